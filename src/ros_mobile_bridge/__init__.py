@@ -1,0 +1,66 @@
+"""ros-mobile-bridge: an async (asyncio and trio, via anyio) client for ROS 2
+robots over Foxglove WebSocket, without installing ROS.
+
+Start with :func:`connect`; everything else is reached from the
+:class:`Client` it yields. See the README for the safety boundary: the
+library sends a zero Twist on teardown while the socket is open, and cannot
+stop a robot after the network is gone."""
+
+from ._client import Client as Client
+from ._connect import Endpoint as Endpoint
+from ._connect import connect as connect
+from ._connect import parse_target as parse_target
+from ._errors import ActionGoalError as ActionGoalError
+from ._errors import ConnectError as ConnectError
+from ._errors import DecodeError as DecodeError
+from ._errors import NotConnected as NotConnected
+from ._errors import NotSupportedError as NotSupportedError
+from ._errors import ProtocolMismatchError as ProtocolMismatchError
+from ._errors import RosBridgeError as RosBridgeError
+from ._errors import SchemaError as SchemaError
+from ._errors import ServiceError as ServiceError
+from ._errors import ServiceTimeout as ServiceTimeout
+from ._options import ClientOptions as ClientOptions
+from ._types import DEFAULT_PORTS as DEFAULT_PORTS
+from ._types import Dispatch as Dispatch
+from ._types import Message as Message
+from ._types import Priority as Priority
+from ._types import ServerInfo as ServerInfo
+from ._types import ServiceInfo as ServiceInfo
+from ._types import Status as Status
+from ._types import SubscriptionState as SubscriptionState
+from ._types import SubscriptionStats as SubscriptionStats
+from ._types import TopicInfo as TopicInfo
+from .codec import FieldDef as FieldDef
+from .flow import Subscription as Subscription
+
+__version__ = "0.1.0.dev0"
+
+__all__ = [
+    "DEFAULT_PORTS",
+    "ActionGoalError",
+    "Client",
+    "ClientOptions",
+    "ConnectError",
+    "DecodeError",
+    "Dispatch",
+    "Endpoint",
+    "FieldDef",
+    "Message",
+    "NotConnected",
+    "NotSupportedError",
+    "Priority",
+    "ProtocolMismatchError",
+    "RosBridgeError",
+    "SchemaError",
+    "ServerInfo",
+    "ServiceError",
+    "ServiceInfo",
+    "ServiceTimeout",
+    "Status",
+    "Subscription",
+    "SubscriptionState",
+    "SubscriptionStats",
+    "TopicInfo",
+    "__version__",
+]

@@ -1,0 +1,572 @@
+"""The :class:`Client`: one API over every transport.
+
+The client owns one task group (started by ``connect()``): the reader task
+(socket -> wire engine -> router -> subscription queues), the writer task
+(outbox -> socket) and the keep-alive task. It holds no wire format: every
+protocol detail lives in the backend."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import AsyncIterator, Mapping, Sequence
+from contextlib import asynccontextmanager
+from typing import Any, Final
+
+import anyio
+import anyio.abc
+
+from ._errors import ConnectError, DecodeError, NotConnected, NotSupportedError, ServiceTimeout
+from ._options import ClientOptions
+from ._types import (
+    Dispatch,
+    Priority,
+    ServerInfo,
+    ServiceInfo,
+    Status,
+    TopicInfo,
+)
+from .backends import Backend, SubscribeHints
+from .codec import FieldDef, same_type_name
+from .flow import FrameQueue, Outbox, RawFrame, Subscription, Watchable, Watcher
+
+__all__ = ["Client"]
+
+_TWIST: Final = "geometry_msgs/msg/Twist"
+_TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
+
+
+def _is_velocity_type(schema: str) -> bool:
+    return same_type_name(schema, _TWIST) or same_type_name(schema, _TWIST_STAMPED)
+
+
+def _check_name(kind: str, name: object) -> str:
+    if not isinstance(name, str):
+        raise TypeError(f"{kind} must be a str, not {type(name).__name__}")
+    if not name.startswith("/") or any(c.isspace() for c in name) or len(name) < 2:
+        raise ValueError(f"{kind} must be an absolute ROS name like '/cmd_vel', got {name!r}")
+    return name
+
+
+def _check_schema(schema: object) -> str:
+    if not isinstance(schema, str):
+        raise TypeError(f"schema must be a str, not {type(schema).__name__}")
+    if schema.count("/") not in (1, 2) or any(c.isspace() for c in schema):
+        raise ValueError(f"schema must be a ROS type like 'geometry_msgs/msg/Twist', got {schema!r}")
+    return schema
+
+
+def _check_timeout(timeout: object) -> float | None:
+    if timeout is None:
+        return None
+    if isinstance(timeout, bool) or not isinstance(timeout, int | float):
+        raise TypeError("timeout must be a number of seconds or None")
+    if not timeout > 0 or math.isinf(timeout):
+        raise ValueError(f"timeout must be a positive, finite number of seconds, got {timeout!r}")
+    return float(timeout)
+
+
+class Client:
+    """A connection to one robot. Obtain it from :func:`ros_mobile_bridge.connect`.
+
+    Every method that talks to the robot raises ``NotConnected`` when the
+    connection is closed or lost, and validates its arguments before doing
+    anything (``ValueError`` / ``TypeError``)."""
+
+    def __init__(self, backend: Backend, options: ClientOptions) -> None:
+        self._backend = backend
+        self._options = options
+        self._log: logging.Logger = options.logger
+        self._status: Watchable[Status] = Watchable("connected")
+        self._topics: Watchable[list[TopicInfo]] = Watchable(backend.topics)
+        self._services: Watchable[list[ServiceInfo]] = Watchable(backend.services)
+        self._parameters: Watchable[dict[str, Any]] = Watchable({})
+        self._last_error: BaseException | None = None
+        self._subs: dict[str, list[Subscription]] = {}
+        self._hints: dict[Subscription, SubscribeHints] = {}
+        self._outbox = Outbox()
+        self._velocity: dict[str, str] = {}
+        self._task_group: anyio.abc.TaskGroup | None = None
+        self._task_scopes: dict[str, anyio.CancelScope] = {}
+        self._closing = False
+
+    # -- lifecycle ----------------------------------------------------------
+    @property
+    def status(self) -> Status:
+        """``"connected"``, then ``"closed"`` after the block ends, or
+        ``"error"`` once the connection was lost (see :attr:`last_error`)."""
+        return self._status.value
+
+    @property
+    def last_error(self) -> BaseException | None:
+        """Why the connection was lost, or None."""
+        return self._last_error
+
+    def watch_status(self) -> Watcher[Status]:
+        """Async iterator: the current status at once, then every change."""
+        return self._status.watch()
+
+    @property
+    def protocol(self) -> str:
+        """The transport in use: ``"foxglove-ws"``, ``"rosbridge"`` or ``"zenoh"``."""
+        return self._backend.protocol
+
+    @property
+    def server_info(self) -> ServerInfo:
+        """What the server said about itself."""
+        return self._backend.server_info
+
+    @property
+    def connected(self) -> bool:
+        return self._status.value == "connected"
+
+    def _require_connected(self) -> None:
+        if self._status.value != "connected":
+            raise NotConnected(
+                f"the connection is {self._status.value}"
+                + (f": {self._last_error}" if self._last_error else "")
+            )
+
+    def _start(self, tg: anyio.abc.TaskGroup) -> None:
+        """Start the client's tasks in ``tg``. Each runs in its own shielded
+        scope: cancelling the scope around the ``connect()`` block must not
+        stop the reader before the teardown has confirmed the zero Twist.
+        :meth:`_stop_tasks` ends them."""
+        self._task_group = tg
+        for fn, name in (
+            (self._reader, "rmb-reader"),
+            (self._writer, "rmb-writer"),
+            (self._keepalive, "rmb-keepalive"),
+        ):
+            scope = anyio.CancelScope(shield=True)
+            self._task_scopes[name] = scope
+            tg.start_soon(self._owned, fn, scope, name=name)
+
+    @staticmethod
+    async def _owned(fn: Any, scope: anyio.CancelScope) -> None:
+        with scope:
+            await fn()
+
+    def _stop_tasks(self) -> None:
+        for scope in self._task_scopes.values():
+            scope.cancel()
+
+    async def _reader(self) -> None:
+        try:
+            await self._backend.run(self)
+        except ConnectError as exc:
+            self._lost(exc)
+        except Exception as exc:  # a bug must not take the user's program down
+            self._log.exception("the reader failed")
+            self._lost(ConnectError(f"internal error in the reader: {exc!r}"))
+
+    async def _writer(self) -> None:
+        outbox = self._outbox
+        backend = self._backend
+        try:
+            while True:
+                await backend.send(await outbox.get())
+        except ConnectError as exc:
+            self._lost(exc)
+
+    async def _keepalive(self) -> None:
+        await self._backend.keepalive()
+
+    def _lost(self, error: ConnectError) -> None:
+        if self._closing or self._status.value != "connected":
+            return
+        self._log.warning("connection lost: %s", error)
+        self._last_error = error
+        self._status.set("error")
+        self._backend.fail_pending(NotConnected(f"disconnected: {error}"))
+        for subs in self._subs.values():
+            for sub in subs:
+                sub._fail(NotConnected(f"disconnected: {error}"))
+
+    async def _teardown(self) -> None:
+        """Flush, zero Twist, confirm, in one shielded scope with a deadline."""
+        self._closing = True
+        options = self._options
+        with anyio.CancelScope(shield=True):
+            with anyio.move_on_after(options.teardown_timeout) as scope:
+                if self._status.value == "connected":
+                    await self._flush_and_stop()
+            if scope.cancelled_caught:
+                self._log.warning(
+                    "teardown did not finish within %.3g s; closing anyway", options.teardown_timeout
+                )
+            if self._status.value == "connected":
+                self._status.set("closed")
+            self._backend.fail_pending(NotConnected("the client is closed"))
+            for subs in self._subs.values():
+                for sub in subs:
+                    sub.close()
+            self._topics.close()
+            self._services.close()
+            self._parameters.close()
+            self._status.close()
+
+    async def _flush_and_stop(self) -> None:
+        backend = self._backend
+        outbox = self._outbox
+        self._task_scopes["rmb-writer"].cancel()  # from here on the teardown writes
+        try:
+            while (message := outbox.pop_control()) is not None:
+                await backend.send(message)
+            with anyio.move_on_after(self._options.teardown_timeout / 2):
+                while (message := outbox.pop()) is not None:
+                    await backend.send(message)
+            dropped = outbox.drop_data()
+            if dropped:
+                self._log.warning("teardown: %d queued data frames were not sent", dropped)
+            if self._options.zero_twist_on_exit:
+                for topic, schema in self._stop_targets().items():
+                    try:
+                        await backend.advertise(topic, schema)
+                        await backend.send(backend.encode_publish(topic, self._zero(schema)))
+                        self._log.info("teardown: zero %s sent to %s", schema.rsplit("/", 1)[-1], topic)
+                    except (NotSupportedError, DecodeError, ValueError) as exc:
+                        self._log.error("teardown: could not send a zero Twist to %s: %s", topic, exc)
+            await backend.confirm_delivery()
+        except ConnectError as exc:
+            self._log.error("teardown: connection failed before the zero Twist was confirmed: %s", exc)
+
+    def _stop_targets(self) -> dict[str, str]:
+        targets = dict(self._velocity)
+        known = {t.name: t.schema_name for t in self._backend.topics}
+        for topic in self._options.stop_topics:
+            if topic not in targets:
+                advertised = known.get(topic, "")
+                targets[topic] = _TWIST_STAMPED if same_type_name(advertised, _TWIST_STAMPED) else _TWIST
+        return targets
+
+    @staticmethod
+    def _zero(schema: str) -> dict[str, Any]:
+        if same_type_name(schema, _TWIST_STAMPED):
+            now = time.time_ns()
+            return {"header": {"stamp": {"sec": now // 1_000_000_000, "nanosec": now % 1_000_000_000}}}
+        return {}
+
+    async def _close_backend(self) -> None:
+        with anyio.CancelScope(shield=True):
+            await self._backend.aclose()
+
+    # -- events from the backend (reader task) -------------------------------
+    def on_frame(self, frame: RawFrame) -> None:
+        subs = self._subs.get(frame.topic)
+        if subs:
+            for sub in subs:
+                sub._queue.offer(frame)
+
+    def on_graph(self) -> None:
+        self._topics.set(self._backend.topics)
+        self._services.set(self._backend.services)
+
+    def on_topic_state(self, topic: str, active: bool) -> None:
+        for sub in self._subs.get(topic, ()):
+            sub._set_state("active" if active else "pending")
+
+    def on_parameters(self, values: Mapping[str, Any]) -> None:
+        merged = dict(self._parameters.value)
+        merged.update(values)
+        self._parameters.set(merged)
+
+    async def before_inbound(self) -> None:
+        outbox = self._outbox
+        if outbox.has_control:
+            send = self._backend.send
+            while (message := outbox.pop_control()) is not None:
+                await send(message)
+
+    # -- discovery ----------------------------------------------------------
+    @property
+    def topics(self) -> list[TopicInfo]:
+        """The topics the server offers now."""
+        return self._topics.value
+
+    @property
+    def services(self) -> list[ServiceInfo]:
+        """The services the server offers now."""
+        return self._services.value
+
+    def watch_topics(self) -> Watcher[list[TopicInfo]]:
+        """Async iterator: the topic list at once, then every change."""
+        return self._topics.watch()
+
+    def watch_services(self) -> Watcher[list[ServiceInfo]]:
+        """Async iterator: the service list at once, then every change."""
+        return self._services.watch()
+
+    # -- subscriptions ------------------------------------------------------
+    def subscribe(
+        self,
+        topic: str,
+        *,
+        max_hz: float | None = None,
+        dispatch: Dispatch = "all",
+        schema: str | None = None,
+        buffer: int | None = None,
+    ) -> _SubscriptionContext:
+        """Subscribe to ``topic``; an async context manager yielding a
+        :class:`~ros_mobile_bridge.Subscription` (``async for msg in sub``).
+
+        The topic need not be advertised yet: the subscription stays
+        ``pending`` and becomes ``active`` when the server offers it.
+        ``max_hz`` caps the delivery rate (frames in between are dropped
+        before decoding; the newest one is delivered at the end of the
+        window). ``dispatch="latest"`` keeps only the newest undelivered
+        message; ``"all"`` queues up to ``buffer`` and drops the oldest when
+        the consumer falls behind. Arguments are checked here, at once."""
+        _check_name("topic", topic)
+        if schema is not None:
+            _check_schema(schema)
+        queue = FrameQueue(
+            max_hz=max_hz,
+            dispatch=dispatch,
+            buffer=self._options.subscription_buffer if buffer is None else buffer,
+        )
+        sub = Subscription(topic, queue, logger=self._log)
+        return _SubscriptionContext(self, sub, SubscribeHints(max_hz=max_hz, schema=schema))
+
+    def _merged_hints(self, topic: str) -> SubscribeHints:
+        hints = [self._hints[s] for s in self._subs.get(topic, ())]
+        caps = [h.max_hz for h in hints]
+        loosest = None if not caps or None in caps else max(c for c in caps if c is not None)
+        schema = next((h.schema for h in hints if h.schema), None)
+        return SubscribeHints(max_hz=loosest, schema=schema)
+
+    async def _add_subscription(self, sub: Subscription, hints: SubscribeHints) -> None:
+        self._require_connected()
+        self._subs.setdefault(sub.topic, []).append(sub)
+        self._hints[sub] = hints
+        try:
+            await self._backend.subscribe(sub.topic, self._merged_hints(sub.topic))
+        except BaseException:
+            await self._remove_subscription(sub)
+            raise
+        if self._backend.topic_active(sub.topic):
+            sub._set_state("active")
+
+    async def _remove_subscription(self, sub: Subscription) -> None:
+        sub.close()
+        self._hints.pop(sub, None)
+        subs = self._subs.get(sub.topic)
+        if subs is None or sub not in subs:
+            return
+        subs.remove(sub)
+        if not self.connected:
+            if not subs:
+                del self._subs[sub.topic]
+            return
+        with anyio.CancelScope(shield=True), anyio.move_on_after(self._options.teardown_timeout):
+            try:
+                if subs:
+                    await self._backend.subscribe(sub.topic, self._merged_hints(sub.topic))
+                else:
+                    del self._subs[sub.topic]
+                    await self._backend.unsubscribe(sub.topic)
+            except ConnectError as exc:
+                self._log.debug("unsubscribe from %s failed: %s", sub.topic, exc)
+
+    # -- publishing ---------------------------------------------------------
+    async def advertise(self, topic: str, schema: str) -> None:
+        """Advertise ``topic`` with type ``schema`` ahead of the first publish,
+        taking the bridge's set-up time out of the hot path."""
+        _check_name("topic", topic)
+        _check_schema(schema)
+        self._require_connected()
+        await self._backend.advertise(topic, schema)
+
+    async def unadvertise(self, topic: str) -> None:
+        """Stop publishing ``topic``. A velocity topic still gets its zero
+        Twist on teardown."""
+        _check_name("topic", topic)
+        self._require_connected()
+        await self._backend.unadvertise(topic)
+
+    async def publish(
+        self, topic: str, schema: str, data: Mapping[str, Any], *, priority: Priority = "data"
+    ) -> None:
+        """Publish ``data`` (a dict; missing fields are zero) on ``topic``.
+
+        The first publish on a topic advertises it (and waits
+        ``options.advertise_settle``). ``priority="control"`` puts the frame
+        in the control outbox: it leaves ahead of every queued data frame,
+        and a newer control value for the same topic replaces an unsent one.
+        ``"data"`` frames queue in order (this waits while 1024 are queued).
+        Returns once the frame is queued. ``ValueError`` when ``data`` does
+        not fit the schema."""
+        _check_name("topic", topic)
+        _check_schema(schema)
+        if priority not in ("data", "control"):
+            raise ValueError(f"priority must be 'data' or 'control', got {priority!r}")
+        if not isinstance(data, Mapping):
+            raise TypeError(f"data must be a mapping (dict), not {type(data).__name__}")
+        self._require_connected()
+        backend = self._backend
+        await backend.advertise(topic, schema)
+        try:
+            message = backend.encode_publish(topic, data)
+        except DecodeError as exc:
+            raise ValueError(f"cannot encode {schema} for {topic}: {exc}") from exc
+        if _is_velocity_type(schema):
+            self._velocity[topic] = schema
+        if priority == "control":
+            self._outbox.put_control(topic, message)
+        else:
+            await self._outbox.put_data(topic, message)
+
+    async def publish_zero_twist(self, topic: str = "/cmd_vel", schema: str | None = None) -> None:
+        """Publish a zero velocity at control priority. ``schema`` defaults to
+        what this client already published there, else the advertised type,
+        else ``geometry_msgs/msg/Twist``."""
+        _check_name("topic", topic)
+        if schema is None:
+            schema = self._velocity.get(topic) or self._stop_targets_for(topic)
+        elif not _is_velocity_type(_check_schema(schema)):
+            raise ValueError(f"schema must be Twist or TwistStamped, got {schema!r}")
+        await self.publish(topic, schema, self._zero(schema), priority="control")
+
+    def _stop_targets_for(self, topic: str) -> str:
+        for t in self._backend.topics:
+            if t.name == topic and same_type_name(t.schema_name, _TWIST_STAMPED):
+                return _TWIST_STAMPED
+        return _TWIST
+
+    # -- services -----------------------------------------------------------
+    async def call_service(
+        self, name: str, request: Mapping[str, Any] | None = None, *, timeout: float | None = None
+    ) -> Any:
+        """Call service ``name`` with ``request`` (a dict; missing fields are
+        zero) and return the decoded response (a dict).
+
+        Raises ``ServiceError`` with the server's text when the call fails,
+        ``ServiceTimeout`` when no answer came within ``timeout`` seconds
+        (default ``options.service_timeout``), ``NotConnected`` when the
+        connection is or goes away. A call never waits forever."""
+        _check_name("service name", name)
+        limit = _check_timeout(timeout) or self._options.service_timeout
+        if request is not None and not isinstance(request, Mapping):
+            raise TypeError(f"request must be a mapping (dict) or None, not {type(request).__name__}")
+        self._require_connected()
+        start = time.perf_counter()
+        with anyio.move_on_after(limit) as scope:
+            result = await self._backend.call_service(name, request)
+        if scope.cancelled_caught:
+            raise ServiceTimeout(name, limit)
+        self._report_latency(start)
+        return result
+
+    def _report_latency(self, start: float) -> None:
+        callback = self._options.on_latency
+        if callback is not None:
+            try:
+                callback((time.perf_counter() - start) * 1000.0)
+            except Exception:
+                self._log.exception("on_latency callback failed")
+
+    # -- parameters ---------------------------------------------------------
+    async def _parameter_call(self, what: str, call: Any, timeout: float | None) -> dict[str, Any]:
+        limit = _check_timeout(timeout) or self._options.service_timeout
+        self._require_connected()
+        start = time.perf_counter()
+        with anyio.move_on_after(limit) as scope:
+            result: dict[str, Any] = await call()
+        if scope.cancelled_caught:
+            raise ServiceTimeout(what, limit)
+        self._report_latency(start)
+        return result
+
+    async def get_parameters(
+        self, names: Sequence[str], *, timeout: float | None = None
+    ) -> dict[str, Any]:
+        """Current values of the named parameters (names the server does not
+        know are absent from the result)."""
+        if isinstance(names, str) or not all(isinstance(n, str) for n in names):
+            raise TypeError("names must be a sequence of str")
+        names = list(names)
+        return await self._parameter_call(
+            "getParameters", lambda: self._backend.get_parameters(names), timeout
+        )
+
+    async def list_parameters(self, *, timeout: float | None = None) -> dict[str, Any]:
+        """Every parameter the server exposes, with its value."""
+        return await self._parameter_call(
+            "getParameters", lambda: self._backend.get_parameters([]), timeout
+        )
+
+    async def set_parameters(
+        self, values: Mapping[str, Any], *, timeout: float | None = None
+    ) -> dict[str, Any]:
+        """Set parameters; returns the values the server reports afterwards."""
+        if not isinstance(values, Mapping) or not all(isinstance(k, str) for k in values):
+            raise TypeError("values must be a mapping of parameter name to value")
+        values = dict(values)
+        return await self._parameter_call(
+            "setParameters", lambda: self._backend.set_parameters(values), timeout
+        )
+
+    @asynccontextmanager
+    async def watch_parameters(self, names: Sequence[str]) -> AsyncIterator[AsyncIterator[dict[str, Any]]]:
+        """Subscribe to updates of the named parameters. Yields an async
+        iterator of ``{name: value}`` snapshots (the newest known values of
+        the watched names), one per change."""
+        if isinstance(names, str) or not all(isinstance(n, str) for n in names):
+            raise TypeError("names must be a sequence of str")
+        wanted = list(names)
+        self._require_connected()
+        await self._backend.subscribe_parameters(wanted)
+
+        async def updates() -> AsyncIterator[dict[str, Any]]:
+            last: dict[str, Any] | None = None
+            async for snapshot in self._parameters.watch():
+                view = {n: snapshot[n] for n in wanted if n in snapshot}
+                if view and view != last:
+                    last = view
+                    yield view
+
+        iterator = updates()
+        try:
+            yield iterator
+        finally:
+            with anyio.CancelScope(shield=True), anyio.move_on_after(self._options.teardown_timeout):
+                await iterator.aclose()  # type: ignore[attr-defined]
+                if self.connected:
+                    try:
+                        await self._backend.unsubscribe_parameters(wanted)
+                    except ConnectError:
+                        pass
+
+    # -- schemas ------------------------------------------------------------
+    def schema_template(self, name: str) -> dict[str, Any]:
+        """A zero-filled message of type ``name`` (fixed-size arrays filled),
+        from the server's schemas or the bundled ROS 2 definitions."""
+        return self._backend.codecs.template(_check_schema(name))
+
+    def schema_definition(self, name: str) -> list[FieldDef]:
+        """The fields of type ``name``, in order, with their types."""
+        return self._backend.codecs.definition(_check_schema(name))
+
+    # -- actions ------------------------------------------------------------
+    def send_action_goal(self, action: str, action_type: str, goal: Mapping[str, Any]) -> Any:
+        """Not available on this transport yet (the Foxglove protocol has no
+        action operations); raises ``NotSupportedError``."""
+        raise NotSupportedError(f"actions are not supported over {self.protocol} yet")
+
+
+class _SubscriptionContext:
+    """What :meth:`Client.subscribe` returns: enter to subscribe, exit to
+    unsubscribe (the bridge stops sending once no local subscriber is left)."""
+
+    def __init__(self, client: Client, sub: Subscription, hints: SubscribeHints) -> None:
+        self._client = client
+        self._sub = sub
+        self._hints = hints
+
+    async def __aenter__(self) -> Subscription:
+        await self._client._add_subscription(self._sub, self._hints)
+        return self._sub
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self._client._remove_subscription(self._sub)

@@ -1,0 +1,89 @@
+"""Client configuration."""
+
+from __future__ import annotations
+
+import logging
+import ssl
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+__all__ = ["ClientOptions"]
+
+
+def _positive(name: str, value: object, *, allow_zero: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise TypeError(f"{name} must be a number, not {type(value).__name__}")
+    if value < 0 or (value == 0 and not allow_zero):
+        raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class ClientOptions:
+    """Everything about a connection that is not the target.
+
+    Every field has a safe default; invalid values raise ``ValueError`` or
+    ``TypeError`` when the options are built, never later."""
+
+    connect_timeout: float = 10.0
+    """Seconds for TCP connect, TLS, the WebSocket upgrade and the server's
+    greeting (Foxglove ``serverInfo``) together."""
+    discovery_grace: float = 0.2
+    """After the greeting, how long ``connect()`` waits for the first topic
+    and service advertisements, so ``client.topics`` is filled on entry. A
+    server with nothing to advertise sends nothing: this bounds that wait."""
+    max_frame_size: int = 64 * 1024 * 1024
+    """Largest inbound message in bytes. A larger one closes the connection
+    with a clear error (raw 1080p images need about 6 MiB)."""
+    keepalive_interval: float = 10.0
+    """Seconds between WebSocket pings (0 disables keep-alive)."""
+    keepalive_timeout: float = 10.0
+    """Seconds to wait for a pong before the connection is declared lost."""
+    service_timeout: float = 10.0
+    """Default deadline of ``call_service`` and parameter requests, seconds."""
+    teardown_timeout: float = 2.0
+    """Deadline of the whole teardown (flush, zero Twist, close), seconds."""
+    advertise_settle: float = 0.15
+    """Pause after a new client advertisement before its first publish, so
+    the bridge has its publisher ready. ``advertise()`` ahead of time takes
+    it out of the hot path."""
+    stop_topics: tuple[str, ...] = ()
+    """Velocity topics that get a zero Twist on teardown even if this client
+    never published to them."""
+    zero_twist_on_exit: bool = True
+    """Send the zero Twist on teardown (strongly recommended)."""
+    subscription_buffer: int = 64
+    """Default per-subscription queue length (``dispatch="all"``)."""
+    ssl_context: ssl.SSLContext | None = None
+    """TLS settings for ``wss://``; the system defaults when None."""
+    logger: logging.Logger = field(default_factory=lambda: logging.getLogger("ros_mobile_bridge"))
+    """Where the library logs skipped frames, decode failures and teardown."""
+    on_latency: Callable[[float], None] | None = None
+    """Called with the round-trip time in milliseconds of every correlated
+    request/response (service calls, parameter requests)."""
+
+    def __post_init__(self) -> None:
+        _positive("connect_timeout", self.connect_timeout)
+        _positive("discovery_grace", self.discovery_grace, allow_zero=True)
+        _positive("keepalive_interval", self.keepalive_interval, allow_zero=True)
+        _positive("keepalive_timeout", self.keepalive_timeout)
+        _positive("service_timeout", self.service_timeout)
+        _positive("teardown_timeout", self.teardown_timeout)
+        _positive("advertise_settle", self.advertise_settle, allow_zero=True)
+        if isinstance(self.max_frame_size, bool) or not isinstance(self.max_frame_size, int):
+            raise TypeError("max_frame_size must be an int")
+        if self.max_frame_size < 1024:
+            raise ValueError("max_frame_size must be at least 1024 bytes")
+        if isinstance(self.subscription_buffer, bool) or not isinstance(self.subscription_buffer, int):
+            raise TypeError("subscription_buffer must be an int")
+        if self.subscription_buffer < 1:
+            raise ValueError("subscription_buffer must be at least 1")
+        if isinstance(self.stop_topics, str):
+            raise TypeError("stop_topics must be a sequence of topic names, not a str")
+        object.__setattr__(self, "stop_topics", tuple(self.stop_topics))
+        for topic in self.stop_topics:
+            if not isinstance(topic, str) or not topic.startswith("/"):
+                raise ValueError(f"stop_topics entries must be absolute topic names, got {topic!r}")
+        if not isinstance(self.logger, logging.Logger):
+            raise TypeError("logger must be a logging.Logger")
+        if self.on_latency is not None and not callable(self.on_latency):
+            raise TypeError("on_latency must be callable")

@@ -1,0 +1,104 @@
+"""Public value types: frozen dataclasses and literals shared by every transport."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+__all__ = [
+    "DEFAULT_PORTS",
+    "Dispatch",
+    "Message",
+    "Priority",
+    "Protocol",
+    "ServerInfo",
+    "ServiceInfo",
+    "Status",
+    "SubscriptionState",
+    "SubscriptionStats",
+    "TopicInfo",
+]
+
+Protocol = Literal["foxglove-ws", "rosbridge", "zenoh"]
+Status = Literal["connecting", "connected", "reconnecting", "closed", "error"]
+Priority = Literal["data", "control"]
+Dispatch = Literal["all", "latest"]
+SubscriptionState = Literal["pending", "active"]
+
+DEFAULT_PORTS: Mapping[str, int] = {"foxglove-ws": 8765, "rosbridge": 9090, "zenoh": 7447}
+"""The port each protocol's bridge listens on unless told otherwise."""
+
+
+@dataclass(frozen=True, slots=True)
+class Message:
+    """One message received on a subscription.
+
+    ``data`` is the decoded message: a ``dict`` for CDR and JSON payloads, with
+    primitive arrays (``uint8[]`` image data, ``float64[]``) as numpy arrays that
+    view the received frame where the codec allows. When the payload could not
+    be decoded, ``data`` is the raw ``memoryview`` and ``decode_error`` says why.
+    ``receive_time_ns`` is ``time.time_ns()`` when the frame arrived;
+    ``log_time_ns`` is the server's timestamp (``None`` when the wire has none).
+    """
+
+    topic: str
+    schema_name: str
+    encoding: str
+    data: Any
+    receive_time_ns: int
+    log_time_ns: int | None
+    byte_size: int
+    decode_error: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    """A topic the server offers. ``schema_name`` is the ROS type as the server
+    spells it (``pkg/msg/Type`` or ``pkg/Type``); ``encoding`` is the message
+    encoding on the wire (``cdr``, ``json``, ...)."""
+
+    name: str
+    schema_name: str
+    encoding: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class ServiceInfo:
+    """A service the server offers."""
+
+    name: str
+    type: str
+
+
+@dataclass(frozen=True, slots=True)
+class ServerInfo:
+    """What the server said about itself during the handshake."""
+
+    name: str
+    protocol: str
+    subprotocol: str | None = None
+    capabilities: tuple[str, ...] = ()
+    supported_encodings: tuple[str, ...] = ()
+    metadata: Mapping[str, str] = field(default_factory=dict)
+    session_id: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SubscriptionStats:
+    """Counters of one subscription since it was opened.
+
+    Every frame routed to the subscription is ``received``; each one then ends
+    in exactly one of ``delivered``, ``dropped_throttle`` (the ``max_hz`` cap),
+    ``dropped_conflated`` (superseded under ``dispatch="latest"``),
+    ``dropped_overflow`` (the consumer fell behind; oldest dropped),
+    or is still queued. ``decode_failures`` counts delivered messages whose
+    payload could not be decoded (delivered raw)."""
+
+    received: int
+    delivered: int
+    dropped_throttle: int
+    dropped_conflated: int
+    dropped_overflow: int
+    decode_failures: int
+    effective_interval_ms: float

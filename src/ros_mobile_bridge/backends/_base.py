@@ -1,0 +1,115 @@
+"""The contract between the :class:`~ros_mobile_bridge.Client` and a transport
+backend. A backend is a wire engine plus a transport; it knows no throttling,
+no outbox and no teardown policy. A new transport is one new backend plus one
+wire engine."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from .._types import ServerInfo, ServiceInfo, TopicInfo
+from ..codec import CodecRegistry
+from ..flow import RawFrame, WireMessage
+
+__all__ = ["Backend", "BackendEvents", "SubscribeHints"]
+
+
+@dataclass(frozen=True, slots=True)
+class SubscribeHints:
+    """What the client knows about a topic subscription that a bridge can use
+    to send less (rosbridge ``throttle_rate``), or to pick a type."""
+
+    max_hz: float | None = None
+    schema: str | None = None
+
+
+class BackendEvents(Protocol):
+    """Callbacks the backend's reader makes into the client. All run in the
+    reader task and must not block."""
+
+    def on_frame(self, frame: RawFrame) -> None:
+        """A message arrived for a subscribed topic."""
+
+    def on_graph(self) -> None:
+        """The topic or service list changed."""
+
+    def on_topic_state(self, topic: str, active: bool) -> None:
+        """The server now carries (or no longer carries) ``topic`` to us."""
+
+    def on_parameters(self, values: Mapping[str, Any]) -> None:
+        """Unsolicited parameter values (a parameter subscription update)."""
+
+    async def before_inbound(self) -> None:
+        """Called before each inbound message is handled: drain control frames."""
+
+
+class Backend(Protocol):
+    """One connection to one bridge. Built connected by the backend's
+    ``open_*`` function; closed by :meth:`aclose`."""
+
+    protocol: str
+    server_info: ServerInfo
+    codecs: CodecRegistry
+
+    @property
+    def topics(self) -> list[TopicInfo]: ...
+
+    @property
+    def services(self) -> list[ServiceInfo]: ...
+
+    def topic_active(self, topic: str) -> bool:
+        """Whether the server currently carries ``topic`` to this client."""
+
+    async def run(self, events: BackendEvents) -> None:
+        """The reader loop. Returns when the connection closed cleanly after
+        :meth:`aclose`; raises ``ConnectError`` when it was lost."""
+
+    async def send(self, message: WireMessage) -> None:
+        """Write one encoded message (the outbox's writer calls this)."""
+
+    async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
+        """Want ``topic``: subscribe now if the server offers it, otherwise as
+        soon as it does. Idempotent per topic."""
+
+    async def unsubscribe(self, topic: str) -> None:
+        """No local subscriber wants ``topic`` any more."""
+
+    async def advertise(self, topic: str, schema: str) -> None:
+        """Make ``topic`` publishable with type ``schema`` (waits for the
+        bridge to be ready). A no-op when already advertised with it."""
+
+    async def unadvertise(self, topic: str) -> None: ...
+
+    def publishing(self) -> Mapping[str, str]:
+        """Topics this client advertised, with their schema names."""
+
+    def encode_publish(self, topic: str, data: Any) -> WireMessage:
+        """Encode ``data`` for the advertised ``topic``. Raises
+        ``DecodeError`` for data that does not fit the schema."""
+
+    async def call_service(self, name: str, request: Any) -> Any:
+        """Call ``name`` and return the decoded response. No timeout here: the
+        client owns the deadline. Raises ``ServiceError`` on failure."""
+
+    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]: ...
+
+    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]: ...
+
+    async def subscribe_parameters(self, names: Sequence[str]) -> None: ...
+
+    async def unsubscribe_parameters(self, names: Sequence[str]) -> None: ...
+
+    async def confirm_delivery(self) -> None:
+        """Return once everything sent so far has reached the server (a
+        round trip), so closing now loses nothing."""
+
+    def fail_pending(self, error: Exception) -> None:
+        """Fail every pending request with ``error``."""
+
+    async def keepalive(self) -> None:
+        """Run the transport's keep-alive until the connection closes."""
+
+    async def aclose(self) -> None:
+        """Close the connection (never raises)."""

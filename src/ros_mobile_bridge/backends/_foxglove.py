@@ -1,0 +1,489 @@
+"""The Foxglove WebSocket backend: the sans-IO Foxglove engine over the
+WebSocket transport, with schemas decoded by the per-connection codec
+registry."""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Final
+
+import anyio
+
+from .._errors import (
+    DecodeError,
+    NotSupportedError,
+    ProtocolMismatchError,
+    RosBridgeError,
+    SchemaError,
+    ServiceError,
+)
+from .._options import ClientOptions
+from .._types import ServerInfo, ServiceInfo, TopicInfo
+from ..codec import CodecRegistry, same_type_name
+from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
+from ..transport import HandshakeRejected, WebSocket, connect_websocket
+from ..wire import foxglove as fx
+from ._base import BackendEvents, SubscribeHints
+
+__all__ = ["FoxgloveBackend", "is_foxglove_rejection", "open_foxglove"]
+
+_EMPTY_CDR: Final = b"\x00\x01\x00\x00"
+"""A CDR encapsulation header (little endian) with no body: an empty request."""
+
+
+@dataclass(slots=True)
+class _ClientChannel:
+    id: int
+    topic: str
+    schema: str
+    encoding: str
+    encode: Any
+    ready: anyio.Event
+
+
+async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
+    """Connect to a Foxglove WebSocket server at ``url`` and wait for its
+    ``serverInfo``, all within ``options.connect_timeout``.
+
+    Raises ``ProtocolMismatchError`` when the server does not speak Foxglove
+    (it picked none of the subprotocols, or never sent ``serverInfo``)."""
+    deadline = anyio.current_time() + options.connect_timeout
+    ws = await connect_websocket(
+        url,
+        subprotocols=fx.SUBPROTOCOLS,
+        max_size=options.max_frame_size,
+        ssl_context=options.ssl_context,
+        timeout=options.connect_timeout,
+    )
+    try:
+        if ws.subprotocol is None:
+            raise ProtocolMismatchError(
+                "foxglove-ws", "rosbridge", "the server accepted none of the Foxglove subprotocols"
+            )
+        engine = fx.FoxgloveEngine(ws.subprotocol)
+        early: list[fx.Event] = []
+        with anyio.move_on_after(max(deadline - anyio.current_time(), 0.0)):
+            while engine.server_info is None:
+                message = await ws.receive()
+                if isinstance(message, str):
+                    events = engine.receive_text(message)
+                else:
+                    events = engine.receive_binary(message)
+                if engine.server_info is None:
+                    early.extend(events)
+                else:  # the greeting itself is not replayed to the reader
+                    early.extend(e for e in events if not isinstance(e, fx.ServerInfo))
+        if engine.server_info is None:
+            raise ProtocolMismatchError(
+                "foxglove-ws",
+                None,
+                f"no serverInfo within {options.connect_timeout:g} s of connecting",
+            )
+        # The first advertisements follow serverInfo at once; a server with no
+        # channels sends none, so wait only a short grace for them.
+        want_services = "services" in engine.server_info.capabilities
+        seen_channels = seen_services = False
+        grace = min(options.discovery_grace, max(deadline - anyio.current_time(), 0.0))
+        with anyio.move_on_after(grace):
+            while not (seen_channels and (seen_services or not want_services)):
+                message = await ws.receive()
+                if isinstance(message, str):
+                    events = engine.receive_text(message)
+                else:
+                    events = engine.receive_binary(message)
+                early.extend(events)
+                seen_channels |= any(isinstance(e, fx.Advertise) for e in events)
+                seen_services |= any(isinstance(e, fx.AdvertiseServices) for e in events)
+    except BaseException:
+        await ws.aclose()
+        raise
+    return FoxgloveBackend(ws, engine, options, early)
+
+
+def is_foxglove_rejection(exc: HandshakeRejected) -> bool:
+    """Whether an HTTP rejection looks like a Foxglove SDK server refusing a
+    client that offered none of its subprotocols."""
+    return exc.status == 400 and "sec-websocket-protocol" in exc.body.lower()
+
+
+class FoxgloveBackend:
+    """One Foxglove WebSocket connection (see :class:`~.Backend`)."""
+
+    protocol = "foxglove-ws"
+
+    def __init__(
+        self,
+        ws: WebSocket,
+        engine: fx.FoxgloveEngine,
+        options: ClientOptions,
+        early_events: list[fx.Event],
+    ) -> None:
+        self._ws = ws
+        self._engine = engine
+        self._options = options
+        self._log: logging.Logger = options.logger
+        self.codecs = CodecRegistry()
+        self._decoders: dict[int, Decoder | None] = {}
+        self._wanted: dict[str, SubscribeHints] = {}
+        self._active: dict[str, int] = {}  # topic -> subscription id
+        self._client_channels: dict[str, _ClientChannel] = {}
+        self._calls: PendingRequests[Any] = PendingRequests()
+        self._params: PendingRequests[dict[str, Any]] = PendingRequests()
+        self._call_ids = itertools.count(1)
+        self._param_ids = itertools.count(1)
+        self._events: BackendEvents | None = None
+        self._early = early_events
+        info = engine.server_info
+        assert info is not None
+        self.server_info = self._server_info(info)
+
+    def _server_info(self, info: fx.ServerInfo) -> ServerInfo:
+        return ServerInfo(
+            name=info.name,
+            protocol=self.protocol,
+            subprotocol=self._engine.subprotocol,
+            capabilities=info.capabilities,
+            supported_encodings=info.supported_encodings,
+            metadata=dict(info.metadata),
+            session_id=info.session_id,
+        )
+
+    # -- discovery ----------------------------------------------------------
+    @property
+    def topics(self) -> list[TopicInfo]:
+        seen: dict[str, TopicInfo] = {}
+        for ch in self._engine.channels.values():
+            if ch.topic not in seen:
+                seen[ch.topic] = TopicInfo(ch.topic, ch.schema_name, ch.encoding)
+        return sorted(seen.values(), key=lambda t: t.name)
+
+    @property
+    def services(self) -> list[ServiceInfo]:
+        return sorted(
+            (ServiceInfo(s.name, s.type) for s in self._engine.services.values()),
+            key=lambda s: s.name,
+        )
+
+    def topic_active(self, topic: str) -> bool:
+        return topic in self._active
+
+    def _channel_for(self, topic: str) -> fx.Channel | None:
+        best: fx.Channel | None = None
+        for ch in self._engine.channels.values():
+            if ch.topic == topic and (best is None or ch.encoding == "cdr"):
+                best = ch
+        return best
+
+    def _service_for(self, name: str) -> fx.ServiceDef | None:
+        for svc in self._engine.services.values():
+            if svc.name == name:
+                return svc
+        return None
+
+    # -- the reader ---------------------------------------------------------
+    async def run(self, events: BackendEvents) -> None:
+        self._events = events
+        early, self._early = self._early, []
+        for event in early:
+            await self._handle(event)
+        ws = self._ws
+        engine = self._engine
+        while True:
+            message = await ws.receive()
+            await events.before_inbound()
+            if isinstance(message, str):
+                for event in engine.receive_text(message):
+                    await self._handle(event)
+                continue
+            received_ns = time.time_ns()
+            for event in engine.receive_binary(message):
+                if type(event) is fx.MessageData:
+                    self._on_message_data(event, received_ns, events)
+                else:
+                    await self._handle(event)
+
+    def _on_message_data(self, event: fx.MessageData, received_ns: int, events: BackendEvents) -> None:
+        channel = event.channel
+        try:
+            decode = self._decoders[channel.id]
+        except KeyError:
+            decode = self._make_decoder(channel)
+        events.on_frame(
+            RawFrame(
+                channel.topic,
+                channel.schema_name,
+                channel.encoding,
+                event.payload,
+                event.log_time_ns,
+                received_ns,
+                decode,
+            )
+        )
+
+    def _make_decoder(self, channel: fx.Channel) -> Decoder | None:
+        decode: Decoder | None = None
+        try:
+            if channel.schema and channel.schema_encoding:
+                self.codecs.add_schema(channel.schema_name, channel.schema_encoding, channel.schema)
+            decode = self.codecs.decoder(channel.schema_name, channel.encoding)
+        except SchemaError as exc:
+            self._log.warning(
+                "channel %d (%s, %s): no decoder, messages will be delivered raw: %s",
+                channel.id,
+                channel.topic,
+                channel.schema_name,
+                exc,
+            )
+        self._decoders[channel.id] = decode
+        return decode
+
+    async def _handle(self, event: fx.Event) -> None:
+        events = self._events
+        assert events is not None
+        if isinstance(event, fx.Advertise):
+            for ch in event.channels:
+                self._decoders.pop(ch.id, None)  # a re-used id gets a fresh decoder
+            for ch in event.channels:
+                if ch.topic in self._wanted and ch.topic not in self._active:
+                    await self._subscribe_channel(ch)
+            events.on_graph()
+        elif isinstance(event, fx.Unadvertise):
+            for ch in event.channels:
+                sub_id = self._active.get(ch.topic)
+                if sub_id is not None and self._engine.subscription_channel(sub_id) == ch:
+                    del self._active[ch.topic]
+                    events.on_topic_state(ch.topic, False)
+                    # another channel may still carry the topic
+                    other = self._channel_for(ch.topic)
+                    if other is not None and ch.topic in self._wanted:
+                        await self._subscribe_channel(other)
+            events.on_graph()
+        elif isinstance(event, fx.AdvertiseServices | fx.UnadvertiseServices):
+            events.on_graph()
+        elif isinstance(event, fx.ServiceCallResponse):
+            self._calls.resolve(event.call_id, event)
+        elif isinstance(event, fx.ServiceCallFailure):
+            svc = self._engine.services.get(event.service_id)
+            name = svc.name if svc is not None else f"#{event.service_id}"
+            if not self._calls.fail(event.call_id, ServiceError(name, event.message)):
+                self._log.warning("serviceCallFailure for unknown call %d: %s", event.call_id, event.message)
+        elif isinstance(event, fx.ParameterValues):
+            values = {p.name: p.value for p in event.parameters}
+            if event.id is None or not self._params.resolve(event.id, values):
+                events.on_parameters(values)
+        elif isinstance(event, fx.Status):
+            level = {0: logging.INFO, 1: logging.WARNING}.get(event.level, logging.ERROR)
+            self._log.log(level, "server status: %s", event.message)
+        elif isinstance(event, fx.ServerInfo):
+            # A later serverInfo resets the server's tables; the engine has
+            # already reported the old channels and services as unadvertised.
+            self.server_info = self._server_info(event)
+            self._decoders.clear()
+            events.on_graph()
+        elif isinstance(event, fx.ProtocolViolation):
+            self._log.warning("skipped a malformed message from the server: %s", event.reason)
+        elif isinstance(event, fx.MessageData):
+            self._on_message_data(event, time.time_ns(), events)
+
+    async def _subscribe_channel(self, channel: fx.Channel) -> None:
+        sub_id, message = self._engine.subscribe(channel.id)
+        self._active[channel.topic] = sub_id
+        await self._ws.send(message)
+        if self._events is not None:
+            self._events.on_topic_state(channel.topic, True)
+
+    # -- subscriptions ------------------------------------------------------
+    async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
+        self._wanted[topic] = hints
+        if topic in self._active:
+            return
+        channel = self._channel_for(topic)
+        if channel is not None:
+            await self._subscribe_channel(channel)
+
+    async def unsubscribe(self, topic: str) -> None:
+        self._wanted.pop(topic, None)
+        sub_id = self._active.pop(topic, None)
+        if sub_id is not None:
+            await self._ws.send(self._engine.unsubscribe([sub_id]))
+
+    # -- publishing ---------------------------------------------------------
+    def publishing(self) -> Mapping[str, str]:
+        return {topic: ch.schema for topic, ch in self._client_channels.items()}
+
+    def _publish_encoding(self, schema: str) -> str:
+        supported = self.server_info.supported_encodings
+        if "cdr" in supported and self.codecs.has_schema(schema):
+            return "cdr"
+        if "json" in supported or not supported:
+            return "json"
+        if "cdr" in supported:
+            raise SchemaError(f"the server only accepts CDR and no definition of {schema!r} is known")
+        raise NotSupportedError(f"the server accepts none of our encodings: {', '.join(supported)}")
+
+    async def advertise(self, topic: str, schema: str) -> None:
+        existing = self._client_channels.get(topic)
+        if existing is not None:
+            if not same_type_name(existing.schema, schema):
+                raise ValueError(
+                    f"{topic} is advertised as {existing.schema}; unadvertise it before "
+                    f"publishing {schema}"
+                )
+            await existing.ready.wait()
+            return
+        if "clientPublish" not in self.server_info.capabilities:
+            raise NotSupportedError("the server does not accept client publishing (no clientPublish)")
+        encoding = self._publish_encoding(schema)
+        encode = self.codecs.encoder(schema, encoding)
+        channel_id, message = self._engine.advertise(topic, encoding, schema)
+        ready = anyio.Event()
+        self._client_channels[topic] = _ClientChannel(channel_id, topic, schema, encoding, encode, ready)
+        try:
+            await self._ws.send(message)
+            await anyio.sleep(self._options.advertise_settle)
+        except BaseException:
+            self._client_channels.pop(topic, None)
+            raise
+        finally:
+            ready.set()
+
+    async def unadvertise(self, topic: str) -> None:
+        channel = self._client_channels.pop(topic, None)
+        if channel is not None:
+            await self._ws.send(self._engine.unadvertise([channel.id]))
+
+    def encode_publish(self, topic: str, data: Any) -> WireMessage:
+        channel = self._client_channels[topic]
+        payload = channel.encode(data)
+        return self._engine.message_data(channel.id, payload)
+
+    # -- services -----------------------------------------------------------
+    def _request_codec(self, svc: fx.ServiceDef, empty: bool) -> tuple[str, Any]:
+        """(wire encoding, encoder), or an encoder of None meaning "send the
+        bare CDR header": the server sent no request schema and the request
+        is empty. A non-empty request without a server schema falls back to
+        the bundled definitions."""
+        req_name, _ = CodecRegistry.service_type_names(svc.type)
+        schema = svc.request
+        encoding = schema.encoding if schema is not None and schema.encoding else "cdr"
+        has_text = schema is not None and bool(schema.schema)
+        if schema is not None:
+            req_name = schema.schema_name or req_name
+            if has_text:
+                self.codecs.add_schema(req_name, schema.schema_encoding or "ros2msg", schema.schema)
+        if encoding == "json":
+            return encoding, self.codecs.encoder(req_name, encoding)
+        if has_text or (not empty and self.codecs.has_schema(req_name)):
+            return encoding, self.codecs.encoder(req_name, encoding)
+        return encoding, None
+
+    def _response_decoder(self, svc: fx.ServiceDef, encoding: str) -> Decoder | None:
+        _, res_name = CodecRegistry.service_type_names(svc.type)
+        schema = svc.response
+        if schema is not None:
+            res_name = schema.schema_name or res_name
+            if schema.schema:
+                self.codecs.add_schema(res_name, schema.schema_encoding or "ros2msg", schema.schema)
+        try:
+            return self.codecs.decoder(res_name, encoding)
+        except SchemaError:
+            return None
+
+    async def call_service(self, name: str, request: Any) -> Any:
+        if "services" not in self.server_info.capabilities:
+            raise NotSupportedError("the server does not offer service calls")
+        svc = self._service_for(name)
+        if svc is None:
+            raise ServiceError(name, "the server does not advertise this service")
+        try:
+            encoding, encode = self._request_codec(svc, not request)
+        except SchemaError as exc:
+            raise ServiceError(name, f"request schema: {exc}") from exc
+        if encode is None:
+            if request:
+                raise ServiceError(
+                    name,
+                    f"the server sent no request schema for {svc.type} and none is bundled; "
+                    "only an empty request can be sent",
+                )
+            payload: bytes = _EMPTY_CDR
+        else:
+            payload = encode(request if request is not None else {})
+        call_id = next(self._call_ids)
+        self._calls.register(call_id)
+        try:
+            await self._ws.send(self._engine.service_call_request(svc.id, call_id, encoding, payload))
+        except BaseException:
+            self._calls.discard(call_id)
+            raise
+        response: fx.ServiceCallResponse = await self._calls.wait(call_id)
+        decode = self._response_decoder(svc, response.encoding)
+        if decode is None:
+            return bytes(response.payload)
+        try:
+            return decode(response.payload)
+        except DecodeError as exc:
+            raise ServiceError(name, f"the response does not decode: {exc}") from exc
+
+    # -- parameters ---------------------------------------------------------
+    def _require(self, capability: str) -> None:
+        if capability not in self.server_info.capabilities:
+            raise NotSupportedError(f"the server does not offer {capability!r}")
+
+    async def _parameter_request(self, build: Any) -> dict[str, Any]:
+        request_id = f"rmb-{next(self._param_ids)}"
+        self._params.register(request_id)
+        try:
+            await self._ws.send(build(request_id))
+        except BaseException:
+            self._params.discard(request_id)
+            raise
+        return await self._params.wait(request_id)
+
+    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
+        self._require("parameters")
+        names = list(names)
+        return await self._parameter_request(lambda rid: self._engine.get_parameters(names, rid))
+
+    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        self._require("parameters")
+        params = [fx.Parameter(name, value) for name, value in values.items()]
+        return await self._parameter_request(lambda rid: self._engine.set_parameters(params, rid))
+
+    async def subscribe_parameters(self, names: Sequence[str]) -> None:
+        self._require("parametersSubscribe")
+        await self._ws.send(self._engine.subscribe_parameter_updates(list(names)))
+
+    async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
+        if "parametersSubscribe" in self.server_info.capabilities and not self._ws.closed:
+            await self._ws.send(self._engine.unsubscribe_parameter_updates(list(names)))
+
+    # -- lifecycle ----------------------------------------------------------
+    async def send(self, message: WireMessage) -> None:
+        await self._ws.send(message)
+
+    async def confirm_delivery(self) -> None:
+        pong = await self._ws.ping()
+        await pong.wait()
+
+    def fail_pending(self, error: Exception) -> None:
+        assert isinstance(error, RosBridgeError)
+        self._calls.fail_all(error)
+        self._params.fail_all(error)
+
+    async def keepalive(self) -> None:
+        interval = self._options.keepalive_interval
+        if interval > 0:
+            await self._ws.keepalive(interval, self._options.keepalive_timeout)
+
+    @property
+    def closed(self) -> bool:
+        return self._ws.closed
+
+    async def aclose(self) -> None:
+        await self._ws.aclose()
+

@@ -1,0 +1,18 @@
+"""Schemas and payloads -> Python objects, and back.
+
+:class:`CodecRegistry` holds the schemas one server advertised and makes
+decoders (CDR or JSON payload -> ``dict``) and encoders (``dict`` -> payload)
+for them, falling back to the ROS 2 Jazzy message definitions bundled with
+rosbags and a few standard service definitions. :func:`normalize_type_name`
+and :func:`same_type_name` deal with the several spellings of a ROS type
+name.
+"""
+
+from __future__ import annotations
+
+from ._model import FieldDef as FieldDef
+from ._names import normalize_type_name as normalize_type_name
+from ._names import same_type_name as same_type_name
+from ._registry import CodecRegistry as CodecRegistry
+
+__all__ = ["CodecRegistry", "FieldDef", "normalize_type_name", "same_type_name"]

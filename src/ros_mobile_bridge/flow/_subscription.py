@@ -1,0 +1,312 @@
+"""The subscription pipeline: raw frames in, filters ahead of decoding, decoded
+messages out to the consumer.
+
+Where a frame goes, in order:
+
+1. The reader calls :meth:`FrameQueue.offer` (synchronous, never blocks).
+2. The rate cap (``max_hz``) holds frames that arrive inside the current
+   window; the newest held frame is delivered when the window ends (trailing
+   delivery: the last message before a topic goes quiet always arrives, at
+   most one window late). Older held frames are dropped, never decoded.
+3. Dispatch: ``"all"`` queues every frame that passed, up to ``buffer``; a
+   consumer that falls behind loses the *oldest* queued frames (counted, never
+   decoded). ``"latest"`` keeps only the newest frame (conflation).
+4. The consumer's ``async for`` takes a frame and decodes it, with the decoder
+   captured when the frame arrived. A payload that does not decode is logged
+   and delivered raw (``Message.data`` is the ``memoryview``).
+
+Decoding on the consumer's pull, rather than in a producer task ahead of it,
+means a dropped or superseded frame is never decoded and a message costs no
+task switch when frames are already waiting."""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Final
+
+import anyio
+import anyio.lowlevel
+
+from .._errors import DecodeError
+from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats
+from ._frame import RawFrame
+
+__all__ = ["FrameQueue", "Subscription"]
+
+Clock = Callable[[], float]
+_YIELD_EVERY: Final = 32
+_LARGE_PAYLOAD: Final = 64 * 1024
+
+
+class FrameQueue:
+    """Rate cap, conflation and the bounded queue of one subscription.
+
+    ``clock`` (monotonic seconds) is injectable so the filter is testable
+    exactly. Synchronous apart from :meth:`get`."""
+
+    def __init__(
+        self,
+        *,
+        max_hz: float | None = None,
+        dispatch: Dispatch = "all",
+        buffer: int = 64,
+        clock: Clock = time.monotonic,
+    ) -> None:
+        if max_hz is not None:
+            if isinstance(max_hz, bool) or not isinstance(max_hz, int | float):
+                raise TypeError(f"max_hz must be a number or None, not {type(max_hz).__name__}")
+            if not max_hz > 0:
+                raise ValueError(f"max_hz must be positive, got {max_hz!r}")
+        if dispatch not in ("all", "latest"):
+            raise ValueError(f"dispatch must be 'all' or 'latest', got {dispatch!r}")
+        if isinstance(buffer, bool) or not isinstance(buffer, int):
+            raise TypeError("buffer must be an int")
+        if buffer < 1:
+            raise ValueError(f"buffer must be at least 1, got {buffer}")
+        self.max_hz = max_hz
+        self.dispatch: Dispatch = dispatch
+        self.buffer = 1 if dispatch == "latest" else buffer
+        self._interval = 1.0 / max_hz if max_hz else 0.0
+        self._clock = clock
+        self._queue: deque[RawFrame] = deque()
+        self._held: RawFrame | None = None
+        self._last_release: float | None = None
+        self._wakeup: anyio.Event | None = None
+        self._closed = False
+        self.received = 0
+        self.delivered = 0
+        self.dropped_throttle = 0
+        self.dropped_conflated = 0
+        self.dropped_overflow = 0
+        self.decode_failures = 0
+
+    @property
+    def interval(self) -> float:
+        """The effective minimum interval between delivered frames, seconds."""
+        return self._interval
+
+    def __len__(self) -> int:
+        return len(self._queue) + (self._held is not None)
+
+    # -- producer side (the reader) -----------------------------------------
+    def offer(self, frame: RawFrame) -> None:
+        """Route one frame through the filters. Never blocks, never decodes."""
+        self.received += 1
+        if self._closed:
+            return
+        interval = self._interval
+        if interval <= 0.0:
+            self._enqueue(frame)
+            return
+        now = self._clock()
+        self._release_due(now)
+        last = self._last_release
+        if last is None or now - last >= interval:
+            self._last_release = now
+            self._enqueue(frame)
+        else:
+            if self._held is not None:
+                self.dropped_throttle += 1
+            self._held = frame
+            self._wake()
+
+    def _release_due(self, now: float) -> None:
+        held = self._held
+        if held is not None and self._last_release is not None:
+            due = self._last_release + self._interval
+            if now >= due:
+                self._held = None
+                self._last_release = due
+                self._enqueue(held)
+
+    def _enqueue(self, frame: RawFrame) -> None:
+        queue = self._queue
+        if len(queue) >= self.buffer:
+            queue.popleft()
+            if self.dispatch == "latest":
+                self.dropped_conflated += 1
+            else:
+                self.dropped_overflow += 1
+        queue.append(frame)
+        self._wake()
+
+    def _wake(self) -> None:
+        wakeup = self._wakeup
+        if wakeup is not None:
+            self._wakeup = None
+            wakeup.set()
+
+    def close(self) -> None:
+        """No more frames will be offered; the consumer drains what is queued."""
+        self._closed = True
+        self._wake()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    # -- consumer side -------------------------------------------------------
+    def take(self) -> RawFrame | None:
+        """The next frame ready for delivery, or None (releases a held frame
+        whose window has ended)."""
+        if self._held is not None:
+            self._release_due(self._clock())
+        if self._queue:
+            return self._queue.popleft()
+        return None
+
+    async def get(self) -> RawFrame:
+        """Wait for the next frame. Raises ``anyio.EndOfStream`` once closed
+        and drained (a frame still held by the rate cap is delivered first)."""
+        while True:
+            frame = self.take()
+            if frame is not None:
+                return frame
+            held = self._held
+            if self._closed:
+                if held is None:
+                    raise anyio.EndOfStream
+                self._held = None
+                return held
+            wakeup = self._wakeup = anyio.Event()
+            if held is not None and self._last_release is not None:
+                delay = self._last_release + self._interval - self._clock()
+                with anyio.move_on_after(max(delay, 0.0)):
+                    await wakeup.wait()
+            else:
+                await wakeup.wait()
+
+
+class Subscription:
+    """A live subscription: ``async for msg in sub`` yields :class:`Message`.
+
+    Obtained from ``Client.subscribe(...)``, an async context manager;
+    leaving its block unsubscribes. Iteration ends (after the frames already
+    queued) when the subscription or the client closes, and raises
+    ``NotConnected`` when the connection was lost."""
+
+    def __init__(
+        self,
+        topic: str,
+        queue: FrameQueue,
+        *,
+        logger: logging.Logger,
+    ) -> None:
+        self.topic = topic
+        self._queue = queue
+        self._logger = logger
+        self._state: SubscriptionState = "pending"
+        self._state_changed = anyio.Event()
+        self._since_yield = 0
+        self._error: Exception | None = None
+
+    @property
+    def state(self) -> SubscriptionState:
+        """``"pending"`` until the server carries the topic to this client
+        (it may not be advertised yet), then ``"active"``."""
+        return self._state
+
+    def _set_state(self, state: SubscriptionState) -> None:
+        if state != self._state:
+            self._state = state
+            self._state_changed.set()
+            self._state_changed = anyio.Event()
+
+    async def wait_active(self) -> None:
+        """Return once the subscription is active."""
+        while self._state != "active":
+            if self._queue.closed:
+                raise anyio.ClosedResourceError
+            await self._state_changed.wait()
+
+    @property
+    def stats(self) -> SubscriptionStats:
+        """A snapshot of this subscription's counters."""
+        q = self._queue
+        return SubscriptionStats(
+            received=q.received,
+            delivered=q.delivered,
+            dropped_throttle=q.dropped_throttle,
+            dropped_conflated=q.dropped_conflated,
+            dropped_overflow=q.dropped_overflow,
+            decode_failures=q.decode_failures,
+            effective_interval_ms=q.interval * 1000.0,
+        )
+
+    def __aiter__(self) -> Subscription:
+        return self
+
+    async def __anext__(self) -> Message:
+        queue = self._queue
+        frame = queue.take()
+        if frame is None:
+            try:
+                frame = await queue.get()
+            except anyio.EndOfStream:
+                if self._error is not None:
+                    raise self._error from None
+                raise StopAsyncIteration from None
+            self._since_yield = 0
+        else:
+            # Frames were already waiting: stay fair to the reader and the
+            # other tasks without paying a task switch per message.
+            self._since_yield += 1
+            if self._since_yield >= _YIELD_EVERY:
+                self._since_yield = 0
+                await anyio.lowlevel.checkpoint()
+            else:
+                await anyio.lowlevel.checkpoint_if_cancelled()
+        message = self._decode(frame)
+        if frame.payload.nbytes >= _LARGE_PAYLOAD:
+            self._since_yield = _YIELD_EVERY  # yield before the next big decode
+        return message
+
+    def _decode(self, frame: RawFrame) -> Message:
+        queue = self._queue
+        queue.delivered += 1
+        payload = frame.payload
+        error: str | None = None
+        data: object
+        if frame.decode is None:
+            data, error = payload, f"no decoder for {frame.schema_name!r} ({frame.encoding})"
+        else:
+            try:
+                data = frame.decode(payload)
+            except DecodeError as exc:
+                data, error = payload, str(exc)
+            except Exception as exc:  # a codec bug must not end the subscription
+                data, error = payload, f"{type(exc).__name__}: {exc}"
+        if error is not None:
+            queue.decode_failures += 1
+            self._logger.warning(
+                "could not decode a %s message on %s (%d bytes), delivering it raw: %s",
+                frame.schema_name or "schemaless",
+                frame.topic,
+                payload.nbytes,
+                error,
+            )
+        return Message(
+            topic=frame.topic,
+            schema_name=frame.schema_name,
+            encoding=frame.encoding,
+            data=data,
+            receive_time_ns=frame.receive_time_ns,
+            log_time_ns=frame.log_time_ns,
+            byte_size=payload.nbytes,
+            decode_error=error,
+        )
+
+    def _fail(self, error: Exception) -> None:
+        """The connection is gone: iteration raises ``error`` once the queued
+        frames are consumed."""
+        self._error = error
+        self.close()
+
+    def close(self) -> None:
+        """Stop receiving; iteration ends after the queued frames."""
+        if not self._queue.closed:
+            self._queue.close()
+            self._state_changed.set()

@@ -1,0 +1,328 @@
+"""A WebSocket client connection: ``websockets``' sans-IO client protocol driven
+by an anyio byte stream, so one implementation serves asyncio and trio.
+
+The connection is used by exactly one reader task (:meth:`WebSocket.receive`)
+and any number of writers (:meth:`WebSocket.send`), serialised by a lock so
+frames never interleave. Keep-alive is WebSocket ping/pong
+(:meth:`WebSocket.keepalive`, run as a task by the owner)."""
+
+from __future__ import annotations
+
+import os
+import ssl as _ssl
+from collections import deque
+from dataclasses import dataclass
+from typing import Final
+
+import anyio
+import anyio.abc
+from websockets.client import ClientProtocol
+from websockets.exceptions import InvalidHandshake, InvalidStatus, InvalidURI
+from websockets.frames import Frame, Opcode
+from websockets.http11 import Response
+from websockets.protocol import State
+from websockets.typing import Subprotocol
+from websockets.uri import parse_uri
+
+from .._errors import ConnectError
+
+__all__ = ["ConnectionLost", "HandshakeRejected", "WebSocket", "connect_websocket"]
+
+_READ_CHUNK: Final = 1 << 18
+
+
+class HandshakeRejected(ConnectError):
+    """The server answered the opening handshake with an HTTP status other than
+    101. ``status`` and ``body`` carry its answer (a Foxglove SDK server says
+    ``Missing expected sec-websocket-protocol header`` with status 400 to a
+    client that offers none of its subprotocols)."""
+
+    def __init__(self, status: int, body: str) -> None:
+        self.status = status
+        self.body = body
+        super().__init__(f"WebSocket handshake rejected with HTTP {status}: {body!r}")
+
+
+class ConnectionLost(ConnectError):
+    """The WebSocket closed: by the peer, by a protocol error, by a frame above
+    the size limit, or by a missed keep-alive. ``code`` is the close code when
+    one was exchanged."""
+
+    def __init__(self, message: str, code: int | None = None) -> None:
+        self.code = code
+        super().__init__(message)
+
+
+@dataclass(slots=True)
+class _Pending:
+    opcode: Opcode
+    parts: list[bytes]
+    size: int
+
+
+class WebSocket:
+    """An open client WebSocket. Create it with :func:`connect_websocket`."""
+
+    def __init__(
+        self, stream: anyio.abc.ByteStream, protocol: ClientProtocol, max_size: int | None
+    ) -> None:
+        self._stream = stream
+        self._proto = protocol
+        self._max_size = max_size
+        self._send_lock = anyio.Lock()
+        self._messages: deque[str | bytes] = deque()
+        self._fragment: _Pending | None = None
+        self._pongs: dict[bytes, anyio.Event] = {}
+        self._closed_reason: ConnectionLost | None = None
+        self.subprotocol: str | None = protocol.subprotocol
+        self.send_timeout = 10.0
+        """Seconds one send may take before the connection is declared lost."""
+
+    # -- receiving ---------------------------------------------------------
+    async def receive(self) -> str | bytes:
+        """The next complete message: ``str`` for text, ``bytes`` for binary.
+
+        Fragmented messages are reassembled. Raises :class:`ConnectionLost`
+        once the connection is closed (the close is answered first)."""
+        messages = self._messages
+        while not messages:
+            if self._closed_reason is not None:
+                raise self._closed_reason
+            try:
+                data = await self._stream.receive(_READ_CHUNK)
+            except (anyio.EndOfStream, anyio.ClosedResourceError, anyio.BrokenResourceError, OSError) as exc:
+                self._proto.receive_eof()
+                self._lost(ConnectionLost(f"connection lost: {exc!r}" if str(exc) else "connection closed by peer"))
+                raise self._closed_reason from exc  # type: ignore[misc]
+            self._proto.receive_data(data)
+            self._take_events()
+            await self._flush()
+        return messages.popleft()
+
+    def _take_events(self) -> None:
+        for event in self._proto.events_received():
+            if isinstance(event, Frame):
+                self._on_frame(event)
+        if self._proto.state is State.CLOSED and self._closed_reason is None:
+            exc = self._proto.close_exc
+            rcvd = self._proto.close_rcvd
+            code = rcvd.code if rcvd is not None else None
+            self._lost(ConnectionLost(f"connection closed: {exc}", code))
+
+    def _on_frame(self, frame: Frame) -> None:
+        op = frame.opcode
+        if op is Opcode.TEXT or op is Opcode.BINARY:
+            if frame.fin:
+                self._messages.append(frame.data.decode() if op is Opcode.TEXT else frame.data)
+            else:
+                self._fragment = _Pending(op, [frame.data], len(frame.data))
+        elif op is Opcode.CONT:
+            pending = self._fragment
+            if pending is None:  # websockets rejects this already; be defensive
+                return
+            pending.parts.append(frame.data)
+            pending.size += len(frame.data)
+            if self._max_size is not None and pending.size > self._max_size:
+                self._fragment = None
+                self._proto.fail(1009, f"message over {self._max_size} bytes")
+                return
+            if frame.fin:
+                self._fragment = None
+                whole = b"".join(pending.parts)
+                self._messages.append(whole.decode() if pending.opcode is Opcode.TEXT else whole)
+        elif op is Opcode.PONG:
+            event = self._pongs.pop(bytes(frame.data), None)
+            if event is not None:
+                event.set()
+
+    def _lost(self, reason: ConnectionLost) -> None:
+        if self._closed_reason is None:
+            self._closed_reason = reason
+        for event in self._pongs.values():
+            event.set()
+        self._pongs.clear()
+
+    @property
+    def closed(self) -> bool:
+        """True once the connection has closed, for any reason."""
+        return self._closed_reason is not None or self._proto.state is State.CLOSED
+
+    # -- sending -----------------------------------------------------------
+    async def send(self, message: str | bytes | bytearray | memoryview) -> None:
+        """Send one message: text for ``str``, binary otherwise. Raises
+        :class:`ConnectionLost` when the connection is gone."""
+        async with self._send_lock:
+            if self._proto.state is not State.OPEN:
+                raise self._closed_reason or ConnectionLost("connection is not open")
+            if isinstance(message, str):
+                self._proto.send_text(message.encode())
+            else:
+                self._proto.send_binary(message)
+            await self._flush_locked()
+
+    async def _flush(self) -> None:
+        async with self._send_lock:
+            await self._flush_locked()
+
+    async def _flush_locked(self) -> None:
+        # A frame half written is a corrupt connection, so the write itself is
+        # shielded from cancellation (the cancellation lands right after it).
+        # It is bounded by send_timeout, or by the caller's own earlier
+        # deadline; past that the connection is failed, never left corrupt.
+        chunks = self._proto.data_to_send()
+        if not chunks:
+            return
+        now = anyio.current_time()
+        limit = now + self.send_timeout
+        effective = anyio.current_effective_deadline()
+        if now < effective < limit:
+            limit = effective
+        with anyio.CancelScope(shield=True, deadline=limit) as scope:
+            for chunk in chunks:
+                try:
+                    if chunk:
+                        await self._stream.send(chunk)
+                    else:
+                        await self._stream.send_eof()
+                except (anyio.ClosedResourceError, anyio.BrokenResourceError, OSError) as exc:
+                    self._lost(ConnectionLost(f"connection lost while sending: {exc!r}"))
+                    raise self._closed_reason from exc  # type: ignore[misc]
+        if scope.cancelled_caught:
+            self._lost(ConnectionLost(f"send did not complete within {limit - now:.3g} s", 1011))
+            with anyio.CancelScope(shield=True):
+                await self._stream.aclose()
+            raise self._closed_reason  # type: ignore[misc]
+
+    async def ping(self) -> anyio.Event:
+        """Send a ping; the returned event is set when its pong arrives (or the
+        connection closes). The reader task must be running to see the pong."""
+        payload = os.urandom(4)
+        event = anyio.Event()
+        self._pongs[payload] = event
+        async with self._send_lock:
+            if self._proto.state is not State.OPEN:
+                event.set()
+                return event
+            self._proto.send_ping(payload)
+            await self._flush_locked()
+        return event
+
+    async def keepalive(self, interval: float, timeout: float) -> None:
+        """Ping every ``interval`` seconds; fail the connection when a pong has
+        not come back within ``timeout``. Returns when the connection closes."""
+        while not self.closed:
+            await anyio.sleep(interval)
+            if self.closed:
+                return
+            pong = await self.ping()
+            with anyio.move_on_after(timeout) as scope:
+                await pong.wait()
+            if scope.cancelled_caught and not self.closed:
+                self._lost(ConnectionLost(f"keep-alive: no pong within {timeout:g} s", 1011))
+                await self._stream.aclose()
+                return
+
+    async def aclose(self, code: int = 1000, reason: str = "", timeout: float = 1.0) -> None:
+        """Close the connection cleanly: send a close frame, wait up to
+        ``timeout`` seconds for the peer's, then close the stream. Never
+        raises; runs shielded so a cancelled owner still closes the socket."""
+        with anyio.CancelScope(shield=True), anyio.move_on_after(timeout):
+            try:
+                if self._proto.state is State.OPEN:
+                    async with self._send_lock:
+                        self._proto.send_close(code, reason)
+                        await self._flush_locked()
+                while self._proto.state is not State.CLOSED and self._closed_reason is None:
+                    data = await self._stream.receive(_READ_CHUNK)
+                    self._proto.receive_data(data)
+                    self._proto.events_received()
+                    await self._flush()
+            except (anyio.EndOfStream, anyio.ClosedResourceError, anyio.BrokenResourceError, OSError, ConnectionLost):
+                pass
+        self._lost(ConnectionLost("connection closed by client", code))
+        with anyio.CancelScope(shield=True):
+            await self._stream.aclose()
+
+
+async def connect_websocket(
+    url: str,
+    *,
+    subprotocols: tuple[str, ...] = (),
+    max_size: int | None = 1 << 20,
+    ssl_context: _ssl.SSLContext | None = None,
+    timeout: float = 10.0,
+) -> WebSocket:
+    """Open a WebSocket to ``url`` (``ws://`` or ``wss://``) offering
+    ``subprotocols``. ``timeout`` covers TCP connect, TLS and the HTTP upgrade.
+
+    Raises :class:`HandshakeRejected` when the server answers with an HTTP
+    status, ``ConnectError`` for anything else that prevents the connection
+    (refused, unreachable, timeout, TLS failure), ``ValueError`` for a bad URL.
+    ``max_size`` bounds one message (``None``: no bound); a larger message
+    closes the connection with code 1009."""
+    try:
+        uri = parse_uri(url)
+    except InvalidURI as exc:
+        raise ValueError(f"not a WebSocket URL: {url!r}") from exc
+    proto = ClientProtocol(
+        uri, subprotocols=[Subprotocol(s) for s in subprotocols] or None, max_size=max_size
+    )
+    stream: anyio.abc.ByteStream | None = None
+    try:
+        with anyio.fail_after(timeout):
+            if uri.secure:
+                ctx = ssl_context or _ssl.create_default_context()
+                stream = await anyio.connect_tcp(
+                    uri.host, uri.port, ssl_context=ctx, tls_standard_compatible=False
+                )
+            else:
+                stream = await anyio.connect_tcp(uri.host, uri.port)
+            proto.send_request(proto.connect())
+            for chunk in proto.data_to_send():
+                await stream.send(chunk)
+            response: Response | None = None
+            leftover: list[Frame] = []
+            while response is None:
+                try:
+                    data = await stream.receive(_READ_CHUNK)
+                except anyio.EndOfStream:
+                    proto.receive_eof()
+                    data = b""
+                if data:
+                    proto.receive_data(data)
+                for event in proto.events_received():
+                    if isinstance(event, Response):
+                        response = event
+                    elif isinstance(event, Frame):
+                        leftover.append(event)
+                if response is None and not data:
+                    raise ConnectError("server closed the connection during the WebSocket handshake")
+    except TimeoutError as exc:
+        if stream is not None:
+            with anyio.CancelScope(shield=True):
+                await stream.aclose()
+        raise ConnectError(f"timed out after {timeout:g} s connecting to {url}") from exc
+    except (OSError, anyio.BrokenResourceError, _ssl.SSLError) as exc:
+        if stream is not None:
+            with anyio.CancelScope(shield=True):
+                await stream.aclose()
+        raise ConnectError(f"cannot connect to {url}: {exc}") from exc
+    except BaseException:
+        if stream is not None:
+            with anyio.CancelScope(shield=True):
+                await stream.aclose()
+        raise
+    if proto.handshake_exc is not None:
+        with anyio.CancelScope(shield=True):
+            await stream.aclose()
+        exc = proto.handshake_exc
+        if isinstance(exc, InvalidStatus):
+            body = bytes(exc.response.body or b"").decode("utf-8", "replace")
+            raise HandshakeRejected(exc.response.status_code, body) from exc
+        if isinstance(exc, InvalidHandshake):
+            raise ConnectError(f"WebSocket handshake with {url} failed: {exc}") from exc
+        raise ConnectError(f"WebSocket handshake with {url} failed: {exc!r}") from exc
+    ws = WebSocket(stream, proto, max_size)
+    for frame in leftover:
+        ws._on_frame(frame)
+    return ws
