@@ -15,11 +15,11 @@ from typing import Any
 import anyio
 import numpy as np
 import pytest
-from _util import wait_until
 from foxglove import Schema
-from peers.foxglove_sdk import SdkServer, cdr, decode, ros2_service, string_msg
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
+from peers.foxglove_sdk import SdkServer, cdr, decode, ros2_service, string_msg
 
 
 @pytest.fixture
@@ -336,21 +336,21 @@ async def test_advertise_ahead_and_unadvertise(server: SdkServer) -> None:
 
 async def test_publish_rejects_bad_arguments_at_once(server: SdkServer) -> None:
     async with rmb.connect(server.url, options=options()) as robot:
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="absolute ROS name"):
             await robot.publish("cmd_vel", "geometry_msgs/msg/Twist", {})
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="ROS type"):
             await robot.publish("/cmd_vel", "not a type", {})
         with pytest.raises(TypeError):
             await robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", [1, 2])  # type: ignore[arg-type]
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="priority"):
             await robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", {}, priority="urgent")  # type: ignore[arg-type]
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="'w'"):
             await robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", {"linear": {"w": 1.0}})
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="max_hz"):
             robot.subscribe("/x", max_hz=0)
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="dispatch"):
             robot.subscribe("/x", dispatch="sometimes")  # type: ignore[arg-type]
-        with pytest.raises(ValueError):
+        with pytest.raises(ValueError, match="timeout"):
             await robot.call_service("/x", {}, timeout=0)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import ssl
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 __all__ = ["ClientOptions"]
@@ -46,7 +46,7 @@ class ClientOptions:
     """Pause after a new client advertisement before its first publish, so
     the bridge has its publisher ready. ``advertise()`` ahead of time takes
     it out of the hot path."""
-    stop_topics: tuple[str, ...] = ()
+    stop_topics: Sequence[str] = ()
     """Velocity topics that get a zero Twist on teardown even if this client
     never published to them."""
     zero_twist_on_exit: bool = True
@@ -73,7 +73,9 @@ class ClientOptions:
             raise TypeError("max_frame_size must be an int")
         if self.max_frame_size < 1024:
             raise ValueError("max_frame_size must be at least 1024 bytes")
-        if isinstance(self.subscription_buffer, bool) or not isinstance(self.subscription_buffer, int):
+        if isinstance(self.subscription_buffer, bool) or not isinstance(
+            self.subscription_buffer, int
+        ):
             raise TypeError("subscription_buffer must be an int")
         if self.subscription_buffer < 1:
             raise ValueError("subscription_buffer must be at least 1")

@@ -67,17 +67,15 @@ async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
         engine = fx.FoxgloveEngine(ws.subprotocol)
         early: list[fx.Event] = []
         with anyio.move_on_after(max(deadline - anyio.current_time(), 0.0)):
-            while engine.server_info is None:
+            while not _greeted(engine):
                 message = await ws.receive()
                 if isinstance(message, str):
                     events = engine.receive_text(message)
                 else:
                     events = engine.receive_binary(message)
-                if engine.server_info is None:
-                    early.extend(events)
-                else:  # the greeting itself is not replayed to the reader
-                    early.extend(e for e in events if not isinstance(e, fx.ServerInfo))
-        if engine.server_info is None:
+                # the greeting itself is not replayed to the reader
+                early.extend(e for e in events if not isinstance(e, fx.ServerInfo))
+        if not _greeted(engine):
             raise ProtocolMismatchError(
                 "foxglove-ws",
                 None,
@@ -85,7 +83,9 @@ async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
             )
         # The first advertisements follow serverInfo at once; a server with no
         # channels sends none, so wait only a short grace for them.
-        want_services = "services" in engine.server_info.capabilities
+        info = engine.server_info
+        assert info is not None
+        want_services = "services" in info.capabilities
         seen_channels = seen_services = False
         grace = min(options.discovery_grace, max(deadline - anyio.current_time(), 0.0))
         with anyio.move_on_after(grace):
@@ -102,6 +102,10 @@ async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
         await ws.aclose()
         raise
     return FoxgloveBackend(ws, engine, options, early)
+
+
+def _greeted(engine: fx.FoxgloveEngine) -> bool:
+    return engine.server_info is not None
 
 
 def is_foxglove_rejection(exc: HandshakeRejected) -> bool:
@@ -206,7 +210,9 @@ class FoxgloveBackend:
                 else:
                     await self._handle(event)
 
-    def _on_message_data(self, event: fx.MessageData, received_ns: int, events: BackendEvents) -> None:
+    def _on_message_data(
+        self, event: fx.MessageData, received_ns: int, events: BackendEvents
+    ) -> None:
         channel = event.channel
         try:
             decode = self._decoders[channel.id]
@@ -270,7 +276,9 @@ class FoxgloveBackend:
             svc = self._engine.services.get(event.service_id)
             name = svc.name if svc is not None else f"#{event.service_id}"
             if not self._calls.fail(event.call_id, ServiceError(name, event.message)):
-                self._log.warning("serviceCallFailure for unknown call %d: %s", event.call_id, event.message)
+                self._log.warning(
+                    "serviceCallFailure for unknown call %d: %s", event.call_id, event.message
+                )
         elif isinstance(event, fx.ParameterValues):
             values = {p.name: p.value for p in event.parameters}
             if event.id is None or not self._params.resolve(event.id, values):
@@ -322,7 +330,9 @@ class FoxgloveBackend:
         if "json" in supported or not supported:
             return "json"
         if "cdr" in supported:
-            raise SchemaError(f"the server only accepts CDR and no definition of {schema!r} is known")
+            raise SchemaError(
+                f"the server only accepts CDR and no definition of {schema!r} is known"
+            )
         raise NotSupportedError(f"the server accepts none of our encodings: {', '.join(supported)}")
 
     async def advertise(self, topic: str, schema: str) -> None:
@@ -336,12 +346,16 @@ class FoxgloveBackend:
             await existing.ready.wait()
             return
         if "clientPublish" not in self.server_info.capabilities:
-            raise NotSupportedError("the server does not accept client publishing (no clientPublish)")
+            raise NotSupportedError(
+                "the server does not accept client publishing (no clientPublish)"
+            )
         encoding = self._publish_encoding(schema)
         encode = self.codecs.encoder(schema, encoding)
         channel_id, message = self._engine.advertise(topic, encoding, schema)
         ready = anyio.Event()
-        self._client_channels[topic] = _ClientChannel(channel_id, topic, schema, encoding, encode, ready)
+        self._client_channels[topic] = _ClientChannel(
+            channel_id, topic, schema, encoding, encode, ready
+        )
         try:
             await self._ws.send(message)
             await anyio.sleep(self._options.advertise_settle)
@@ -416,7 +430,9 @@ class FoxgloveBackend:
         call_id = next(self._call_ids)
         self._calls.register(call_id)
         try:
-            await self._ws.send(self._engine.service_call_request(svc.id, call_id, encoding, payload))
+            await self._ws.send(
+                self._engine.service_call_request(svc.id, call_id, encoding, payload)
+            )
         except BaseException:
             self._calls.discard(call_id)
             raise
@@ -486,4 +502,3 @@ class FoxgloveBackend:
 
     async def aclose(self) -> None:
         await self._ws.aclose()
-

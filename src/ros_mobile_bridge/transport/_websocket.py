@@ -90,9 +90,18 @@ class WebSocket:
                 raise self._closed_reason
             try:
                 data = await self._stream.receive(_READ_CHUNK)
-            except (anyio.EndOfStream, anyio.ClosedResourceError, anyio.BrokenResourceError, OSError) as exc:
+            except (
+                anyio.EndOfStream,
+                anyio.ClosedResourceError,
+                anyio.BrokenResourceError,
+                OSError,
+            ) as exc:
                 self._proto.receive_eof()
-                self._lost(ConnectionLost(f"connection lost: {exc!r}" if str(exc) else "connection closed by peer"))
+                self._lost(
+                    ConnectionLost(
+                        f"connection lost: {exc!r}" if str(exc) else "connection closed by peer"
+                    )
+                )
                 raise self._closed_reason from exc  # type: ignore[misc]
             self._proto.receive_data(data)
             self._take_events()
@@ -111,17 +120,18 @@ class WebSocket:
 
     def _on_frame(self, frame: Frame) -> None:
         op = frame.opcode
+        data = frame.data if type(frame.data) is bytes else bytes(frame.data)
         if op is Opcode.TEXT or op is Opcode.BINARY:
             if frame.fin:
-                self._messages.append(frame.data.decode() if op is Opcode.TEXT else frame.data)
+                self._messages.append(data.decode() if op is Opcode.TEXT else data)
             else:
-                self._fragment = _Pending(op, [frame.data], len(frame.data))
+                self._fragment = _Pending(op, [data], len(data))
         elif op is Opcode.CONT:
             pending = self._fragment
             if pending is None:  # websockets rejects this already; be defensive
                 return
-            pending.parts.append(frame.data)
-            pending.size += len(frame.data)
+            pending.parts.append(data)
+            pending.size += len(data)
             if self._max_size is not None and pending.size > self._max_size:
                 self._fragment = None
                 self._proto.fail(1009, f"message over {self._max_size} bytes")
@@ -131,7 +141,7 @@ class WebSocket:
                 whole = b"".join(pending.parts)
                 self._messages.append(whole.decode() if pending.opcode is Opcode.TEXT else whole)
         elif op is Opcode.PONG:
-            event = self._pongs.pop(bytes(frame.data), None)
+            event = self._pongs.pop(data, None)
             if event is not None:
                 event.set()
 
@@ -212,7 +222,7 @@ class WebSocket:
         not come back within ``timeout``. Returns when the connection closes."""
         while not self.closed:
             await anyio.sleep(interval)
-            if self.closed:
+            if self._closed_reason is not None:
                 return
             pong = await self.ping()
             with anyio.move_on_after(timeout) as scope:
@@ -237,7 +247,13 @@ class WebSocket:
                     self._proto.receive_data(data)
                     self._proto.events_received()
                     await self._flush()
-            except (anyio.EndOfStream, anyio.ClosedResourceError, anyio.BrokenResourceError, OSError, ConnectionLost):
+            except (
+                anyio.EndOfStream,
+                anyio.ClosedResourceError,
+                anyio.BrokenResourceError,
+                OSError,
+                ConnectionLost,
+            ):
                 pass
         self._lost(ConnectionLost("connection closed by client", code))
         with anyio.CancelScope(shield=True):
@@ -296,7 +312,9 @@ async def connect_websocket(
                     elif isinstance(event, Frame):
                         leftover.append(event)
                 if response is None and not data:
-                    raise ConnectError("server closed the connection during the WebSocket handshake")
+                    raise ConnectError(
+                        "server closed the connection during the WebSocket handshake"
+                    )
     except TimeoutError as exc:
         if stream is not None:
             with anyio.CancelScope(shield=True):
@@ -315,13 +333,13 @@ async def connect_websocket(
     if proto.handshake_exc is not None:
         with anyio.CancelScope(shield=True):
             await stream.aclose()
-        exc = proto.handshake_exc
-        if isinstance(exc, InvalidStatus):
-            body = bytes(exc.response.body or b"").decode("utf-8", "replace")
-            raise HandshakeRejected(exc.response.status_code, body) from exc
-        if isinstance(exc, InvalidHandshake):
-            raise ConnectError(f"WebSocket handshake with {url} failed: {exc}") from exc
-        raise ConnectError(f"WebSocket handshake with {url} failed: {exc!r}") from exc
+        failure = proto.handshake_exc
+        if isinstance(failure, InvalidStatus):
+            body = bytes(failure.response.body or b"").decode("utf-8", "replace")
+            raise HandshakeRejected(failure.response.status_code, body) from failure
+        if isinstance(failure, InvalidHandshake):
+            raise ConnectError(f"WebSocket handshake with {url} failed: {failure}") from failure
+        raise ConnectError(f"WebSocket handshake with {url} failed: {failure!r}") from failure
     ws = WebSocket(stream, proto, max_size)
     for frame in leftover:
         ws._on_frame(frame)
