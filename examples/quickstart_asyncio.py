@@ -1,0 +1,35 @@
+"""Quick start on asyncio: list topics, read one odometry message, call a
+service, drive briefly. Run against the demo robot:
+
+    rmb demo --serve --port 8765 &
+    python examples/quickstart_asyncio.py ws://127.0.0.1:8765
+"""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+
+import ros_mobile_bridge as rmb
+
+
+async def main(url: str) -> None:
+    async with rmb.connect(url) as robot:
+        print("topics:", [t.name for t in robot.topics])
+        async with robot.subscribe("/odom", max_hz=10) as sub:
+            async for msg in sub:
+                position = msg.data["pose"]["pose"]["position"]
+                print(f"{msg.topic}: x={position['x']:.2f} y={position['y']:.2f}")
+                break
+        reply = await robot.call_service("/set_led", {"data": True}, timeout=5)
+        print("set_led ->", reply)
+        for _ in range(5):
+            await robot.publish(
+                "/cmd_vel", "geometry_msgs/msg/Twist", {"linear": {"x": 0.2}}, priority="control"
+            )
+            await asyncio.sleep(0.1)
+    # leaving the block sent a zero Twist to /cmd_vel, then closed the socket
+
+
+if __name__ == "__main__":
+    asyncio.run(main(sys.argv[1] if len(sys.argv) > 1 else "ws://127.0.0.1:8765"))
