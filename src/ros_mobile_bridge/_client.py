@@ -7,6 +7,7 @@ protocol detail lives in the backend."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import time
@@ -53,7 +54,9 @@ def _check_schema(schema: object) -> str:
     if not isinstance(schema, str):
         raise TypeError(f"schema must be a str, not {type(schema).__name__}")
     if schema.count("/") not in (1, 2) or any(c.isspace() for c in schema):
-        raise ValueError(f"schema must be a ROS type like 'geometry_msgs/msg/Twist', got {schema!r}")
+        raise ValueError(
+            f"schema must be a ROS type like 'geometry_msgs/msg/Twist', got {schema!r}"
+        )
     return schema
 
 
@@ -194,7 +197,8 @@ class Client:
                     await self._flush_and_stop()
             if scope.cancelled_caught:
                 self._log.warning(
-                    "teardown did not finish within %.3g s; closing anyway", options.teardown_timeout
+                    "teardown did not finish within %.3g s; closing anyway",
+                    options.teardown_timeout,
                 )
             if self._status.value == "connected":
                 self._status.set("closed")
@@ -225,12 +229,18 @@ class Client:
                     try:
                         await backend.advertise(topic, schema)
                         await backend.send(backend.encode_publish(topic, self._zero(schema)))
-                        self._log.info("teardown: zero %s sent to %s", schema.rsplit("/", 1)[-1], topic)
+                        self._log.info(
+                            "teardown: zero %s sent to %s", schema.rsplit("/", 1)[-1], topic
+                        )
                     except (NotSupportedError, DecodeError, ValueError) as exc:
-                        self._log.error("teardown: could not send a zero Twist to %s: %s", topic, exc)
+                        self._log.error(
+                            "teardown: could not send a zero Twist to %s: %s", topic, exc
+                        )
             await backend.confirm_delivery()
         except ConnectError as exc:
-            self._log.error("teardown: connection failed before the zero Twist was confirmed: %s", exc)
+            self._log.error(
+                "teardown: connection failed before the zero Twist was confirmed: %s", exc
+            )
 
     def _stop_targets(self) -> dict[str, str]:
         targets = dict(self._velocity)
@@ -238,14 +248,18 @@ class Client:
         for topic in self._options.stop_topics:
             if topic not in targets:
                 advertised = known.get(topic, "")
-                targets[topic] = _TWIST_STAMPED if same_type_name(advertised, _TWIST_STAMPED) else _TWIST
+                targets[topic] = (
+                    _TWIST_STAMPED if same_type_name(advertised, _TWIST_STAMPED) else _TWIST
+                )
         return targets
 
     @staticmethod
     def _zero(schema: str) -> dict[str, Any]:
         if same_type_name(schema, _TWIST_STAMPED):
             now = time.time_ns()
-            return {"header": {"stamp": {"sec": now // 1_000_000_000, "nanosec": now % 1_000_000_000}}}
+            return {
+                "header": {"stamp": {"sec": now // 1_000_000_000, "nanosec": now % 1_000_000_000}}
+            }
         return {}
 
     async def _close_backend(self) -> None:
@@ -448,7 +462,9 @@ class Client:
         _check_name("service name", name)
         limit = _check_timeout(timeout) or self._options.service_timeout
         if request is not None and not isinstance(request, Mapping):
-            raise TypeError(f"request must be a mapping (dict) or None, not {type(request).__name__}")
+            raise TypeError(
+                f"request must be a mapping (dict) or None, not {type(request).__name__}"
+            )
         self._require_connected()
         start = time.perf_counter()
         with anyio.move_on_after(limit) as scope:
@@ -508,7 +524,9 @@ class Client:
         )
 
     @asynccontextmanager
-    async def watch_parameters(self, names: Sequence[str]) -> AsyncIterator[AsyncIterator[dict[str, Any]]]:
+    async def watch_parameters(
+        self, names: Sequence[str]
+    ) -> AsyncIterator[AsyncIterator[dict[str, Any]]]:
         """Subscribe to updates of the named parameters. Yields an async
         iterator of ``{name: value}`` snapshots (the newest known values of
         the watched names), one per change."""
@@ -530,13 +548,14 @@ class Client:
         try:
             yield iterator
         finally:
-            with anyio.CancelScope(shield=True), anyio.move_on_after(self._options.teardown_timeout):
+            with (
+                anyio.CancelScope(shield=True),
+                anyio.move_on_after(self._options.teardown_timeout),
+            ):
                 await iterator.aclose()  # type: ignore[attr-defined]
                 if self.connected:
-                    try:
+                    with contextlib.suppress(ConnectError):
                         await self._backend.unsubscribe_parameters(wanted)
-                    except ConnectError:
-                        pass
 
     # -- schemas ------------------------------------------------------------
     def schema_template(self, name: str) -> dict[str, Any]:

@@ -133,7 +133,9 @@ def parse_target(
         raise ValueError(f"a tcp/ endpoint is a zenoh target, but protocol={protocol!r}")
     effective = "zenoh" if zenoh else protocol
     default = DEFAULT_PORTS.get(effective, DEFAULT_PORTS["foxglove-ws"])
-    chosen = port if port is not None else (_parse_port(port_text, target) if port_text else default)
+    chosen = (
+        port if port is not None else (_parse_port(port_text, target) if port_text else default)
+    )
     is_secure = secure if secure is not None else bool(scheme_secure)
     return Endpoint(host=host, port=chosen, secure=is_secure, path=path, zenoh=zenoh)
 

@@ -18,7 +18,15 @@ class RawFrame:
     unadvertised or re-advertised with another schema decodes correctly.
     ``payload`` is a zero-copy view of the received WebSocket message."""
 
-    __slots__ = ("decode", "encoding", "log_time_ns", "payload", "receive_time_ns", "schema_name", "topic")
+    __slots__ = (
+        "decode",
+        "encoding",
+        "log_time_ns",
+        "payload",
+        "receive_time_ns",
+        "schema_name",
+        "topic",
+    )
 
     def __init__(
         self,
