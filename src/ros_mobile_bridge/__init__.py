@@ -63,4 +63,6 @@ __all__ = [
     "SubscriptionStats",
     "TopicInfo",
     "__version__",
+    "connect",
+    "parse_target",
 ]

@@ -423,7 +423,7 @@ class Client:
         try:
             message = backend.encode_publish(topic, data)
         except DecodeError as exc:
-            raise ValueError(f"cannot encode {schema} for {topic}: {exc}") from exc
+            raise ValueError(f"{topic}: {exc}") from exc
         if _is_velocity_type(schema):
             self._velocity[topic] = schema
         if priority == "control":

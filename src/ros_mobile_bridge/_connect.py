@@ -43,7 +43,7 @@ class Endpoint:
 
 
 def _parse_port(text: str, target: str) -> int:
-    if not text.isdigit():
+    if not (text.isascii() and text.isdigit()):
         raise ValueError(f"invalid port {text!r} in target {target!r}")
     port = int(text)
     if not 0 < port < 65536:
@@ -60,6 +60,11 @@ def _check_host(host: str, target: str) -> str:
         pass
     if not _HOSTNAME.match(host):
         raise ValueError(f"invalid host {host!r} in target {target!r}")
+    # A name whose last label is a number would be read by the resolver as a
+    # legacy IPv4 form ("010.1.1.1" is 8.1.1.1): refuse it (WHATWG's rule).
+    last = host.rstrip(".").rsplit(".", 1)[-1].lower()
+    if last.isdigit() or (last.startswith("0x") and all(c in "0123456789abcdef" for c in last[2:])):
+        raise ValueError(f"invalid IPv4 address {host!r} in target {target!r}")
     return host
 
 
@@ -120,12 +125,16 @@ def parse_target(
             if not after.startswith(":"):
                 raise ValueError(f"unexpected {after!r} after IPv6 address in {target!r}")
             port_text = after[1:]
+            if not port_text:
+                raise ValueError(f"empty port in target {target!r}")
         try:
             ipaddress.IPv6Address(host_text)
         except ValueError:
             raise ValueError(f"invalid IPv6 address {host_text!r} in {target!r}") from None
     elif text.count(":") == 1:
         host_text, port_text = text.split(":")
+        if not port_text:
+            raise ValueError(f"empty port in target {target!r}")
     elif text.count(":") > 1:
         raise ValueError(f"IPv6 addresses need brackets: [{text}]:port (target {target!r})")
     host = _check_host(host_text, target)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 import ssl
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -13,7 +14,7 @@ __all__ = ["ClientOptions"]
 def _positive(name: str, value: object, *, allow_zero: bool = False) -> None:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise TypeError(f"{name} must be a number, not {type(value).__name__}")
-    if value < 0 or (value == 0 and not allow_zero):
+    if math.isnan(value) or value < 0 or (value == 0 and not allow_zero):
         raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
 
 
@@ -85,6 +86,10 @@ class ClientOptions:
         for topic in self.stop_topics:
             if not isinstance(topic, str) or not topic.startswith("/"):
                 raise ValueError(f"stop_topics entries must be absolute topic names, got {topic!r}")
+        if not isinstance(self.zero_twist_on_exit, bool):
+            raise TypeError("zero_twist_on_exit must be a bool")
+        if self.ssl_context is not None and not isinstance(self.ssl_context, ssl.SSLContext):
+            raise TypeError("ssl_context must be an ssl.SSLContext or None")
         if not isinstance(self.logger, logging.Logger):
             raise TypeError("logger must be a logging.Logger")
         if self.on_latency is not None and not callable(self.on_latency):

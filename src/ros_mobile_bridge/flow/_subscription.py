@@ -94,9 +94,9 @@ class FrameQueue:
     # -- producer side (the reader) -----------------------------------------
     def offer(self, frame: RawFrame) -> None:
         """Route one frame through the filters. Never blocks, never decodes."""
-        self.received += 1
         if self._closed:
             return
+        self.received += 1
         interval = self._interval
         if interval <= 0.0:
             self._enqueue(frame)
@@ -241,6 +241,9 @@ class Subscription:
 
     async def __anext__(self) -> Message:
         queue = self._queue
+        # A cancellation is taken before a frame leaves the queue, never
+        # after, so a cancelled ``__anext__`` loses nothing.
+        await anyio.lowlevel.checkpoint_if_cancelled()
         frame = queue.take()
         if frame is None:
             try:
@@ -256,9 +259,7 @@ class Subscription:
             self._since_yield += 1
             if self._since_yield >= _YIELD_EVERY:
                 self._since_yield = 0
-                await anyio.lowlevel.checkpoint()
-            else:
-                await anyio.lowlevel.checkpoint_if_cancelled()
+                await anyio.lowlevel.cancel_shielded_checkpoint()
         message = self._decode(frame)
         if frame.payload.nbytes >= _LARGE_PAYLOAD:
             self._since_yield = _YIELD_EVERY  # yield before the next big decode

@@ -1,0 +1,943 @@
+"""The flow layer, exactly: FrameQueue + Subscription (rate cap, dispatch,
+overflow, trailing delivery, decoding on pull), Outbox, PendingRequests and
+Watchable.
+
+Time is a fake clock the tests advance by hand; nothing here asserts on the
+wall clock. Tasks are synchronised with ``anyio.wait_all_tasks_blocked``,
+never with sleeps."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import anyio
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ros_mobile_bridge import DecodeError, NotConnected, ServiceError
+from ros_mobile_bridge.flow import (
+    FrameQueue,
+    Outbox,
+    PendingRequests,
+    RawFrame,
+    Subscription,
+    Watchable,
+)
+
+# Marked here as well as by conftest: the anyio plugin must see the marker at
+# collection time for parametrized async tests (conftest adds it only after
+# parametrization, which leaves them without their parameters).
+
+
+LOGGER = logging.getLogger("tests.test_flow")
+
+
+# -- helpers ------------------------------------------------------------------
+class FakeClock:
+    """Monotonic seconds that move only when the test says so."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self.now = start
+
+    def __call__(self) -> float:
+        return self.now
+
+    def set(self, now: float) -> None:
+        assert now >= self.now, "a monotonic clock never goes back"
+        self.now = now
+
+
+class CountingDecoder:
+    """Decodes the ASCII integer payload and records every call."""
+
+    def __init__(self) -> None:
+        self.calls: list[int] = []
+
+    def __call__(self, view: memoryview) -> int:
+        value = int(bytes(view))
+        self.calls.append(value)
+        return value
+
+
+def frame(i: int, decode: object = None, *, topic: str = "/t") -> RawFrame:
+    return RawFrame(
+        topic=topic,
+        schema_name="std_msgs/msg/Int32",
+        encoding="cdr",
+        payload=memoryview(str(i).encode()),
+        log_time_ns=None,
+        receive_time_ns=i,
+        decode=decode,  # type: ignore[arg-type]
+    )
+
+
+def payload_id(f: RawFrame | None) -> int | None:
+    return None if f is None else int(bytes(f.payload))
+
+
+def take_all(q: FrameQueue) -> list[int]:
+    out: list[int] = []
+    while (f := q.take()) is not None:
+        out.append(int(bytes(f.payload)))
+    return out
+
+
+def accounted(q: FrameQueue) -> int:
+    """delivered + every drop + still queued (held included)."""
+    return q.delivered + q.dropped_throttle + q.dropped_conflated + q.dropped_overflow + len(q)
+
+
+async def pull_ready(sub: Subscription) -> list[object]:
+    """Consume every message that is ready now, through ``__anext__``, and
+    stop (by cancelling the consumer while it waits) once none is."""
+    got: list[object] = []
+
+    async def consume() -> None:
+        async for msg in sub:
+            got.append(msg.data)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(consume)
+        await anyio.wait_all_tasks_blocked()
+        tg.cancel_scope.cancel()
+    return got
+
+
+async def drain(sub: Subscription) -> list[object]:
+    """Consume until the (closed) subscription ends."""
+    return [msg.data async for msg in sub]
+
+
+# -- FrameQueue: no cap ---------------------------------------------------------
+def test_without_a_cap_every_frame_passes_in_order() -> None:
+    clock = FakeClock()
+    q = FrameQueue(buffer=1000, clock=clock)
+    for i in range(500):
+        q.offer(frame(i))  # all at the same instant: no cap, nothing held
+    assert len(q) == 500
+    assert take_all(q) == list(range(500))
+    assert q.take() is None
+    assert q.received == 500
+    assert q.dropped_throttle == q.dropped_conflated == q.dropped_overflow == 0
+    assert q.interval == 0.0
+
+
+# -- FrameQueue: the max_hz cap ---------------------------------------------------
+async def test_max_hz_10_on_1ms_frames_delivers_11_and_decodes_only_those() -> None:
+    # 1000 frames at t = 0, 1, ..., 999 ms under max_hz=10 (windows of 100 ms).
+    # What the algorithm promises:
+    #   * frame 0 opens the first window and is delivered at once            (1)
+    #   * each later window start (100, 200, ..., 900 ms) releases the newest
+    #     frame held during the window before it                            (9)
+    #   * the newest frame of the last window (999) is held and released
+    #     once that window ends, at 1000 ms                                   (1)
+    # so 11 delivered (10 of them within the simulated second) and the other
+    # 989 superseded while held: dropped_throttle, never decoded.
+    clock = FakeClock()
+    decoder = CountingDecoder()
+    q = FrameQueue(max_hz=10, buffer=64, clock=clock)
+    sub = Subscription("/t", q, logger=LOGGER)
+    for i in range(1000):
+        clock.set(i / 1000)
+        q.offer(frame(i, decoder))
+    assert q.received == 1000
+    assert q.dropped_throttle == 989
+    assert len(q) == 11  # 10 ready + 1 held
+    assert decoder.calls == []  # offering never decodes
+
+    # Within the second: exactly 10 are ready, the 11th is still held.
+    ready = await pull_ready(sub)
+    assert len(ready) == 10
+    assert len(q) == 1
+    assert q.take() is None  # the last window has not ended yet
+
+    clock.set(1.001)  # the last window has ended (1 ms of float slack)
+    (last,) = await pull_ready(sub)
+    assert last == 999
+    delivered = [*ready, last]
+    assert q.delivered == 11
+    assert q.dropped_throttle == 989
+    assert accounted(q) == q.received == 1000
+
+    # Only delivered frames were decoded, each once, in delivery order.
+    assert decoder.calls == delivered
+    assert delivered[0] == 0
+    # The k-th release is the newest frame before the k*100 ms boundary
+    # (frame 100k-1), or frame 100k where float rounding of the accumulated
+    # window start puts that frame just before the boundary.
+    for k in range(1, 10):
+        assert delivered[k] in (100 * k - 1, 100 * k), (k, delivered)
+    assert sub.stats.effective_interval_ms == pytest.approx(100.0)
+
+    q.close()
+    with pytest.raises(StopAsyncIteration):
+        await sub.__anext__()
+
+
+def test_max_hz_exact_schedule_with_dyadic_times() -> None:
+    # Exactly representable times (1/1024 s steps, max_hz=8 -> 0.125 s
+    # windows), so the schedule is exact to the frame.
+    clock = FakeClock()
+    q = FrameQueue(max_hz=8, buffer=64, clock=clock)
+    out: list[int] = []
+    for i in range(1024):
+        clock.set(i / 1024)
+        q.offer(frame(i))
+        out += take_all(q)
+    assert out == [0, *(128 * k - 1 for k in range(1, 8))]
+    clock.set(1023 / 1024 + 1 / 2048)
+    assert q.take() is None  # the last window (0.875 .. 1.0) is still open
+    clock.set(1.0)
+    assert payload_id(q.take()) == 1023
+    assert q.take() is None
+    assert q.received == 1024
+    assert q.dropped_throttle == 1024 - 9
+
+
+def test_a_frame_after_a_quiet_gap_is_delivered_at_once() -> None:
+    clock = FakeClock()
+    q = FrameQueue(max_hz=4, clock=clock)  # 0.25 s windows
+    q.offer(frame(0))
+    clock.set(0.25)
+    q.offer(frame(1))  # exactly one interval later: a new window
+    clock.set(10.0)
+    q.offer(frame(2))
+    assert take_all(q) == [0, 1, 2]
+    assert q.dropped_throttle == 0
+
+
+def test_trailing_delivery_releases_the_newest_frame_of_a_burst_when_the_window_ends() -> None:
+    clock = FakeClock()
+    q = FrameQueue(max_hz=4, clock=clock)  # 0.25 s windows, dyadic times below
+    q.offer(frame(0))  # t=0: delivered at once, opens the window
+    for i, t in [(1, 0.0625), (2, 0.125), (3, 0.1875)]:
+        clock.set(t)
+        q.offer(frame(i))  # burst inside the window: held, superseded
+    # then silence
+    assert take_all(q) == [0]
+    assert q.take() is None
+    clock.set(0.25 - 1 / 1024)
+    assert q.take() is None  # not before the window ends
+    clock.set(0.25)
+    assert payload_id(q.take()) == 3  # the last message before quiet arrives
+    assert q.take() is None
+    clock.set(100.0)
+    assert q.take() is None  # released once, not again
+    assert q.dropped_throttle == 2
+    assert q.received == 4
+
+
+async def test_a_consumer_waiting_on_a_held_frame_gets_it_when_the_window_ends() -> None:
+    # The consumer waits in get() while the rate cap holds the newest frame;
+    # once the (fake) window has ended the frame is delivered without any new
+    # frame arriving. max_hz=100 bounds get()'s internal re-check to 10 ms.
+    clock = FakeClock()
+    q = FrameQueue(max_hz=100, clock=clock)
+    sub = Subscription("/t", q, logger=LOGGER)
+    q.offer(frame(0, CountingDecoder()))
+    clock.set(0.001)
+    q.offer(frame(1, CountingDecoder()))  # held
+    assert (await sub.__anext__()).data == 0
+    got: list[object] = []
+
+    async def consume() -> None:
+        got.append((await sub.__anext__()).data)
+
+    with anyio.fail_after(10):
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(consume)
+            await anyio.wait_all_tasks_blocked()
+            assert got == []  # still held: the window has not ended
+            clock.set(0.01)
+    assert got == [1]
+    assert q.dropped_throttle == 0
+
+
+# -- FrameQueue: dispatch and overflow ---------------------------------------------
+async def test_dispatch_latest_keeps_only_the_newest_frame() -> None:
+    decoder = CountingDecoder()
+    q = FrameQueue(dispatch="latest", buffer=64, clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    for i in range(10):
+        q.offer(frame(i, decoder))
+    assert len(q) == 1
+    assert q.dropped_conflated == 9
+    assert q.dropped_overflow == 0
+    assert await pull_ready(sub) == [9]
+    assert decoder.calls == [9]
+    assert accounted(q) == q.received == 10
+
+
+def test_dispatch_latest_with_a_cap_conflates_the_released_frame() -> None:
+    clock = FakeClock()
+    q = FrameQueue(max_hz=4, dispatch="latest", clock=clock)
+    q.offer(frame(0))
+    clock.set(0.125)
+    q.offer(frame(1))  # held
+    clock.set(0.25)  # the window ends: 1 is released and supersedes 0
+    assert payload_id(q.take()) == 1
+    assert q.dropped_conflated == 1
+    assert q.dropped_throttle == 0
+
+
+async def test_dispatch_all_with_a_full_buffer_drops_the_oldest_undecoded() -> None:
+    decoder = CountingDecoder()
+    q = FrameQueue(dispatch="all", buffer=3, clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    for i in range(10):
+        q.offer(frame(i, decoder))
+    assert q.dropped_overflow == 7
+    assert q.dropped_conflated == 0
+    assert len(q) == 3
+    assert await pull_ready(sub) == [7, 8, 9]
+    assert decoder.calls == [7, 8, 9]
+    stats = sub.stats
+    assert (stats.received, stats.delivered, stats.dropped_overflow) == (10, 3, 7)
+
+
+# -- FrameQueue: the accounting invariant --------------------------------------------
+_ARRIVALS = st.lists(
+    st.one_of(
+        st.tuples(st.just("frame"), st.integers(0, 400)),  # ms since the previous event
+        st.tuples(st.just("tick"), st.integers(0, 400)),  # time passes, nothing arrives
+        st.tuples(st.just("pull"), st.just(0)),  # consume whatever is ready
+    ),
+    max_size=80,
+)
+
+
+async def _run_arrivals(
+    ops: list[tuple[str, int]], max_hz: float | None, dispatch: str, buffer: int
+) -> None:
+    clock = FakeClock()
+    decoder = CountingDecoder()
+    q = FrameQueue(max_hz=max_hz, dispatch=dispatch, buffer=buffer, clock=clock)  # type: ignore[arg-type]
+    sub = Subscription("/t", q, logger=LOGGER)
+    delivered: list[object] = []
+    offered = 0
+
+    def check() -> None:
+        s = sub.stats
+        assert s.received == offered
+        assert s.received == (
+            s.delivered + s.dropped_throttle + s.dropped_conflated + s.dropped_overflow + len(q)
+        )
+        assert s.delivered == len(delivered) == len(decoder.calls)
+        assert len(q) <= q.buffer + (1 if max_hz else 0)
+        if dispatch == "latest":
+            assert s.dropped_overflow == 0
+        else:
+            assert s.dropped_conflated == 0
+        if not max_hz:
+            assert s.dropped_throttle == 0
+
+    for kind, ms in ops:
+        if kind == "frame":
+            clock.set(clock.now + ms / 1000)
+            q.offer(frame(offered, decoder))
+            offered += 1
+        elif kind == "tick":
+            clock.set(clock.now + ms / 1000)
+        else:
+            delivered += await pull_ready(sub)
+        check()
+    sub.close()
+    delivered += await drain(sub)
+    check()
+    assert len(q) == 0
+    # Order is kept, only delivered frames were decoded, and the last frame
+    # before the end always arrives.
+    assert delivered == sorted(set(delivered))  # type: ignore[type-var]
+    assert decoder.calls == delivered
+    if offered:
+        assert delivered[-1] == offered - 1
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+@settings(deadline=None, max_examples=60)
+@given(
+    ops=_ARRIVALS,
+    max_hz=st.sampled_from([None, 1, 4, 10, 30, 1000, 2.5]),
+    dispatch=st.sampled_from(["all", "latest"]),
+    buffer=st.integers(1, 6),
+)
+def test_every_received_frame_is_delivered_dropped_or_queued(
+    backend: str,
+    ops: list[tuple[str, int]],
+    max_hz: float | None,
+    dispatch: str,
+    buffer: int,
+) -> None:
+    anyio.run(_run_arrivals, ops, max_hz, dispatch, buffer, backend=backend)
+
+
+# -- FrameQueue: close -----------------------------------------------------------------
+async def test_close_drains_queued_then_the_held_frame_then_ends() -> None:
+    clock = FakeClock()
+    q = FrameQueue(max_hz=4, clock=clock)
+    q.offer(frame(0))
+    clock.set(0.1)
+    q.offer(frame(1))  # held
+    clock.set(0.2)
+    q.offer(frame(2))  # held, 1 dropped
+    q.close()
+    assert q.closed
+    assert payload_id(await q.get()) == 0
+    assert payload_id(await q.get()) == 2  # held, delivered although its window is open
+    with pytest.raises(anyio.EndOfStream):
+        await q.get()
+    with pytest.raises(anyio.EndOfStream):
+        await q.get()  # and stays ended
+    assert q.dropped_throttle == 1
+
+
+async def test_close_wakes_a_waiting_consumer() -> None:
+    q = FrameQueue(clock=FakeClock())
+    ended = False
+
+    async def consume() -> None:
+        nonlocal ended
+        with pytest.raises(anyio.EndOfStream):
+            await q.get()
+        ended = True
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(consume)
+        await anyio.wait_all_tasks_blocked()
+        assert not ended
+        q.close()
+    assert ended
+
+
+def test_a_frame_offered_after_close_keeps_the_counters_consistent() -> None:
+    q = FrameQueue(clock=FakeClock())
+    q.offer(frame(0))
+    q.close()
+    q.offer(frame(1))
+    assert accounted(q) == q.received
+
+
+# -- Subscription ---------------------------------------------------------------------
+async def test_iteration_ends_after_close_once_queued_messages_are_consumed() -> None:
+    decoder = CountingDecoder()
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    for i in range(3):
+        q.offer(frame(i, decoder))
+    sub.close()
+    sub.close()  # idempotent
+    assert await drain(sub) == [0, 1, 2]
+    with pytest.raises(StopAsyncIteration):
+        await sub.__anext__()
+
+
+async def test_close_ends_a_waiting_iteration() -> None:
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    got: list[object] = []
+
+    async def consume() -> None:
+        got.extend(await drain(sub))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(consume)
+        await anyio.wait_all_tasks_blocked()
+        q.offer(frame(7, CountingDecoder()))
+        await anyio.wait_all_tasks_blocked()
+        assert got == []  # still iterating
+        sub.close()
+    assert got == [7]
+
+
+async def test_fail_raises_the_error_after_the_queued_messages() -> None:
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    q.offer(frame(1, CountingDecoder()))
+    error = NotConnected("connection lost")
+    sub._fail(error)
+    assert (await sub.__anext__()).data == 1
+    with pytest.raises(NotConnected) as info:
+        await sub.__anext__()
+    assert info.value is error
+    with pytest.raises(NotConnected):
+        async for _ in sub:
+            pass
+
+
+async def test_fail_wakes_a_waiting_iteration_with_the_error() -> None:
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    raised: list[BaseException] = []
+
+    async def consume() -> None:
+        try:
+            await sub.__anext__()
+        except NotConnected as exc:
+            raised.append(exc)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(consume)
+        await anyio.wait_all_tasks_blocked()
+        sub._fail(NotConnected("gone"))
+    assert len(raised) == 1
+
+
+async def test_wait_active_returns_on_activation_and_raises_once_closed() -> None:
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    assert sub.state == "pending"
+    done = False
+
+    async def wait() -> None:
+        nonlocal done
+        await sub.wait_active()
+        done = True
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(wait)
+        await anyio.wait_all_tasks_blocked()
+        assert not done
+        sub._set_state("active")
+    assert done
+    assert sub.state == "active"
+    await sub.wait_active()  # already active: returns at once
+
+    other = Subscription("/u", FrameQueue(clock=FakeClock()), logger=LOGGER)
+    other.close()
+    with pytest.raises(anyio.ClosedResourceError):
+        await other.wait_active()
+
+
+async def test_message_fields_come_from_the_frame() -> None:
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    q.offer(
+        RawFrame(
+            topic="/t",
+            schema_name="pkg/msg/T",
+            encoding="json",
+            payload=memoryview(b"42"),
+            log_time_ns=5,
+            receive_time_ns=6,
+            decode=lambda view: {"v": int(bytes(view))},
+        )
+    )
+    msg = await sub.__anext__()
+    assert (msg.topic, msg.schema_name, msg.encoding) == ("/t", "pkg/msg/T", "json")
+    assert (msg.data, msg.log_time_ns, msg.receive_time_ns, msg.byte_size) == ({"v": 42}, 5, 6, 2)
+    assert msg.decode_error is None
+
+
+def _raise_decode_error(view: memoryview) -> object:
+    raise DecodeError("truncated CDR")
+
+
+def _raise_value_error(view: memoryview) -> object:
+    raise ValueError("codec bug")
+
+
+@pytest.mark.parametrize(
+    ("decode", "expected_error"),
+    [
+        (_raise_decode_error, "truncated CDR"),
+        (_raise_value_error, "ValueError: codec bug"),
+        (None, "no decoder"),
+    ],
+)
+async def test_a_payload_that_does_not_decode_is_delivered_raw(
+    decode: object, expected_error: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    q.offer(frame(123, decode))
+    q.offer(frame(4, CountingDecoder()))
+    with caplog.at_level(logging.WARNING, logger=LOGGER.name):
+        bad = await sub.__anext__()
+    assert isinstance(bad.data, memoryview)
+    assert bytes(bad.data) == b"123"
+    assert bad.decode_error is not None
+    assert expected_error in bad.decode_error
+    assert bad.byte_size == 3
+    assert any("delivering it raw" in r.getMessage() for r in caplog.records)
+    good = await sub.__anext__()  # the subscription carries on
+    assert good.data == 4
+    assert good.decode_error is None
+    stats = sub.stats
+    assert (stats.delivered, stats.decode_failures) == (2, 1)
+
+
+async def test_a_cancelled_next_does_not_lose_a_waiting_frame() -> None:
+    decoder = CountingDecoder()
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    q.offer(frame(1, decoder))
+    with anyio.CancelScope() as scope:
+        scope.cancel()
+        await sub.__anext__()
+    assert accounted(q) == q.received
+    assert (await sub.__anext__()).data == 1
+
+
+# -- FrameQueue: argument validation ------------------------------------------------------
+@pytest.mark.parametrize("max_hz", [0, 0.0, -1, -0.5, math.nan])
+def test_max_hz_must_be_positive(max_hz: float) -> None:
+    with pytest.raises(ValueError, match="max_hz"):
+        FrameQueue(max_hz=max_hz)
+
+
+@pytest.mark.parametrize("max_hz", [True, False, "10", b"10", [10]])
+def test_max_hz_must_be_a_number(max_hz: object) -> None:
+    with pytest.raises(TypeError, match="max_hz"):
+        FrameQueue(max_hz=max_hz)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("dispatch", ["newest", "ALL", "", None, 1])
+def test_dispatch_must_be_all_or_latest(dispatch: object) -> None:
+    with pytest.raises(ValueError, match="dispatch"):
+        FrameQueue(dispatch=dispatch)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("buffer", [0, -1])
+def test_buffer_must_be_at_least_one(buffer: int) -> None:
+    with pytest.raises(ValueError, match="buffer"):
+        FrameQueue(buffer=buffer)
+
+
+@pytest.mark.parametrize("buffer", [True, False, 1.0, "4", None])
+def test_buffer_must_be_an_int(buffer: object) -> None:
+    with pytest.raises(TypeError, match="buffer"):
+        FrameQueue(buffer=buffer)  # type: ignore[arg-type]
+
+
+def test_valid_arguments_are_kept() -> None:
+    q = FrameQueue(max_hz=2.5, dispatch="all", buffer=7)
+    assert (q.max_hz, q.dispatch, q.buffer, q.interval) == (2.5, "all", 7, 0.4)
+    latest = FrameQueue(max_hz=None, dispatch="latest", buffer=7)
+    assert (latest.buffer, latest.interval) == (1, 0.0)
+
+
+# -- Outbox -------------------------------------------------------------------------------
+async def test_control_frames_leave_before_data_frames() -> None:
+    box = Outbox()
+    await box.put_data("/map", "d1")
+    await box.put_data("/image", b"d2")
+    box.put_control("/cmd_vel", "stop")
+    assert box.has_control
+    assert len(box) == 3
+    assert [box.pop(), box.pop(), box.pop(), box.pop()] == ["stop", "d1", b"d2", None]
+    assert not box.has_control
+    assert len(box) == 0
+
+
+async def test_control_frames_for_one_key_coalesce_to_the_newest() -> None:
+    box = Outbox()
+    for i in range(10):
+        box.put_control("/cmd_vel", f"v{i}")
+    assert len(box) == 1
+    assert box.coalesced == 9
+    assert box.pop() == "v9"
+    assert box.pop() is None
+
+
+async def test_a_re_put_control_key_takes_the_newest_place() -> None:
+    box = Outbox()
+    box.put_control("a", "a1")
+    box.put_control("b", "b1")
+    box.put_control("a", "a2")
+    assert box.pop_control() == "b1"
+    assert box.pop_control() == "a2"
+    assert box.pop_control() is None
+    assert box.coalesced == 1
+
+
+async def test_a_control_frame_drops_older_data_frames_for_its_key() -> None:
+    box = Outbox()
+    await box.put_data("/cmd_vel", "old1")
+    await box.put_data("/odom", "other")
+    await box.put_data("/cmd_vel", "old2")
+    box.put_control("/cmd_vel", "stop")
+    await box.put_data("/cmd_vel", "newer")  # after the control frame: kept
+    assert box.coalesced == 2
+    assert [box.pop(), box.pop(), box.pop(), box.pop()] == ["stop", "other", "newer", None]
+
+
+async def test_data_frames_are_fifo() -> None:
+    box = Outbox()
+    for i in range(20):
+        await box.put_data(i % 3, f"m{i}")
+    assert [box.pop() for _ in range(20)] == [f"m{i}" for i in range(20)]
+    assert box.pop() is None
+
+
+async def test_put_data_waits_while_full_and_resumes_after_pop() -> None:
+    box = Outbox(data_limit=2)
+    await box.put_data("k", "a")
+    await box.put_data("k", "b")
+    done: list[str] = []
+
+    async def put(message: str) -> None:
+        await box.put_data("k", message)
+        done.append(message)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(put, "c")
+        await anyio.wait_all_tasks_blocked()
+        assert done == []
+        assert len(box) == 2
+        box.put_control("other", "ctl")  # control frames never wait
+        assert box.pop() == "ctl"  # popping control makes no data room
+        await anyio.wait_all_tasks_blocked()
+        assert done == []
+        assert box.pop() == "a"
+        await anyio.wait_all_tasks_blocked()
+        assert done == ["c"]
+        tg.start_soon(put, "d")
+        await anyio.wait_all_tasks_blocked()
+        assert done == ["c"]  # full again
+        assert box.drop_data() == 2  # drop_data makes room too
+    assert done == ["c", "d"]
+    assert [box.pop(), box.pop()] == ["d", None]
+
+
+async def test_several_blocked_publishers_each_get_in_in_turn() -> None:
+    box = Outbox(data_limit=1)
+    await box.put_data("k", "first")
+    done: list[str] = []
+
+    async def put(message: str) -> None:
+        await box.put_data("k", message)
+        done.append(message)
+
+    async with anyio.create_task_group() as tg:
+        for name in ("x", "y"):
+            tg.start_soon(put, name)
+        await anyio.wait_all_tasks_blocked()
+        sent = [box.pop()]
+        while len(sent) < 3:
+            await anyio.wait_all_tasks_blocked()
+            sent.append(box.pop())
+    assert sent[0] == "first"
+    assert sorted(sent[1:]) == ["x", "y"]
+    assert sorted(done) == ["x", "y"]
+
+
+async def test_get_waits_for_a_frame() -> None:
+    box = Outbox()
+    got: list[object] = []
+
+    async def writer() -> None:
+        got.append(await box.get())
+        got.append(await box.get())
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(writer)
+        await anyio.wait_all_tasks_blocked()
+        assert got == []
+        box.put_control("/cmd_vel", "stop")
+        await anyio.wait_all_tasks_blocked()
+        assert got == ["stop"]
+        await box.put_data("/x", b"data")
+    assert got == ["stop", b"data"]
+    await box.put_data("/x", "ready")
+    assert await box.get() == "ready"  # no wait when a frame is queued
+
+
+def test_outbox_data_limit_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="data_limit"):
+        Outbox(data_limit=0)
+
+
+# -- PendingRequests ------------------------------------------------------------------------
+async def test_resolve_answers_the_waiter() -> None:
+    pending: PendingRequests[str] = PendingRequests()
+    pending.register(1)
+    assert 1 in pending
+    got: list[str] = []
+
+    async def wait() -> None:
+        got.append(await pending.wait(1))
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(wait)
+        await anyio.wait_all_tasks_blocked()
+        assert got == []
+        assert pending.resolve(1, "answer")
+    assert got == ["answer"]
+    assert 1 not in pending
+    assert len(pending) == 0
+
+
+async def test_an_answer_before_wait_is_kept() -> None:
+    pending: PendingRequests[int] = PendingRequests()
+    pending.register("id")
+    assert pending.resolve("id", 5)
+    assert not pending.resolve("id", 6)  # the first answer wins
+    assert not pending.fail("id", NotConnected())
+    assert await pending.wait("id") == 5
+
+
+async def test_fail_raises_in_the_waiter() -> None:
+    pending: PendingRequests[int] = PendingRequests()
+    pending.register(7)
+    error = ServiceError("/srv", "nope")
+    assert pending.fail(7, error)
+    with pytest.raises(ServiceError) as info:
+        await pending.wait(7)
+    assert info.value is error
+    assert 7 not in pending
+
+
+async def test_fail_all_fails_every_waiter() -> None:
+    pending: PendingRequests[int] = PendingRequests()
+    for key in range(3):
+        pending.register(key)
+    pending.resolve(0, 0)  # already answered: not failed
+    raised: list[BaseException] = []
+
+    async def wait(key: int) -> None:
+        try:
+            await pending.wait(key)
+        except NotConnected as exc:
+            raised.append(exc)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(wait, 1)
+        tg.start_soon(wait, 2)
+        await anyio.wait_all_tasks_blocked()
+        assert pending.fail_all(NotConnected("lost")) == 2
+        assert pending.fail_all(NotConnected("again")) == 0
+    assert len(raised) == 2
+    assert all(str(exc) == "lost" for exc in raised)
+    assert await pending.wait(0) == 0
+    assert len(pending) == 0
+
+
+async def test_discard_forgets_a_request() -> None:
+    pending: PendingRequests[int] = PendingRequests()
+    pending.register("x")
+    pending.discard("x")
+    pending.discard("x")  # unknown keys are fine
+    assert "x" not in pending
+    assert not pending.resolve("x", 1)
+    assert not pending.fail("x", NotConnected())
+    pending.register("x")  # the key can be reused
+
+
+async def test_late_answers_are_ignored() -> None:
+    pending: PendingRequests[int] = PendingRequests()
+    assert not pending.resolve("never", 1)
+    assert not pending.fail("never", NotConnected())
+    pending.register(1)
+    pending.resolve(1, 10)
+    assert await pending.wait(1) == 10
+    assert not pending.resolve(1, 11)
+    assert not pending.fail(1, NotConnected())
+    assert len(pending) == 0
+
+
+async def test_a_cancelled_wait_removes_the_registration() -> None:
+    pending: PendingRequests[int] = PendingRequests()
+    pending.register(1)
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(pending.wait, 1)
+        await anyio.wait_all_tasks_blocked()
+        assert 1 in pending
+        tg.cancel_scope.cancel()
+    assert 1 not in pending
+    assert not pending.resolve(1, 5)  # the late answer is ignored
+    pending.register(2)
+    with anyio.CancelScope() as scope:
+        scope.cancel()
+        await pending.wait(2)
+    assert scope.cancelled_caught
+    assert len(pending) == 0
+
+
+async def test_registering_a_pending_key_twice_raises() -> None:
+    pending: PendingRequests[int] = PendingRequests()
+    pending.register(1)
+    with pytest.raises(ValueError, match="already pending"):
+        pending.register(1)
+    pending.resolve(1, 1)
+    assert await pending.wait(1) == 1
+    pending.register(1)  # answered and collected: free again
+
+
+# -- Watchable ----------------------------------------------------------------------------------
+async def test_a_watcher_gets_the_current_value_at_once_then_changes() -> None:
+    value = Watchable("connecting")
+    watcher = value.watch()
+    assert await watcher.__anext__() == "connecting"
+    got: list[str] = []
+
+    async def watch() -> None:
+        async for v in watcher:
+            got.append(v)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(watch)
+        await anyio.wait_all_tasks_blocked()
+        assert got == []
+        assert value.set("connected")
+        await anyio.wait_all_tasks_blocked()
+        assert got == ["connected"]
+        value.set("closed")
+        await anyio.wait_all_tasks_blocked()
+        value.close()
+    assert got == ["connected", "closed"]
+    assert value.value == "closed"
+
+
+async def test_a_slow_watcher_sees_only_the_newest_value() -> None:
+    value = Watchable(0)
+    watcher = value.watch()
+    assert await watcher.__anext__() == 0
+    for i in range(1, 6):
+        assert value.set(i)
+    assert await watcher.__anext__() == 5
+    late = value.watch()
+    assert await late.__anext__() == 5  # a new watcher starts at the current value
+
+
+async def test_close_ends_iteration() -> None:
+    value = Watchable([1])
+    watcher = value.watch()
+    ended = False
+
+    async def watch() -> None:
+        nonlocal ended
+        async for _ in watcher:
+            pass
+        ended = True
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(watch)
+        await anyio.wait_all_tasks_blocked()
+        assert not ended
+        value.close()
+    assert ended
+    with pytest.raises(StopAsyncIteration):
+        await watcher.__anext__()
+
+
+async def test_setting_an_equal_value_does_not_wake_watchers() -> None:
+    value = Watchable(["/a", "/b"])
+    got: list[list[str]] = []
+
+    async def watch() -> None:
+        async for v in value.watch():
+            got.append(v)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(watch)
+        await anyio.wait_all_tasks_blocked()
+        assert got == [["/a", "/b"]]
+        assert not value.set(["/a", "/b"])  # equal, though another object
+        await anyio.wait_all_tasks_blocked()
+        assert got == [["/a", "/b"]]
+        assert value.set(["/a"])
+        await anyio.wait_all_tasks_blocked()
+        assert got == [["/a", "/b"], ["/a"]]
+        value.close()
