@@ -14,6 +14,7 @@ import anyio
 import anyio.abc
 from websockets.frames import Frame, Opcode
 from websockets.http11 import Request
+from websockets.protocol import State
 from websockets.server import ServerProtocol
 from websockets.typing import Subprotocol
 
@@ -30,6 +31,8 @@ class Peer:
         for chunk in self.proto.data_to_send():
             if chunk:
                 await self.stream.send(chunk)
+            else:  # the protocol ends the TCP stream (after a close, or a failure)
+                await self.stream.send_eof()
 
     async def send_text(self, text: str) -> None:
         self.proto.send_text(text.encode())
@@ -44,8 +47,11 @@ class Peer:
         await self.stream.send(data)
 
     async def recv(self) -> str | bytes:
-        """The next data message from the client (pings are answered)."""
+        """The next data message from the client (pings are answered).
+        ``anyio.EndOfStream`` once the connection is closed."""
         while not self._frames:
+            if self.proto.state is State.CLOSED:
+                raise anyio.EndOfStream
             data = await self.stream.receive()
             self.proto.receive_data(data)
             for event in self.proto.events_received():
@@ -105,13 +111,16 @@ async def scripted_server(
             except (anyio.EndOfStream, anyio.BrokenResourceError, anyio.ClosedResourceError):
                 pass
 
-    async with anyio.create_task_group() as tg:
-        tg.start_soon(listener.serve, serve)
-        try:
-            yield f"ws://127.0.0.1:{port}"
-        finally:
-            tg.cancel_scope.cancel()
-            await listener.aclose()
+    # The listener is closed only after the task group has ended: closing it
+    # while ``serve`` is still in ``accept()`` makes that raise
+    # ClosedResourceError (trio) instead of taking the cancellation.
+    async with listener:
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(listener.serve, serve)
+            try:
+                yield f"ws://127.0.0.1:{port}"
+            finally:
+                tg.cancel_scope.cancel()
 
 
 SERVER_INFO = (
