@@ -201,6 +201,13 @@ def _make_cdr_encoder(typename: str, store: Typestore, build: Builder) -> Encode
     return encode
 
 
+def _unsupported(message_encoding: str, schema_name: str) -> SchemaError:
+    return SchemaError(
+        f"unsupported message encoding {message_encoding!r} for {schema_name!r} "
+        "(supported: cdr, json)"
+    )
+
+
 class CodecRegistry:
     """Per-connection schema registry and codec factory.
 
@@ -384,10 +391,7 @@ class CodecRegistry:
         if encoding == "json":
             return _json_decode
         if encoding != "cdr":
-            raise SchemaError(
-                f"unsupported message encoding {message_encoding!r} for {schema_name!r} "
-                "(supported: cdr, json)"
-            )
+            raise _unsupported(message_encoding, schema_name)
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
             gen = self._prepare(key, msgdef)
@@ -420,10 +424,7 @@ class CodecRegistry:
         if encoding == "json":
             return self._json_encoder(schema_name)
         if encoding != "cdr":
-            raise SchemaError(
-                f"unsupported message encoding {message_encoding!r} for {schema_name!r} "
-                "(supported: cdr, json)"
-            )
+            raise _unsupported(message_encoding, schema_name)
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
             gen = self._prepare(key, msgdef)
