@@ -941,3 +941,26 @@ async def test_setting_an_equal_value_does_not_wake_watchers() -> None:
         await anyio.wait_all_tasks_blocked()
         assert got == [["/a", "/b"], ["/a"]]
         value.close()
+
+
+# -- FrameQueue: the byte bound ---------------------------------------------------------
+def test_queue_is_bounded_by_bytes_and_keeps_the_newest() -> None:
+    q = FrameQueue(buffer=1000, max_bytes=10)
+    for i in range(100, 110):  # 3-byte payloads: at most 3 fit in 10 bytes
+        q.offer(frame(i))
+    assert [payload_id(q.take()) for _ in range(3)] == [107, 108, 109]
+    assert q.take() is None
+    assert q.dropped_overflow == 7
+    assert q.received == 10
+
+
+def test_a_frame_larger_than_the_byte_bound_is_still_delivered() -> None:
+    q = FrameQueue(max_bytes=2)
+    q.offer(frame(1000))  # 4 bytes, alone in the queue
+    assert payload_id(q.take()) == 1000
+
+
+@pytest.mark.parametrize("max_bytes", [0, -1, True, 1.5])
+def test_max_bytes_must_be_a_positive_int(max_bytes: object) -> None:
+    with pytest.raises(ValueError, match="max_bytes"):
+        FrameQueue(max_bytes=max_bytes)  # type: ignore[arg-type]

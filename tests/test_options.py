@@ -38,7 +38,7 @@ def test_defaults() -> None:
     assert opts.advertise_settle == 0.15
     assert opts.stop_topics == ()
     assert opts.zero_twist_on_exit is True
-    assert opts.subscription_buffer == 64
+    assert opts.subscription_buffer == 1024
     assert opts.ssl_context is None
     assert isinstance(opts.logger, logging.Logger)
     assert opts.logger.name == "ros_mobile_bridge"

@@ -17,6 +17,7 @@ from typing import Any, Final
 
 import anyio
 import anyio.abc
+import anyio.lowlevel
 
 from ._errors import ConnectError, DecodeError, NotConnected, NotSupportedError, ServiceTimeout
 from ._options import ClientOptions
@@ -35,6 +36,7 @@ from .flow import FrameQueue, Outbox, RawFrame, Subscription, Watchable, Watcher
 __all__ = ["Client"]
 
 _TWIST: Final = "geometry_msgs/msg/Twist"
+_READER_YIELD_EVERY: Final = 64
 _TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
 
 
@@ -93,6 +95,7 @@ class Client:
         self._task_group: anyio.abc.TaskGroup | None = None
         self._task_scopes: dict[str, anyio.CancelScope] = {}
         self._closing = False
+        self._inbound = 0
 
     # -- lifecycle ----------------------------------------------------------
     @property
@@ -122,6 +125,7 @@ class Client:
 
     @property
     def connected(self) -> bool:
+        """True while the connection is up (``status == "connected"``)."""
         return self._status.value == "connected"
 
     def _require_connected(self) -> None:
@@ -268,30 +272,41 @@ class Client:
 
     # -- events from the backend (reader task) -------------------------------
     def on_frame(self, frame: RawFrame) -> None:
+        """Backend callback: route one frame to this topic's subscriptions."""
         subs = self._subs.get(frame.topic)
         if subs:
             for sub in subs:
                 sub._queue.offer(frame)
 
     def on_graph(self) -> None:
+        """Backend callback: the topic or service list changed."""
         self._topics.set(self._backend.topics)
         self._services.set(self._backend.services)
 
     def on_topic_state(self, topic: str, active: bool) -> None:
+        """Backend callback: the server now carries ``topic`` to us, or not."""
         for sub in self._subs.get(topic, ()):
             sub._set_state("active" if active else "pending")
 
     def on_parameters(self, values: Mapping[str, Any]) -> None:
+        """Backend callback: unsolicited parameter values arrived."""
         merged = dict(self._parameters.value)
         merged.update(values)
         self._parameters.set(merged)
 
     async def before_inbound(self) -> None:
+        """Backend callback, before each inbound message: send pending control
+        frames first, and every 64 messages let the consumers run, so a burst
+        read in one go does not overflow their queues before they wake."""
         outbox = self._outbox
         if outbox.has_control:
             send = self._backend.send
             while (message := outbox.pop_control()) is not None:
                 await send(message)
+        self._inbound += 1
+        if self._inbound >= _READER_YIELD_EVERY:
+            self._inbound = 0
+            await anyio.lowlevel.checkpoint()
 
     # -- discovery ----------------------------------------------------------
     @property

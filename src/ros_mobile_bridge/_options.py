@@ -52,8 +52,10 @@ class ClientOptions:
     never published to them."""
     zero_twist_on_exit: bool = True
     """Send the zero Twist on teardown (strongly recommended)."""
-    subscription_buffer: int = 64
-    """Default per-subscription queue length (``dispatch="all"``)."""
+    subscription_buffer: int = 1024
+    """Default per-subscription queue length (``dispatch="all"``). The queue
+    is also bounded to 64 MiB of payload; past either bound the oldest frame
+    is dropped (undecoded, counted)."""
     ssl_context: ssl.SSLContext | None = None
     """TLS settings for ``wss://``; the system defaults when None."""
     logger: logging.Logger = field(default_factory=lambda: logging.getLogger("ros_mobile_bridge"))

@@ -28,7 +28,7 @@ from .._errors import ConnectError
 
 __all__ = ["ConnectionLost", "HandshakeRejected", "WebSocket", "connect_websocket"]
 
-_READ_CHUNK: Final = 1 << 18
+_READ_CHUNK: Final = 1 << 20
 
 
 class HandshakeRejected(ConnectError):
@@ -69,7 +69,7 @@ class WebSocket:
         self._stream = stream
         self._proto = protocol
         self._max_size = max_size
-        self._send_lock = anyio.Lock()
+        self._send_lock = anyio.Lock(fast_acquire=True)
         self._messages: deque[str | bytes] = deque()
         self._fragment: _Pending | None = None
         self._pongs: dict[bytes, anyio.Event] = {}
@@ -105,7 +105,10 @@ class WebSocket:
                 raise self._closed_reason from exc  # type: ignore[misc]
             self._proto.receive_data(data)
             self._take_events()
-            await self._flush()
+            chunks = self._proto.data_to_send()  # pongs, close replies: usually none
+            if chunks:
+                async with self._send_lock:
+                    await self._write(chunks)
         return messages.popleft()
 
     def _take_events(self) -> None:
@@ -171,17 +174,23 @@ class WebSocket:
             await self._flush_locked()
 
     async def _flush(self) -> None:
-        async with self._send_lock:
-            await self._flush_locked()
+        chunks = self._proto.data_to_send()
+        if chunks:
+            async with self._send_lock:
+                await self._write(chunks)
 
     async def _flush_locked(self) -> None:
-        # A frame half written is a corrupt connection, so the write itself is
-        # shielded from cancellation (the cancellation lands right after it).
-        # It is bounded by send_timeout, or by the caller's own earlier
-        # deadline; past that the connection is failed, never left corrupt.
         chunks = self._proto.data_to_send()
-        if not chunks:
-            return
+        if chunks:
+            await self._write(chunks)
+
+    async def _write(self, chunks: list[bytes]) -> None:
+        """Write ``chunks`` (the caller holds the send lock).
+
+        A frame half written is a corrupt connection, so the write itself is
+        shielded from cancellation (the cancellation lands right after it).
+        It is bounded by ``send_timeout``, or by the caller's own earlier
+        deadline; past that the connection is failed, never left corrupt."""
         now = anyio.current_time()
         limit = now + self.send_timeout
         effective = anyio.current_effective_deadline()
