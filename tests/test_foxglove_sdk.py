@@ -344,7 +344,7 @@ async def test_publish_rejects_bad_arguments_at_once(server: SdkServer) -> None:
             await robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", [1, 2])  # type: ignore[arg-type]
         with pytest.raises(ValueError, match="priority"):
             await robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", {}, priority="urgent")  # type: ignore[arg-type]
-        with pytest.raises(ValueError, match="'linear.w': unknown field"):
+        with pytest.raises(ValueError, match=r"'linear\.w': unknown field"):
             await robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", {"linear": {"w": 1.0}})
         with pytest.raises(ValueError, match="max_hz"):
             robot.subscribe("/x", max_hz=0)

@@ -199,6 +199,12 @@ class Client:
             with anyio.move_on_after(options.teardown_timeout) as scope:
                 if self._status.value == "connected":
                     await self._flush_and_stop()
+                elif options.zero_twist_on_exit and (targets := self._stop_targets()):
+                    self._log.error(
+                        "teardown: the connection is gone, so no zero Twist could be sent to %s;"
+                        " only the robot's own cmd_vel watchdog can stop it now",
+                        ", ".join(sorted(targets)),
+                    )
             if scope.cancelled_caught:
                 self._log.warning(
                     "teardown did not finish within %.3g s; closing anyway",

@@ -57,7 +57,7 @@ class Peer:
             for event in self.proto.events_received():
                 if isinstance(event, Frame):
                     if event.opcode is Opcode.TEXT:
-                        self._frames.append(event.data.decode())
+                        self._frames.append(bytes(event.data).decode())
                     elif event.opcode is Opcode.BINARY:
                         self._frames.append(bytes(event.data))
             await self._flush()

@@ -115,11 +115,19 @@ class WebSocket:
         for event in self._proto.events_received():
             if isinstance(event, Frame):
                 self._on_frame(event)
-        if self._proto.state is State.CLOSED and self._closed_reason is None:
-            exc = self._proto.close_exc
-            rcvd = self._proto.close_rcvd
+        proto = self._proto
+        if self._closed_reason is not None:
+            return
+        if proto.state is State.CLOSED:
+            rcvd = proto.close_rcvd
             code = rcvd.code if rcvd is not None else None
-            self._lost(ConnectionLost(f"connection closed: {exc}", code))
+            self._lost(ConnectionLost(f"connection closed: {proto.close_exc}", code))
+        elif proto.state is State.CLOSING and proto.close_rcvd is None and proto.close_sent:
+            # We failed the connection (a frame over the size limit, a
+            # protocol error): it is over now, whether or not the peer ever
+            # closes its side.
+            sent = proto.close_sent
+            self._lost(ConnectionLost(f"connection failed: {sent.code} {sent.reason}", sent.code))
 
     def _on_frame(self, frame: Frame) -> None:
         op = frame.opcode
@@ -307,7 +315,7 @@ async def connect_websocket(
                 await stream.send(chunk)
             response: Response | None = None
             leftover: list[Frame] = []
-            while response is None:
+            while response is None and proto.handshake_exc is None:
                 try:
                     data = await stream.receive(_READ_CHUNK)
                 except anyio.EndOfStream:
