@@ -506,7 +506,7 @@ async def test_wait_active_returns_on_activation_and_raises_once_closed() -> Non
 
     other = Subscription("/u", FrameQueue(clock=FakeClock()), logger=LOGGER)
     other.close()
-    with pytest.raises(anyio.ClosedResourceError):
+    with pytest.raises(NotConnected, match="closed"):
         await other.wait_active()
 
 

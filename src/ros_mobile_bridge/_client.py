@@ -11,9 +11,9 @@ import contextlib
 import logging
 import math
 import time
-from collections.abc import AsyncIterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
-from typing import Any, Final
+from typing import Any, Final, TypeVar
 
 import anyio
 import anyio.abc
@@ -37,6 +37,7 @@ __all__ = ["Client"]
 
 _TWIST: Final = "geometry_msgs/msg/Twist"
 _READER_YIELD_EVERY: Final = 64
+T = TypeVar("T")
 _TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
 
 
@@ -92,7 +93,6 @@ class Client:
         self._hints: dict[Subscription, SubscribeHints] = {}
         self._outbox = Outbox()
         self._velocity: dict[str, str] = {}
-        self._task_group: anyio.abc.TaskGroup | None = None
         self._task_scopes: dict[str, anyio.CancelScope] = {}
         self._closing = False
         self._inbound = 0
@@ -140,7 +140,6 @@ class Client:
         scope: cancelling the scope around the ``connect()`` block must not
         stop the reader before the teardown has confirmed the zero Twist.
         :meth:`_stop_tasks` ends them."""
-        self._task_group = tg
         for fn, name in (
             (self._reader, "rmb-reader"),
             (self._writer, "rmb-writer"),
@@ -253,15 +252,23 @@ class Client:
             )
 
     def _stop_targets(self) -> dict[str, str]:
+        """Velocity topic -> schema, for every topic the zero Twist goes to."""
         targets = dict(self._velocity)
-        known = {t.name: t.schema_name for t in self._backend.topics}
         for topic in self._options.stop_topics:
             if topic not in targets:
-                advertised = known.get(topic, "")
-                targets[topic] = (
-                    _TWIST_STAMPED if same_type_name(advertised, _TWIST_STAMPED) else _TWIST
-                )
+                targets[topic] = self._velocity_schema(topic)
         return targets
+
+    def _velocity_schema(self, topic: str) -> str:
+        """What this client published on ``topic``, else TwistStamped when the
+        server advertises it so, else Twist."""
+        published = self._velocity.get(topic)
+        if published is not None:
+            return published
+        for t in self._backend.topics:
+            if t.name == topic and same_type_name(t.schema_name, _TWIST_STAMPED):
+                return _TWIST_STAMPED
+        return _TWIST
 
     @staticmethod
     def _zero(schema: str) -> dict[str, Any]:
@@ -458,16 +465,10 @@ class Client:
         else ``geometry_msgs/msg/Twist``."""
         _check_name("topic", topic)
         if schema is None:
-            schema = self._velocity.get(topic) or self._stop_targets_for(topic)
+            schema = self._velocity_schema(topic)
         elif not _is_velocity_type(_check_schema(schema)):
             raise ValueError(f"schema must be Twist or TwistStamped, got {schema!r}")
         await self.publish(topic, schema, self._zero(schema), priority="control")
-
-    def _stop_targets_for(self, topic: str) -> str:
-        for t in self._backend.topics:
-            if t.name == topic and same_type_name(t.schema_name, _TWIST_STAMPED):
-                return _TWIST_STAMPED
-        return _TWIST
 
     # -- services -----------------------------------------------------------
     async def call_service(
@@ -481,19 +482,11 @@ class Client:
         (default ``options.service_timeout``), ``NotConnected`` when the
         connection is or goes away. A call never waits forever."""
         _check_name("service name", name)
-        limit = _check_timeout(timeout) or self._options.service_timeout
         if request is not None and not isinstance(request, Mapping):
             raise TypeError(
                 f"request must be a mapping (dict) or None, not {type(request).__name__}"
             )
-        self._require_connected()
-        start = time.perf_counter()
-        with anyio.move_on_after(limit) as scope:
-            result = await self._backend.call_service(name, request)
-        if scope.cancelled_caught:
-            raise ServiceTimeout(name, limit)
-        self._report_latency(start)
-        return result
+        return await self._request(name, lambda: self._backend.call_service(name, request), timeout)
 
     def _report_latency(self, start: float) -> None:
         callback = self._options.on_latency
@@ -503,17 +496,23 @@ class Client:
             except Exception:
                 self._log.exception("on_latency callback failed")
 
-    # -- parameters ---------------------------------------------------------
-    async def _parameter_call(self, what: str, call: Any, timeout: float | None) -> dict[str, Any]:
+    async def _request(
+        self, what: str, call: Callable[[], Awaitable[T]], timeout: float | None
+    ) -> T:
+        """Run one correlated request under its deadline (``timeout`` or
+        ``options.service_timeout``) and report its round trip to
+        ``on_latency``. ``ServiceTimeout`` names ``what`` at the deadline."""
         limit = _check_timeout(timeout) or self._options.service_timeout
         self._require_connected()
         start = time.perf_counter()
         with anyio.move_on_after(limit) as scope:
-            result: dict[str, Any] = await call()
+            result = await call()
         if scope.cancelled_caught:
             raise ServiceTimeout(what, limit)
         self._report_latency(start)
         return result
+
+    # -- parameters ---------------------------------------------------------
 
     async def get_parameters(
         self, names: Sequence[str], *, timeout: float | None = None
@@ -523,13 +522,13 @@ class Client:
         if isinstance(names, str) or not all(isinstance(n, str) for n in names):
             raise TypeError("names must be a sequence of str")
         names = list(names)
-        return await self._parameter_call(
+        return await self._request(
             "getParameters", lambda: self._backend.get_parameters(names), timeout
         )
 
     async def list_parameters(self, *, timeout: float | None = None) -> dict[str, Any]:
         """Every parameter the server exposes, with its value."""
-        return await self._parameter_call(
+        return await self._request(
             "getParameters", lambda: self._backend.get_parameters([]), timeout
         )
 
@@ -540,7 +539,7 @@ class Client:
         if not isinstance(values, Mapping) or not all(isinstance(k, str) for k in values):
             raise TypeError("values must be a mapping of parameter name to value")
         values = dict(values)
-        return await self._parameter_call(
+        return await self._request(
             "setParameters", lambda: self._backend.set_parameters(values), timeout
         )
 

@@ -25,11 +25,11 @@ from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, same_type_name
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
-from ..transport import HandshakeRejected, WebSocket, connect_websocket
+from ..transport import WebSocket, connect_websocket
 from ..wire import foxglove as fx
 from ._base import BackendEvents, SubscribeHints
 
-__all__ = ["FoxgloveBackend", "is_foxglove_rejection", "open_foxglove"]
+__all__ = ["FoxgloveBackend", "open_foxglove"]
 
 _EMPTY_CDR: Final = b"\x00\x01\x00\x00"
 """A CDR encapsulation header (little endian) with no body: an empty request."""
@@ -106,12 +106,6 @@ async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
 
 def _greeted(engine: fx.FoxgloveEngine) -> bool:
     return engine.server_info is not None
-
-
-def is_foxglove_rejection(exc: HandshakeRejected) -> bool:
-    """Whether an HTTP rejection looks like a Foxglove SDK server refusing a
-    client that offered none of its subprotocols."""
-    return exc.status == 400 and "sec-websocket-protocol" in exc.body.lower()
 
 
 class FoxgloveBackend:

@@ -30,7 +30,7 @@ from typing import Final
 import anyio
 import anyio.lowlevel
 
-from .._errors import DecodeError
+from .._errors import DecodeError, NotConnected
 from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats
 from ._frame import RawFrame
 
@@ -39,6 +39,7 @@ __all__ = ["FrameQueue", "Subscription"]
 Clock = Callable[[], float]
 _YIELD_EVERY: Final = 32
 _LARGE_PAYLOAD: Final = 64 * 1024
+_DUE_SLACK: Final = 1e-6
 
 
 class FrameQueue:
@@ -123,7 +124,9 @@ class FrameQueue:
         held = self._held
         if held is not None and self._last_release is not None:
             due = self._last_release + self._interval
-            if now >= due:
+            # within a microsecond counts as due: a timer that short cannot be
+            # armed, and waiting for it would spin
+            if now + _DUE_SLACK >= due:
                 self._held = None
                 self._last_release = due
                 self._enqueue(held)
@@ -228,10 +231,11 @@ class Subscription:
             self._state_changed = anyio.Event()
 
     async def wait_active(self) -> None:
-        """Return once the subscription is active."""
+        """Return once the subscription is active. Raises ``NotConnected``
+        (or the connection's error) if it closes first."""
         while self._state != "active":
             if self._queue.closed:
-                raise anyio.ClosedResourceError
+                raise self._error or NotConnected(f"the subscription to {self.topic} is closed")
             await self._state_changed.wait()
 
     @property
