@@ -74,6 +74,7 @@ def options(**kw: Any) -> rmb.ClientOptions:
     kw.setdefault("connect_timeout", 5.0)
     kw.setdefault("advertise_settle", 0.0)
     kw.setdefault("discovery_grace", 0.05)
+    kw.setdefault("reconnect", None)  # these faults end the session; reconnect has its own tests
     return rmb.ClientOptions(**kw)
 
 

@@ -10,7 +10,7 @@ import ssl
 
 import pytest
 
-from ros_mobile_bridge import ClientOptions
+from ros_mobile_bridge import ClientOptions, ReconnectPolicy
 
 # field -> may it be zero?
 FLOAT_FIELDS = {
@@ -43,11 +43,19 @@ def test_defaults() -> None:
     assert isinstance(opts.logger, logging.Logger)
     assert opts.logger.name == "ros_mobile_bridge"
     assert opts.on_latency is None
+    assert opts.reconnect == ReconnectPolicy()
 
 
 def test_every_field_is_covered_here() -> None:
     names = {f.name for f in dataclasses.fields(ClientOptions)}
-    others = {"stop_topics", "zero_twist_on_exit", "ssl_context", "logger", "on_latency"}
+    others = {
+        "stop_topics",
+        "zero_twist_on_exit",
+        "ssl_context",
+        "logger",
+        "on_latency",
+        "reconnect",
+    }
     assert names == set(FLOAT_FIELDS) | set(INT_FIELDS) | others
 
 
@@ -181,3 +189,37 @@ def test_a_logger_subclass_is_accepted() -> None:
 def test_on_latency_must_be_callable(callback: object) -> None:
     with pytest.raises(TypeError, match="on_latency"):
         ClientOptions(on_latency=callback)  # type: ignore[arg-type]
+
+
+# -- ReconnectPolicy ---------------------------------------------------------------------
+def test_reconnect_policy_backoff_grows_to_the_cap_with_jitter_bounds() -> None:
+    policy = ReconnectPolicy(initial_delay=0.5, max_delay=4.0, multiplier=2.0, jitter=0.2)
+    mid = [policy.delay(n, lambda: 0.5) for n in range(1, 7)]  # 0.5: no jitter
+    assert mid == [0.5, 1.0, 2.0, 4.0, 4.0, 4.0]
+    assert policy.delay(1, lambda: 0.0) == pytest.approx(0.4)
+    assert policy.delay(1, lambda: 0.999999) == pytest.approx(0.6, abs=1e-5)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"initial_delay": -1},
+        {"max_delay": math.nan},
+        {"multiplier": 0.5},
+        {"jitter": 1.0},
+        {"jitter": -0.1},
+        {"initial_delay": 5, "max_delay": 1},
+        {"max_attempts": 0},
+        {"max_attempts": True},
+        {"max_attempts": 1.5},
+    ],
+)
+def test_reconnect_policy_rejects_bad_values(kwargs: dict[str, object]) -> None:
+    with pytest.raises((ValueError, TypeError)):
+        ReconnectPolicy(**kwargs)  # type: ignore[arg-type]
+
+
+def test_reconnect_must_be_a_policy_or_none() -> None:
+    assert ClientOptions(reconnect=None).reconnect is None
+    with pytest.raises(TypeError, match="reconnect"):
+        ClientOptions(reconnect=True)  # type: ignore[arg-type]

@@ -103,7 +103,9 @@ async def test_keepalive_fails_a_connection_whose_peer_stopped_answering() -> No
         await peer.send_text(SERVER_INFO)
         await anyio.sleep(30)  # never reads, so never answers a ping
 
-    options = rmb.ClientOptions(keepalive_interval=0.1, keepalive_timeout=0.2, discovery_grace=0)
+    options = rmb.ClientOptions(
+        keepalive_interval=0.1, keepalive_timeout=0.2, discovery_grace=0, reconnect=None
+    )
     async with scripted_server(silent) as url:
         with anyio.fail_after(10):
             async with rmb.connect(url, options=options) as robot:

@@ -21,6 +21,7 @@ from ._errors import SchemaError as SchemaError
 from ._errors import ServiceError as ServiceError
 from ._errors import ServiceTimeout as ServiceTimeout
 from ._options import ClientOptions as ClientOptions
+from ._options import ReconnectPolicy as ReconnectPolicy
 from ._types import DEFAULT_PORTS as DEFAULT_PORTS
 from ._types import Dispatch as Dispatch
 from ._types import Message as Message
@@ -51,6 +52,7 @@ __all__ = [
     "NotSupportedError",
     "Priority",
     "ProtocolMismatchError",
+    "ReconnectPolicy",
     "RosBridgeError",
     "SchemaError",
     "ServerInfo",

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import random
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
@@ -80,8 +81,17 @@ class Client:
     connection is closed or lost, and validates its arguments before doing
     anything (``ValueError`` / ``TypeError``)."""
 
-    def __init__(self, backend: Backend, options: ClientOptions) -> None:
+    def __init__(
+        self,
+        backend: Backend,
+        options: ClientOptions,
+        reopen: Callable[[], Awaitable[Backend]] | None = None,
+    ) -> None:
         self._backend = backend
+        self._reopen = reopen
+        self._connected = anyio.Event()
+        self._connected.set()
+        self._watched_parameters: dict[str, int] = {}
         self._options = options
         self._log: logging.Logger = options.logger
         self._status: Watchable[Status] = Watchable("connected")
@@ -100,8 +110,10 @@ class Client:
     # -- lifecycle ----------------------------------------------------------
     @property
     def status(self) -> Status:
-        """``"connected"``, then ``"closed"`` after the block ends, or
-        ``"error"`` once the connection was lost (see :attr:`last_error`)."""
+        """``"connected"``; ``"reconnecting"`` while a lost connection is
+        being re-established (``options.reconnect``); ``"closed"`` after the
+        block ends; ``"error"`` once the connection is lost for good (see
+        :attr:`last_error`)."""
         return self._status.value
 
     @property
@@ -129,6 +141,8 @@ class Client:
         return self._status.value == "connected"
 
     def _require_connected(self) -> None:
+        """Raise ``NotConnected`` unless the connection is up. While it is
+        being re-established the message says so."""
         if self._status.value != "connected":
             raise NotConnected(
                 f"the connection is {self._status.value}"
@@ -141,7 +155,7 @@ class Client:
         stop the reader before the teardown has confirmed the zero Twist.
         :meth:`_stop_tasks` ends them."""
         for fn, name in (
-            (self._reader, "rmb-reader"),
+            (self._supervise, "rmb-reader"),
             (self._writer, "rmb-writer"),
             (self._keepalive, "rmb-keepalive"),
         ):
@@ -158,37 +172,122 @@ class Client:
         for scope in self._task_scopes.values():
             scope.cancel()
 
-    async def _reader(self) -> None:
-        try:
-            await self._backend.run(self)
-        except ConnectError as exc:
-            self._lost(exc)
-        except Exception as exc:  # a bug must not take the user's program down
-            self._log.exception("the reader failed")
-            self._lost(ConnectError(f"internal error in the reader: {exc!r}"))
+    async def _supervise(self) -> None:
+        """The reader task: run the backend's reader; when the connection is
+        lost, re-establish it under ``options.reconnect`` and run again."""
+        while True:
+            try:
+                await self._backend.run(self)
+                return
+            except ConnectError as exc:
+                error: ConnectError = exc
+            except Exception as exc:  # a bug must not take the user's program down
+                self._log.exception("the reader failed")
+                error = ConnectError(f"internal error in the reader: {exc!r}")
+            if self._closing:
+                return
+            self._disconnected(error)
+            if not await self._reconnect(error):
+                return
 
-    async def _writer(self) -> None:
-        outbox = self._outbox
-        backend = self._backend
-        try:
-            while True:
-                await backend.send(await outbox.get())
-        except ConnectError as exc:
-            self._lost(exc)
-
-    async def _keepalive(self) -> None:
-        await self._backend.keepalive()
-
-    def _lost(self, error: ConnectError) -> None:
-        if self._closing or self._status.value != "connected":
-            return
+    def _disconnected(self, error: ConnectError) -> None:
+        """The connection is gone: fail what waits on it, keep what can be
+        restored (subscriptions, advertisements, parameter watches)."""
         self._log.warning("connection lost: %s", error)
         self._last_error = error
-        self._status.set("error")
+        self._connected = anyio.Event()
         self._backend.fail_pending(NotConnected(f"disconnected: {error}"))
+        dropped = self._outbox.clear()
+        if dropped:
+            # a velocity command replayed seconds later could move the robot
+            self._log.warning("dropped %d queued outgoing frames with the connection", dropped)
+        for topic in self._subs:
+            self.on_topic_state(topic, False)
+        if self._reopen is not None and self._options.reconnect is not None:
+            self._status.set("reconnecting")
+        else:
+            self._give_up(error)
+
+    def _give_up(self, error: ConnectError) -> None:
+        self._last_error = error
+        self._status.set("error")
         for subs in self._subs.values():
             for sub in subs:
                 sub._fail(NotConnected(f"disconnected: {error}"))
+
+    async def _reconnect(self, error: ConnectError) -> bool:
+        """Re-open the connection and restore its state. Returns False (with
+        status ``"error"``) when the policy gives up."""
+        policy = self._options.reconnect
+        reopen = self._reopen
+        if policy is None or reopen is None:
+            return False
+        attempt = 0
+        old = self._backend
+        with anyio.CancelScope(shield=True):
+            await old.aclose()
+        while policy.max_attempts is None or attempt < policy.max_attempts:
+            attempt += 1
+            delay = policy.delay(attempt, random.random)
+            self._log.info("reconnecting in %.2f s (attempt %d)", delay, attempt)
+            await anyio.sleep(delay)
+            try:
+                backend = await reopen()
+            except ConnectError as exc:
+                self._log.info("reconnect attempt %d failed: %s", attempt, exc)
+                self._last_error = exc
+                continue
+            try:
+                await self._restore(old, backend)
+            except ConnectError as exc:
+                self._log.info("restoring after reconnect failed: %s", exc)
+                self._last_error = exc
+                with anyio.CancelScope(shield=True):
+                    await backend.aclose()
+                continue
+            except BaseException:
+                with anyio.CancelScope(shield=True):
+                    await backend.aclose()
+                raise
+            self._log.info("reconnected after %d attempt(s)", attempt)
+            self._connected.set()
+            self._status.set("connected")
+            return True
+        self._log.error("giving up after %d reconnect attempts", attempt)
+        self._give_up(self._last_error if isinstance(self._last_error, ConnectError) else error)
+        return False
+
+    async def _restore(self, old: Backend, backend: Backend) -> None:
+        """Bring a fresh connection to the state the lost one had."""
+        self._backend = backend
+        self.on_graph()
+        for topic, schema in old.publishing().items():
+            await backend.advertise(topic, schema)
+        for topic in list(self._subs):
+            await backend.subscribe(topic, self._merged_hints(topic))
+            if backend.topic_active(topic):
+                self.on_topic_state(topic, True)
+        if self._watched_parameters:
+            await backend.subscribe_parameters(sorted(self._watched_parameters))
+
+    async def _writer(self) -> None:
+        outbox = self._outbox
+        while True:
+            message = await outbox.get()
+            try:
+                await self._backend.send(message)
+            except ConnectError:
+                await self._connected.wait()  # the reader handles the loss
+
+    async def _keepalive(self) -> None:
+        while True:
+            backend = self._backend
+            await backend.keepalive()  # returns when that connection is gone
+            async for status in self._status.watch():
+                if status in ("closed", "error"):
+                    return
+                if status == "connected" and self._backend is not backend:
+                    break  # a fresh connection: keep it alive too
 
     async def _teardown(self) -> None:
         """Flush, zero Twist, confirm, in one shielded scope with a deadline."""
@@ -379,9 +478,13 @@ class Client:
         return SubscribeHints(max_hz=loosest, schema=schema)
 
     async def _add_subscription(self, sub: Subscription, hints: SubscribeHints) -> None:
-        self._require_connected()
+        reconnecting = self._status.value == "reconnecting"
+        if not reconnecting:
+            self._require_connected()
         self._subs.setdefault(sub.topic, []).append(sub)
         self._hints[sub] = hints
+        if reconnecting:
+            return  # pending; the reconnect subscribes it
         try:
             await self._backend.subscribe(sub.topic, self._merged_hints(sub.topic))
         except BaseException:
@@ -555,6 +658,8 @@ class Client:
         wanted = list(names)
         self._require_connected()
         await self._backend.subscribe_parameters(wanted)
+        for name in wanted:
+            self._watched_parameters[name] = self._watched_parameters.get(name, 0) + 1
 
         async def updates() -> AsyncIterator[dict[str, Any]]:
             last: dict[str, Any] | None = None
@@ -573,9 +678,17 @@ class Client:
                 anyio.move_on_after(self._options.teardown_timeout),
             ):
                 await iterator.aclose()  # type: ignore[attr-defined]
-                if self.connected:
+                unwatched = []
+                for name in wanted:
+                    left = self._watched_parameters.get(name, 0) - 1
+                    if left > 0:
+                        self._watched_parameters[name] = left
+                    else:
+                        self._watched_parameters.pop(name, None)
+                        unwatched.append(name)
+                if self.connected and unwatched:
                     with contextlib.suppress(ConnectError):
-                        await self._backend.unsubscribe_parameters(wanted)
+                        await self._backend.unsubscribe_parameters(unwatched)
 
     # -- schemas ------------------------------------------------------------
     def schema_template(self, name: str) -> dict[str, Any]:

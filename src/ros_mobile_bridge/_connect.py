@@ -196,7 +196,12 @@ async def connect(
         raise TypeError("options must be a ClientOptions")
     endpoint = parse_target(target, protocol=protocol, port=port, secure=secure)
     backend = await _open_backend(endpoint, protocol, options)
-    client = Client(backend, options)
+
+    async def reopen() -> Backend:
+        # the same endpoint and the protocol the first connection settled on
+        return await _open_backend(endpoint, backend.protocol, options)
+
+    client = Client(backend, options, reopen)
     body_error: Exception | None = None
     try:
         async with anyio.create_task_group() as tg:

@@ -8,7 +8,7 @@ import ssl
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-__all__ = ["ClientOptions"]
+__all__ = ["ClientOptions", "ReconnectPolicy"]
 
 
 def _positive(name: str, value: object, *, allow_zero: bool = False) -> None:
@@ -16,6 +16,49 @@ def _positive(name: str, value: object, *, allow_zero: bool = False) -> None:
         raise TypeError(f"{name} must be a number, not {type(value).__name__}")
     if math.isnan(value) or value < 0 or (value == 0 and not allow_zero):
         raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+
+
+@dataclass(frozen=True, slots=True)
+class ReconnectPolicy:
+    """How a client re-establishes a connection it lost.
+
+    Only a connection that was once established is retried: the first
+    ``connect()`` fails at once. The n-th attempt waits
+    ``min(max_delay, initial_delay * multiplier ** (n - 1))`` seconds,
+    spread by ``jitter`` (a fraction: 0.2 means +/- 20 %).
+    ``max_attempts=None`` retries until the client is closed."""
+
+    initial_delay: float = 0.5
+    max_delay: float = 10.0
+    multiplier: float = 2.0
+    jitter: float = 0.2
+    max_attempts: int | None = None
+
+    def __post_init__(self) -> None:
+        _positive("initial_delay", self.initial_delay, allow_zero=True)
+        _positive("max_delay", self.max_delay, allow_zero=True)
+        _positive("multiplier", self.multiplier)
+        _positive("jitter", self.jitter, allow_zero=True)
+        if self.multiplier < 1:
+            raise ValueError(f"multiplier must be >= 1, got {self.multiplier!r}")
+        if self.jitter >= 1:
+            raise ValueError(f"jitter must be below 1, got {self.jitter!r}")
+        if self.max_delay < self.initial_delay:
+            raise ValueError("max_delay must not be below initial_delay")
+        if self.max_attempts is not None and (
+            isinstance(self.max_attempts, bool)
+            or not isinstance(self.max_attempts, int)
+            or self.max_attempts < 1
+        ):
+            raise ValueError(
+                f"max_attempts must be a positive int or None, got {self.max_attempts!r}"
+            )
+
+    def delay(self, attempt: int, random: Callable[[], float]) -> float:
+        """Seconds to wait before attempt number ``attempt`` (1-based);
+        ``random`` returns a float in [0, 1)."""
+        base = min(self.max_delay, self.initial_delay * self.multiplier ** (attempt - 1))
+        return max(0.0, base * (1.0 + self.jitter * (2.0 * random() - 1.0)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,6 +103,9 @@ class ClientOptions:
     """TLS settings for ``wss://``; the system defaults when None."""
     logger: logging.Logger = field(default_factory=lambda: logging.getLogger("ros_mobile_bridge"))
     """Where the library logs skipped frames, decode failures and teardown."""
+    reconnect: ReconnectPolicy | None = field(default_factory=ReconnectPolicy)
+    """How to re-establish a lost connection; ``None`` disables reconnecting
+    (a lost connection then ends in status ``"error"``)."""
     on_latency: Callable[[float], None] | None = None
     """Called with the round-trip time in milliseconds of every correlated
     request/response (service calls, parameter requests)."""
@@ -88,6 +134,8 @@ class ClientOptions:
         for topic in self.stop_topics:
             if not isinstance(topic, str) or not topic.startswith("/"):
                 raise ValueError(f"stop_topics entries must be absolute topic names, got {topic!r}")
+        if self.reconnect is not None and not isinstance(self.reconnect, ReconnectPolicy):
+            raise TypeError("reconnect must be a ReconnectPolicy or None")
         if not isinstance(self.zero_twist_on_exit, bool):
             raise TypeError("zero_twist_on_exit must be a bool")
         if self.ssl_context is not None and not isinstance(self.ssl_context, ssl.SSLContext):

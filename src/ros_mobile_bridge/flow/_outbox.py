@@ -104,6 +104,12 @@ class Outbox:
                 self._ready = anyio.Event()
             await self._ready.wait()
 
+    def clear(self) -> int:
+        """Discard every queued frame, control and data; returns how many."""
+        n = len(self._control)
+        self._control.clear()
+        return n + self.drop_data()
+
     def drop_data(self) -> int:
         """Discard every queued data frame; returns how many."""
         n = len(self._data)
