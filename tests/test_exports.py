@@ -20,11 +20,15 @@ PACKAGE = "ros_mobile_bridge"
 PACKAGE_DIR = Path(rmb.__file__).parent
 INIT_SOURCE = (PACKAGE_DIR / "__init__.py").read_text(encoding="utf-8")
 
-PUBLIC_NAMES = sorted(set(rmb.__all__) - {"__version__"})
+PUBLIC_SUBMODULES = {"lag"}
+"""Public modules re-exported by name (``rmb.lag``); their own names are
+checked by ``test_lag_module_exports_its_readers``."""
+PUBLIC_NAMES = sorted(set(rmb.__all__) - {"__version__"} - PUBLIC_SUBMODULES)
 # What a user reaches as ``rmb.X``: __all__ plus any public attribute it misses.
 API_NAMES = sorted(
     ({n for n, v in vars(rmb).items() if not isinstance(v, types.ModuleType)} | set(rmb.__all__))
     - {"__version__"}
+    - PUBLIC_SUBMODULES
     - {n for n in vars(rmb) if n.startswith("_")}
 )
 
@@ -65,6 +69,20 @@ def _public_attributes() -> set[str]:
 
 def test_every_public_attribute_is_in_all() -> None:
     assert _public_attributes() == set(PUBLIC_NAMES)
+
+
+def test_lag_module_exports_its_readers() -> None:
+    assert isinstance(rmb.lag, types.ModuleType)
+    assert set(rmb.lag.__all__) == {
+        "LagStats",
+        "clear",
+        "history_csv",
+        "max_lag_ms",
+        "stats",
+        "sustained_lag_ms",
+    }
+    for name in rmb.lag.__all__:
+        assert getattr(rmb.lag, name).__doc__, name
 
 
 @pytest.mark.parametrize("name", ["connect", "parse_target"])

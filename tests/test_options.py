@@ -10,7 +10,7 @@ import ssl
 
 import pytest
 
-from ros_mobile_bridge import ClientOptions, ReconnectPolicy
+from ros_mobile_bridge import BreakerPolicy, ClientOptions, ReconnectPolicy
 
 # field -> may it be zero?
 FLOAT_FIELDS = {
@@ -44,6 +44,9 @@ def test_defaults() -> None:
     assert opts.logger.name == "ros_mobile_bridge"
     assert opts.on_latency is None
     assert opts.reconnect == ReconnectPolicy()
+    assert opts.breaker == BreakerPolicy()
+    assert opts.throttle_mode == "auto"
+    assert opts.preset_overrides is None
 
 
 def test_every_field_is_covered_here() -> None:
@@ -55,6 +58,9 @@ def test_every_field_is_covered_here() -> None:
         "logger",
         "on_latency",
         "reconnect",
+        "breaker",
+        "throttle_mode",
+        "preset_overrides",
     }
     assert names == set(FLOAT_FIELDS) | set(INT_FIELDS) | others
 
@@ -223,3 +229,26 @@ def test_reconnect_must_be_a_policy_or_none() -> None:
     assert ClientOptions(reconnect=None).reconnect is None
     with pytest.raises(TypeError, match="reconnect"):
         ClientOptions(reconnect=True)  # type: ignore[arg-type]
+
+
+# -- throttle and breaker options ---------------------------------------------------------
+def test_throttle_mode_must_be_a_mode_or_a_callable() -> None:
+    assert ClientOptions(throttle_mode="efficient").throttle_mode == "efficient"
+    assert callable(ClientOptions(throttle_mode=lambda: "performance").throttle_mode)
+    with pytest.raises(ValueError, match="throttle_mode"):
+        ClientOptions(throttle_mode="turbo")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [{"cooldowns_s": ()}, {"saturation_ms": 0}, {"dwell_s": -1}, {"probe_s": math.nan}],
+)
+def test_breaker_policy_rejects_bad_values(kwargs: dict[str, object]) -> None:
+    with pytest.raises((ValueError, TypeError)):
+        BreakerPolicy(**kwargs)  # type: ignore[arg-type]
+
+
+def test_breaker_must_be_a_policy_or_none() -> None:
+    assert ClientOptions(breaker=None).breaker is None
+    with pytest.raises(TypeError, match="breaker"):
+        ClientOptions(breaker=object())  # type: ignore[arg-type]

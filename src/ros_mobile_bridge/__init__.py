@@ -6,6 +6,7 @@ Start with :func:`connect`; everything else is reached from the
 library sends a zero Twist on teardown while the socket is open, and cannot
 stop a robot after the network is gone."""
 
+from . import lag as lag
 from ._client import Client as Client
 from ._connect import Endpoint as Endpoint
 from ._connect import connect as connect
@@ -20,6 +21,7 @@ from ._errors import RosBridgeError as RosBridgeError
 from ._errors import SchemaError as SchemaError
 from ._errors import ServiceError as ServiceError
 from ._errors import ServiceTimeout as ServiceTimeout
+from ._options import BreakerPolicy as BreakerPolicy
 from ._options import ClientOptions as ClientOptions
 from ._options import ReconnectPolicy as ReconnectPolicy
 from ._types import DEFAULT_PORTS as DEFAULT_PORTS
@@ -34,12 +36,23 @@ from ._types import SubscriptionStats as SubscriptionStats
 from ._types import TopicInfo as TopicInfo
 from .codec import FieldDef as FieldDef
 from .flow import Subscription as Subscription
+from .flow._breaker import BreakerState as BreakerState
+from .flow._breaker import CircuitBreaker as CircuitBreaker
+from .flow._lag import LagStats as LagStats
+from .flow._throttle import DEFAULT_PRESETS as DEFAULT_PRESETS
+from .flow._throttle import Bucket as Bucket
+from .flow._throttle import ThrottleMode as ThrottleMode
 
 __version__ = "0.1.0.dev0"
 
 __all__ = [
     "DEFAULT_PORTS",
+    "DEFAULT_PRESETS",
     "ActionGoalError",
+    "BreakerPolicy",
+    "BreakerState",
+    "Bucket",
+    "CircuitBreaker",
     "Client",
     "ClientOptions",
     "ConnectError",
@@ -47,6 +60,7 @@ __all__ = [
     "Dispatch",
     "Endpoint",
     "FieldDef",
+    "LagStats",
     "Message",
     "NotConnected",
     "NotSupportedError",
@@ -63,8 +77,10 @@ __all__ = [
     "Subscription",
     "SubscriptionState",
     "SubscriptionStats",
+    "ThrottleMode",
     "TopicInfo",
     "__version__",
     "connect",
+    "lag",
     "parse_target",
 ]

@@ -32,12 +32,26 @@ from ._types import (
 )
 from .backends import Backend, SubscribeHints
 from .codec import FieldDef, same_type_name
-from .flow import FrameQueue, Outbox, RawFrame, Subscription, Watchable, Watcher
+from .flow import (
+    AdaptiveThrottle,
+    Bucket,
+    FrameQueue,
+    Outbox,
+    RawFrame,
+    Subscription,
+    ThrottleMode,
+    Watchable,
+    Watcher,
+    current_monitor,
+    participate,
+    resolve_presets,
+)
 
 __all__ = ["Client"]
 
 _TWIST: Final = "geometry_msgs/msg/Twist"
 _READER_YIELD_EVERY: Final = 64
+_RELIABILITY_TICK: Final = 0.2
 T = TypeVar("T")
 _TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
 
@@ -86,8 +100,16 @@ class Client:
         backend: Backend,
         options: ClientOptions,
         reopen: Callable[[], Awaitable[Backend]] | None = None,
+        presets: Mapping[ThrottleMode, tuple[Bucket, ...]] | None = None,
     ) -> None:
         self._backend = backend
+        self._presets = (
+            presets
+            if presets is not None
+            else resolve_presets(options.preset_overrides, options.logger)
+        )
+        mode = options.throttle_mode
+        self._mode: Callable[[], ThrottleMode] = mode if callable(mode) else (lambda: mode)
         self._reopen = reopen
         self._connected = anyio.Event()
         self._connected.set()
@@ -158,6 +180,8 @@ class Client:
             (self._supervise, "rmb-reader"),
             (self._writer, "rmb-writer"),
             (self._keepalive, "rmb-keepalive"),
+            (participate, "rmb-lag"),
+            (self._reliability, "rmb-reliability"),
         ):
             scope = anyio.CancelScope(shield=True)
             self._task_scopes[name] = scope
@@ -201,8 +225,11 @@ class Client:
         if dropped:
             # a velocity command replayed seconds later could move the robot
             self._log.warning("dropped %d queued outgoing frames with the connection", dropped)
-        for topic in self._subs:
+        for topic, subs in self._subs.items():
             self.on_topic_state(topic, False)
+            for sub in subs:  # breaker timers die with the connection
+                sub.breaker.reset()
+                sub._queue.blocked = False
         if self._reopen is not None and self._options.reconnect is not None:
             self._status.set("reconnecting")
         else:
@@ -264,9 +291,7 @@ class Client:
         for topic, schema in old.publishing().items():
             await backend.advertise(topic, schema)
         for topic in list(self._subs):
-            await backend.subscribe(topic, self._merged_hints(topic))
-            if backend.topic_active(topic):
-                self.on_topic_state(topic, True)
+            await self._sync_topic(topic)
         if self._watched_parameters:
             await backend.subscribe_parameters(sorted(self._watched_parameters))
 
@@ -445,6 +470,7 @@ class Client:
         topic: str,
         *,
         max_hz: float | None = None,
+        adaptive: bool = True,
         dispatch: Dispatch = "all",
         schema: str | None = None,
         buffer: int | None = None,
@@ -456,22 +482,35 @@ class Client:
         ``pending`` and becomes ``active`` when the server offers it.
         ``max_hz`` caps the delivery rate (frames in between are dropped
         before decoding; the newest one is delivered at the end of the
-        window). ``dispatch="latest"`` keeps only the newest undelivered
+        window). ``adaptive`` lets the event loop's lag widen that interval
+        (``options.throttle_mode``); the effective interval is the larger of
+        the two, and a subscription with ``adaptive=False`` ignores the lag
+        (and its breaker never trips on its own). ``dispatch="latest"`` keeps only the newest undelivered
         message; ``"all"`` queues up to ``buffer`` and drops the oldest when
         the consumer falls behind. Arguments are checked here, at once."""
         _check_name("topic", topic)
         if schema is not None:
             _check_schema(schema)
+        if not isinstance(adaptive, bool):
+            raise TypeError("adaptive must be a bool")
+        throttle = (
+            AdaptiveThrottle(self._presets, self._mode, current_monitor(), logger=self._log)
+            if adaptive
+            else None
+        )
         queue = FrameQueue(
             max_hz=max_hz,
             dispatch=dispatch,
             buffer=self._options.subscription_buffer if buffer is None else buffer,
+            adaptive=throttle.interval_s if throttle is not None else None,
         )
-        sub = Subscription(topic, queue, logger=self._log)
+        policy = self._options.breaker
+        breaker = policy.build() if policy is not None else None
+        sub = Subscription(topic, queue, logger=self._log, throttle=throttle, breaker=breaker)
         return _SubscriptionContext(self, sub, SubscribeHints(max_hz=max_hz, schema=schema))
 
     def _merged_hints(self, topic: str) -> SubscribeHints:
-        hints = [self._hints[s] for s in self._subs.get(topic, ())]
+        hints = [self._hints[s] for s in self._subs.get(topic, ()) if not s._queue.blocked]
         caps = [h.max_hz for h in hints]
         loosest = None if not caps or None in caps else max(c for c in caps if c is not None)
         schema = next((h.schema for h in hints if h.schema), None)
@@ -492,6 +531,51 @@ class Client:
             raise
         if self._backend.topic_active(sub.topic):
             sub._set_state("active")
+
+    async def _sync_topic(self, topic: str) -> None:
+        """Make the bridge carry ``topic`` exactly when a local subscription
+        whose breaker is not tripped wants it."""
+        backend = self._backend
+        if any(not s._queue.blocked for s in self._subs.get(topic, ())):
+            await backend.subscribe(topic, self._merged_hints(topic))
+            if backend.topic_active(topic):
+                self.on_topic_state(topic, True)
+        else:
+            await backend.unsubscribe(topic)
+            self.on_topic_state(topic, False)
+
+    async def _reliability(self) -> None:
+        """Every 200 ms: refresh each adaptive subscription's throttle, feed
+        its breaker the lag, and apply breaker states (tripped: the bridge
+        stops sending; half-open or closed: it sends again)."""
+        monitor = current_monitor()
+        policy = self._options.breaker
+        while True:
+            await anyio.sleep(_RELIABILITY_TICK)
+            if self._status.value != "connected":
+                continue
+            lag = monitor.max_lag_ms()
+            for topic, subs in list(self._subs.items()):
+                changed = False
+                for sub in subs:
+                    throttle = sub._throttle
+                    if throttle is not None and policy is not None:
+                        throttle.interval_s()  # refresh at_deepest
+                        sub.breaker.observe(lag, throttle.at_deepest)
+                    else:
+                        sub.breaker.poll()
+                    blocked = sub.breaker.state in ("tripped_auto", "tripped_manual")
+                    if blocked != sub._queue.blocked:
+                        sub._queue.blocked = blocked
+                        changed = True
+                        self._log.warning(
+                            "subscription to %s: breaker %s", topic, sub.breaker.state
+                        )
+                if changed:
+                    try:
+                        await self._sync_topic(topic)
+                    except ConnectError as exc:
+                        self._log.debug("breaker change on %s not applied: %s", topic, exc)
 
     async def _remove_subscription(self, sub: Subscription) -> None:
         sub.close()

@@ -16,6 +16,7 @@ from ._errors import NotSupportedError, ProtocolMismatchError
 from ._options import ClientOptions
 from ._types import DEFAULT_PORTS
 from .backends import Backend, open_foxglove
+from .flow import resolve_presets
 
 __all__ = ["Endpoint", "connect", "parse_target"]
 
@@ -195,13 +196,14 @@ async def connect(
     elif not isinstance(options, ClientOptions):
         raise TypeError("options must be a ClientOptions")
     endpoint = parse_target(target, protocol=protocol, port=port, secure=secure)
+    presets = resolve_presets(options.preset_overrides, options.logger)  # before any I/O
     backend = await _open_backend(endpoint, protocol, options)
 
     async def reopen() -> Backend:
         # the same endpoint and the protocol the first connection settled on
         return await _open_backend(endpoint, backend.protocol, options)
 
-    client = Client(backend, options, reopen)
+    client = Client(backend, options, reopen, presets)
     body_error: Exception | None = None
     try:
         async with anyio.create_task_group() as tg:

@@ -5,10 +5,13 @@ from __future__ import annotations
 import logging
 import math
 import ssl
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
-__all__ = ["ClientOptions", "ReconnectPolicy"]
+from .flow._breaker import CircuitBreaker
+from .flow._throttle import THROTTLE_MODES, Bucket, ThrottleMode
+
+__all__ = ["BreakerPolicy", "ClientOptions", "ReconnectPolicy"]
 
 
 def _positive(name: str, value: object, *, allow_zero: bool = False) -> None:
@@ -62,6 +65,39 @@ class ReconnectPolicy:
 
 
 @dataclass(frozen=True, slots=True)
+class BreakerPolicy:
+    """When a subscription's circuit breaker trips and how long it rests.
+
+    It trips when, after ``warmup_s``, the event loop's lag has stayed at or
+    above ``saturation_ms`` for ``dwell_s`` while the adaptive throttle sat
+    at its deepest bucket. It then waits the next of ``cooldowns_s`` (the
+    last repeats; the ladder restarts with each new connection), goes
+    half-open, and closes after ``probe_s`` without saturation."""
+
+    cooldowns_s: tuple[float, ...] = (30.0, 60.0, 120.0, 300.0)
+    saturation_ms: float = 250.0
+    dwell_s: float = 3.0
+    warmup_s: float = 5.0
+    probe_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "cooldowns_s", tuple(self.cooldowns_s))
+        self.build()  # validates every value
+
+    def build(self, clock: Callable[[], float] | None = None) -> CircuitBreaker:
+        """A breaker following this policy."""
+        kwargs: dict[str, object] = {} if clock is None else {"clock": clock}
+        return CircuitBreaker(
+            cooldowns_s=self.cooldowns_s,
+            saturation_ms=self.saturation_ms,
+            dwell_s=self.dwell_s,
+            warmup_s=self.warmup_s,
+            probe_s=self.probe_s,
+            **kwargs,  # type: ignore[arg-type]
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class ClientOptions:
     """Everything about a connection that is not the target.
 
@@ -103,6 +139,18 @@ class ClientOptions:
     """TLS settings for ``wss://``; the system defaults when None."""
     logger: logging.Logger = field(default_factory=lambda: logging.getLogger("ros_mobile_bridge"))
     """Where the library logs skipped frames, decode failures and teardown."""
+    throttle_mode: ThrottleMode | Callable[[], ThrottleMode] = "auto"
+    """The adaptive throttle's curve: ``"performance"``, ``"auto"`` or
+    ``"efficient"``, or a callable read on every message so a settings
+    change applies at once."""
+    preset_overrides: Mapping[str, Sequence[Bucket | tuple[float, float, str]]] | None = None
+    """Replacement curves per mode (``(threshold_ms, min_interval_ms,
+    label)`` buckets). A curve that fails validation is logged and that
+    mode keeps its default (:data:`DEFAULT_PRESETS`); an unknown mode name
+    raises ``ValueError``."""
+    breaker: BreakerPolicy | None = field(default_factory=BreakerPolicy)
+    """The per-subscription circuit breaker; ``None`` never trips it
+    automatically (``retry()`` / ``disable()`` still work)."""
     reconnect: ReconnectPolicy | None = field(default_factory=ReconnectPolicy)
     """How to re-establish a lost connection; ``None`` disables reconnecting
     (a lost connection then ends in status ``"error"``)."""
@@ -134,6 +182,13 @@ class ClientOptions:
         for topic in self.stop_topics:
             if not isinstance(topic, str) or not topic.startswith("/"):
                 raise ValueError(f"stop_topics entries must be absolute topic names, got {topic!r}")
+        if not callable(self.throttle_mode) and self.throttle_mode not in THROTTLE_MODES:
+            raise ValueError(
+                f"throttle_mode must be one of {', '.join(THROTTLE_MODES)} or a callable, "
+                f"got {self.throttle_mode!r}"
+            )
+        if self.breaker is not None and not isinstance(self.breaker, BreakerPolicy):
+            raise TypeError("breaker must be a BreakerPolicy or None")
         if self.reconnect is not None and not isinstance(self.reconnect, ReconnectPolicy):
             raise TypeError("reconnect must be a ReconnectPolicy or None")
         if not isinstance(self.zero_twist_on_exit, bool):

@@ -92,8 +92,13 @@ class SubscriptionStats:
     in exactly one of ``delivered``, ``dropped_throttle`` (the ``max_hz`` cap),
     ``dropped_conflated`` (superseded under ``dispatch="latest"``),
     ``dropped_overflow`` (the consumer fell behind; oldest dropped),
-    or is still queued. ``decode_failures`` counts delivered messages whose
-    payload could not be decoded (delivered raw)."""
+    ``dropped_breaker`` (the circuit breaker was tripped), or is still
+    queued. ``decode_failures`` counts delivered messages whose payload
+    could not be decoded (delivered raw). ``effective_interval_ms`` is the
+    larger of the ``max_hz`` cap and the adaptive throttle's interval;
+    ``bucket`` names the throttle bucket (``""`` without one);
+    ``arrival_bytes_per_s`` is the payload rate arriving over the last
+    second, before any filter."""
 
     received: int
     delivered: int
@@ -102,3 +107,6 @@ class SubscriptionStats:
     dropped_overflow: int
     decode_failures: int
     effective_interval_ms: float
+    dropped_breaker: int = 0
+    bucket: str = ""
+    arrival_bytes_per_s: float = 0.0

@@ -488,7 +488,15 @@ class FoxgloveBackend:
     async def keepalive(self) -> None:
         interval = self._options.keepalive_interval
         if interval > 0:
-            await self._ws.keepalive(interval, self._options.keepalive_timeout)
+            await self._ws.keepalive(interval, self._options.keepalive_timeout, self._report_rtt)
+
+    def _report_rtt(self, rtt_ms: float) -> None:
+        callback = self._options.on_latency
+        if callback is not None:
+            try:
+                callback(rtt_ms)
+            except Exception:
+                self._log.exception("on_latency callback failed")
 
     @property
     def closed(self) -> bool:

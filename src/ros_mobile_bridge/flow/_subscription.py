@@ -32,7 +32,9 @@ import anyio.lowlevel
 
 from .._errors import DecodeError, NotConnected
 from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats
+from ._breaker import CircuitBreaker
 from ._frame import RawFrame
+from ._throttle import AdaptiveThrottle
 
 __all__ = ["FrameQueue", "Subscription"]
 
@@ -55,6 +57,7 @@ class FrameQueue:
         dispatch: Dispatch = "all",
         buffer: int = 1024,
         max_bytes: int = 64 * 1024 * 1024,
+        adaptive: Callable[[], float] | None = None,
         clock: Clock = time.monotonic,
     ) -> None:
         if max_hz is not None:
@@ -75,7 +78,15 @@ class FrameQueue:
         self.buffer = 1 if dispatch == "latest" else buffer
         self.max_bytes = max_bytes
         self._bytes = 0
-        self._interval = 1.0 / max_hz if max_hz else 0.0
+        self._cap = 1.0 / max_hz if max_hz else 0.0
+        self._interval = self._cap
+        self._adaptive = adaptive
+        self.blocked = False
+        """Set while the subscription's circuit breaker is tripped: frames
+        are counted and dropped."""
+        self._rate_start = clock()
+        self._rate_bytes = 0
+        self._arrival_rate = 0.0
         self._clock = clock
         self._queue: deque[RawFrame] = deque()
         self._held: RawFrame | None = None
@@ -87,12 +98,22 @@ class FrameQueue:
         self.dropped_throttle = 0
         self.dropped_conflated = 0
         self.dropped_overflow = 0
+        self.dropped_breaker = 0
         self.decode_failures = 0
 
     @property
     def interval(self) -> float:
-        """The effective minimum interval between delivered frames, seconds."""
+        """The effective minimum interval between delivered frames, seconds:
+        the larger of the ``max_hz`` cap and the adaptive interval, as of the
+        last frame."""
         return self._interval
+
+    @property
+    def arrival_bytes_per_s(self) -> float:
+        """Payload bytes per second arriving over the last full second."""
+        if self._clock() - self._rate_start >= 2.0:
+            return 0.0  # nothing arrived for a whole window
+        return self._arrival_rate
 
     def __len__(self) -> int:
         return len(self._queue) + (self._held is not None)
@@ -103,11 +124,26 @@ class FrameQueue:
         if self._closed:
             return
         self.received += 1
-        interval = self._interval
+        now = self._clock()
+        if now - self._rate_start >= 1.0:
+            self._arrival_rate = self._rate_bytes / (now - self._rate_start)
+            self._rate_start = now
+            self._rate_bytes = 0
+        self._rate_bytes += frame.payload.nbytes
+        if self.blocked:
+            self.dropped_breaker += 1
+            return
+        interval = self._cap
+        if self._adaptive is not None:
+            adaptive = self._adaptive()
+            if adaptive > interval:
+                interval = adaptive
+            self._interval = interval
         if interval <= 0.0:
+            if self._held is not None:  # the cap was lifted: release what it held
+                self._release_due(now)
             self._enqueue(frame)
             return
-        now = self._clock()
         self._release_due(now)
         last = self._last_release
         if last is None or now - last >= interval:
@@ -209,9 +245,18 @@ class Subscription:
         queue: FrameQueue,
         *,
         logger: logging.Logger,
+        throttle: AdaptiveThrottle | None = None,
+        breaker: CircuitBreaker | None = None,
     ) -> None:
         self.topic = topic
         self._queue = queue
+        self._throttle = throttle
+        self.breaker: CircuitBreaker = breaker if breaker is not None else CircuitBreaker()
+        """This subscription's circuit breaker: ``state``, ``next_retry_at``
+        (monotonic seconds), ``retry()``, ``disable()``, ``watch()``. While
+        it is tripped the bridge stops sending the topic (unless another
+        local subscription still wants it); manual changes apply within the
+        client's next reliability tick (200 ms)."""
         self._logger = logger
         self._state: SubscriptionState = "pending"
         self._state_changed = anyio.Event()
@@ -250,6 +295,9 @@ class Subscription:
             dropped_overflow=q.dropped_overflow,
             decode_failures=q.decode_failures,
             effective_interval_ms=q.interval * 1000.0,
+            dropped_breaker=q.dropped_breaker,
+            bucket=self._throttle.bucket_label if self._throttle is not None else "",
+            arrival_bytes_per_s=q.arrival_bytes_per_s,
         )
 
     def __aiter__(self) -> Subscription:

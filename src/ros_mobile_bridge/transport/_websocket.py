@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import ssl as _ssl
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final
 
@@ -234,16 +235,26 @@ class WebSocket:
             await self._flush_locked()
         return event
 
-    async def keepalive(self, interval: float, timeout: float) -> None:
+    async def keepalive(
+        self,
+        interval: float,
+        timeout: float,
+        on_rtt: Callable[[float], None] | None = None,
+    ) -> None:
         """Ping every ``interval`` seconds; fail the connection when a pong has
-        not come back within ``timeout``. Returns when the connection closes."""
+        not come back within ``timeout``. Each answered ping's round trip, in
+        milliseconds, goes to ``on_rtt`` (an idle latency probe with no side
+        effect on the server). Returns when the connection closes."""
         while not self.closed:
             await anyio.sleep(interval)
             if self._closed_reason is not None:
                 return
+            sent = anyio.current_time()
             pong = await self.ping()
             with anyio.move_on_after(timeout) as scope:
                 await pong.wait()
+            if on_rtt is not None and not scope.cancelled_caught and not self.closed:
+                on_rtt((anyio.current_time() - sent) * 1000.0)
             if scope.cancelled_caught and not self.closed:
                 self._lost(ConnectionLost(f"keep-alive: no pong within {timeout:g} s", 1011))
                 await self._stream.aclose()
