@@ -18,10 +18,20 @@ Prints ``port PORT`` when ready, then serves commands on stdin, one a line:
     per second (on a fixed schedule), then answer ``done COUNT SECONDS``.
 ``quit``
     Stop the server and exit (so does end of input).
+
+``python bench/_peer.py reliability BACKLOG`` is the server of
+``bench_reliability.py`` instead (see :func:`reliability_main`): an image
+stream at a settable rate, and client publishing with every ``/cmd_vel``
+message stamped on receipt. ``python bench/_peer.py publisher URL COUNT
+SEED`` is an idle second client publishing control frames to it, and
+``python bench/_peer.py rxqueue PORT`` watches its socket receive queues (see
+:func:`publisher_main`, :func:`rxqueue_main`).
 """
 
 from __future__ import annotations
 
+import json
+import struct
 import sys
 import threading
 import time
@@ -30,7 +40,7 @@ from typing import Any, Final
 
 import foxglove
 from foxglove import Channel, Schema
-from foxglove.websocket import ServerListener
+from foxglove.websocket import Capability, ServerListener
 from rosbags.typesys import Stores, get_typestore
 
 STRING_TOPIC: Final = "/bench/string"
@@ -158,5 +168,293 @@ def main() -> None:
         server.stop()
 
 
+# -- the reliability peer (bench_reliability.py) ---------------------------------------
+
+CMD_TOPIC: Final = "/cmd_vel"
+TWIST_TYPE: Final = "geometry_msgs/msg/Twist"
+
+
+def twist_seq(data: bytes, encoding: str) -> int:
+    """The sequence number ``bench_reliability.py`` puts in ``linear.y`` of a
+    Twist (CDR or JSON); 0 for anything else (the teardown's zero Twist)."""
+    try:
+        if encoding == "cdr":
+            if len(data) < 20:
+                return 0
+            fmt = "<d" if data[1] == 1 else ">d"  # encapsulation: CDR_LE or CDR_BE
+            return int(struct.unpack_from(fmt, data, 12)[0])  # header 4 + linear.x 8
+        if encoding == "json":
+            return int(json.loads(data).get("linear", {}).get("y", 0))
+    except (ValueError, TypeError, AttributeError, struct.error):
+        pass
+    return 0
+
+
+class ReliabilityListener(_Listener):
+    """Also accepts client publishing: every message a client publishes is
+    stamped with ``time.time_ns()`` as the first thing the callback does, and
+    kept (decoded later, off the callback)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.client_channels: dict[tuple[int, int], tuple[str, str]] = {}
+        self.inbox: list[tuple[int, int, bytes, int]] = []
+        self.inbox_lock = threading.Lock()
+
+    def on_client_advertise(self, client: Any, channel: Any) -> None:
+        with self.cond:
+            self.client_channels[(client.id, channel.id)] = (channel.topic, channel.encoding)
+
+    def on_message_data(self, client: Any, client_channel_id: int, data: bytes) -> None:
+        now = time.time_ns()
+        with self.inbox_lock:
+            self.inbox.append((client.id, client_channel_id, data, now))
+
+    def take_commands(self, topic: str) -> list[tuple[int, int]]:
+        """(sequence number, receive time ns) of every message received on
+        ``topic`` since the last call, in arrival order. Messages on other
+        topics stay for their own call."""
+        with self.cond:
+            channels = dict(self.client_channels)
+        with self.inbox_lock:
+            inbox, self.inbox = self.inbox, []
+        out: list[tuple[int, int]] = []
+        other: list[tuple[int, int, bytes, int]] = []
+        for client_id, channel_id, data, ns in inbox:
+            name, encoding = channels.get((client_id, channel_id), ("", ""))
+            if name != topic:
+                other.append((client_id, channel_id, data, ns))
+            elif (seq := twist_seq(data, encoding)) > 0:
+                out.append((seq, ns))
+        with self.inbox_lock:
+            self.inbox[:0] = other
+        return out
+
+
+class ImageStream:
+    """A thread that logs ``payload`` on ``channel`` at a settable rate, on a
+    fixed schedule that never bursts to catch up. It sleeps between messages,
+    so it holds this process's GIL only inside ``Channel.log``."""
+
+    def __init__(self, channel: Channel, payload: bytes) -> None:
+        self._channel = channel
+        self._payload = payload
+        self._rate = 0.0
+        self._cond = threading.Condition()
+        self._stop = False
+        self.logged = 0
+        self._thread = threading.Thread(target=self._run, name="image-stream", daemon=True)
+        self._thread.start()
+
+    def set_rate(self, rate: float) -> None:
+        with self._cond:
+            self._rate = rate
+            self._cond.notify_all()
+
+    def close(self) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        log, payload = self._channel.log, self._payload
+        rate = 0.0
+        due = time.perf_counter()
+        while True:
+            with self._cond:
+                while self._rate <= 0 and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                if self._rate != rate:
+                    rate, due = self._rate, time.perf_counter()
+            period = 1.0 / rate
+            now = time.perf_counter()
+            if due > now:
+                time.sleep(due - now)
+            elif now - due > period:
+                due = now  # late: drop the missed slots rather than burst
+            log(payload)
+            self.logged += 1
+            due += period
+
+
+class WakeProbe:
+    """A thread of this process that sleeps 1 ms at a time and records how
+    late it wakes up: what any Python callback here (the ``/cmd_vel``
+    receipt stamp included) waits for a CPU and for the GIL."""
+
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.late_ns: list[int] = []
+
+    def start(self) -> None:
+        self.stop()
+        self.late_ns = []
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="wake-probe", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> list[int]:
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join(timeout=5)
+            self._thread = None
+        return self.late_ns
+
+    def _run(self) -> None:
+        late, clock = self.late_ns, time.perf_counter_ns
+        while not self._stop.is_set():
+            due = clock() + 1_000_000
+            time.sleep(0.001)
+            late.append(clock() - due)
+
+
+def reliability_main(backlog: int) -> None:
+    """``python bench/_peer.py reliability BACKLOG``: the server of
+    ``bench_reliability.py``. It offers ``/bench/image`` (640x480 rgb8, CDR)
+    and accepts client publishing (``clientPublish``, CDR and JSON). Prints
+    ``port PORT``, then serves commands on stdin, one a line:
+
+    ``stream RATE``
+        Log the image at RATE per second from now on (0 stops); ``ok``.
+    ``commands [TOPIC]``
+        ``commands N SEQ:NS ...``: every message clients published on TOPIC
+        (default ``/cmd_vel``) since the last ``commands``, as the sequence
+        number in its ``linear.y`` and the server's ``time.time_ns()`` at
+        receipt. Messages on other topics are discarded.
+    ``logged``
+        ``logged N``: images logged since start.
+    ``probe start``, ``probe stop``
+        Start a :class:`WakeProbe` (``ok``); stop it and answer
+        ``probe LATE_US ...``, how late each 1 ms sleep woke (microseconds).
+    ``quit``
+        Stop and exit (so does end of input).
+    """
+    sys.setswitchinterval(0.0005)  # the receipt stamp must not wait 5 ms for the GIL
+    listener = ReliabilityListener()
+    context = foxglove.Context()
+    server = foxglove.start_server(
+        name="rmb-bench-reliability",
+        host="127.0.0.1",
+        port=0,
+        context=context,
+        server_listener=listener,
+        capabilities=[Capability.ClientPublish],
+        supported_encodings=["cdr", "json"],
+        message_backlog_size=backlog,
+    )
+    msgdef, _ = _STORE.generate_msgdef(IMAGE_TYPE, ros_version=2)
+    channel = Channel(
+        IMAGE_TOPIC,
+        message_encoding="cdr",
+        schema=Schema(name=IMAGE_TYPE, encoding="ros2msg", data=msgdef.encode()),
+        context=context,
+    )
+    stream = ImageStream(channel, payloads()[IMAGE_TOPIC])
+    probe = WakeProbe()
+    print(f"port {server.port}", flush=True)
+    try:
+        for line in sys.stdin:
+            words = line.split()
+            if not words:
+                continue
+            if words[0] == "quit":
+                break
+            if words[0] == "stream" and len(words) == 2:
+                stream.set_rate(float(words[1]))
+                print("ok", flush=True)
+            elif words[0] == "commands" and len(words) <= 2:
+                got = listener.take_commands(words[1] if len(words) == 2 else CMD_TOPIC)
+                print("commands", len(got), *(f"{s}:{ns}" for s, ns in got), flush=True)
+            elif words[0] == "logged" and len(words) == 1:
+                print(f"logged {stream.logged}", flush=True)
+            elif words[0] == "probe" and words[1:] == ["start"]:
+                probe.start()
+                print("ok", flush=True)
+            elif words[0] == "probe" and words[1:] == ["stop"]:
+                print("probe", *(ns // 1000 for ns in probe.stop()), flush=True)
+            else:
+                print(f"error bad command {line.strip()!r}", flush=True)
+    finally:
+        probe.stop()
+        stream.close()
+        channel.close()
+        server.stop()
+
+
+IDLE_TOPIC: Final = "/cmd_vel_idle"
+
+
+def publisher_main(url: str, count: int, seed: int) -> None:
+    """``python bench/_peer.py publisher URL COUNT SEED``: a second client with
+    nothing else to do (``websockets``' synchronous client, no subscription),
+    the baseline for what the server and this machine add to a control frame.
+    Advertises ``/cmd_vel_idle`` (Twist, CDR) and prints ``ready``; on a line
+    from stdin publishes COUNT Twists 15-25 ms apart (the sequence number 1..
+    COUNT in ``linear.y``), then prints ``sent SEQ:NS ...`` with
+    ``time.time_ns()`` taken just before each send, and exits."""
+    import random
+
+    from websockets.sync.client import connect
+    from websockets.typing import Subprotocol
+
+    with connect(url, subprotocols=[Subprotocol("foxglove.sdk.v1.1")], compression=None) as ws:
+        channel = {"id": 1, "topic": IDLE_TOPIC, "encoding": "cdr", "schemaName": TWIST_TYPE}
+        ws.send(json.dumps({"op": "advertise", "channels": [channel]}))
+        print("ready", flush=True)
+        sys.stdin.readline()
+        rng = random.Random(seed)
+        header = struct.pack("<BI", 1, 1) + b"\x00\x01\x00\x00"  # message data, channel 1; CDR_LE
+        stamps: list[str] = []
+        for seq in range(1, count + 1):
+            time.sleep(rng.uniform(0.015, 0.025))
+            frame = header + struct.pack("<6d", 0.1, float(seq), 0.0, 0.0, 0.0, 0.2)
+            stamps.append(f"{seq}:{time.time_ns()}")
+            ws.send(frame)
+    print("sent", *stamps, flush=True)
+
+
+def rxqueue_main(port: int) -> None:
+    """``python bench/_peer.py rxqueue PORT`` (Linux): until a line arrives on
+    stdin, poll ``/proc/net/tcp`` every 0.2 ms and record every change
+    of the receive queue (bytes the kernel holds that the process has not
+    read yet) of the sockets whose local port is PORT: the server's side of
+    each connection. Then print ``rxqueue T_NS:REMOTE:BYTES ...`` and exit."""
+    suffix = f":{port:04X}"
+    changes: list[str] = []
+    last: dict[str, int] = {}
+    done = threading.Event()
+
+    def wait_for_input() -> None:
+        sys.stdin.readline()
+        done.set()
+
+    threading.Thread(target=wait_for_input, daemon=True).start()
+    print("ready", flush=True)
+    while not done.is_set():
+        now = time.time_ns()
+        with open("/proc/net/tcp") as table:
+            next(table)
+            for line in table:
+                fields = line.split()
+                if fields[1].endswith(suffix):
+                    rx = int(fields[4].split(":")[1], 16)
+                    if last.get(fields[2]) != rx:
+                        last[fields[2]] = rx
+                        changes.append(f"{now}:{fields[2]}:{rx}")
+        time.sleep(0.0002)  # about 0.3 ms resolution for a fraction of a core
+    print("rxqueue", *changes, flush=True)
+
+
 if __name__ == "__main__":
-    main()
+    if sys.argv[1:2] == ["reliability"]:
+        reliability_main(int(sys.argv[2]) if len(sys.argv) > 2 else 8)
+    elif sys.argv[1:2] == ["rxqueue"]:
+        rxqueue_main(int(sys.argv[2]))
+    elif sys.argv[1:2] == ["publisher"]:
+        publisher_main(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
+    else:
+        main()

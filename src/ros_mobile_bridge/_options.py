@@ -84,16 +84,14 @@ class BreakerPolicy:
         object.__setattr__(self, "cooldowns_s", tuple(self.cooldowns_s))
         self.build()  # validates every value
 
-    def build(self, clock: Callable[[], float] | None = None) -> CircuitBreaker:
+    def build(self) -> CircuitBreaker:
         """A breaker following this policy."""
-        kwargs: dict[str, object] = {} if clock is None else {"clock": clock}
         return CircuitBreaker(
             cooldowns_s=self.cooldowns_s,
             saturation_ms=self.saturation_ms,
             dwell_s=self.dwell_s,
             warmup_s=self.warmup_s,
             probe_s=self.probe_s,
-            **kwargs,  # type: ignore[arg-type]
         )
 
 
