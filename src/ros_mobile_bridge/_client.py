@@ -431,15 +431,23 @@ class Client:
         merged.update(values)
         self._parameters.set(merged)
 
+    async def _send_control(self) -> None:
+        """Write every queued control frame now (the writer task would only
+        get to them on its next turn)."""
+        outbox = self._outbox
+        send = self._backend.send
+        try:
+            while (message := outbox.pop_control()) is not None:
+                await send(message)
+        except ConnectError:
+            pass  # the reader handles the loss and reports it
+
     async def before_inbound(self) -> None:
         """Backend callback, before each inbound message: send pending control
         frames first, and every 64 messages let the consumers run, so a burst
         read in one go does not overflow their queues before they wake."""
-        outbox = self._outbox
-        if outbox.has_control:
-            send = self._backend.send
-            while (message := outbox.pop_control()) is not None:
-                await send(message)
+        if self._outbox.has_control:
+            await self._send_control()
         self._inbound += 1
         if self._inbound >= _READER_YIELD_EVERY:
             self._inbound = 0
@@ -624,8 +632,9 @@ class Client:
         in the control outbox: it leaves ahead of every queued data frame,
         and a newer control value for the same topic replaces an unsent one.
         ``"data"`` frames queue in order (this waits while 1024 are queued).
-        Returns once the frame is queued. ``ValueError`` when ``data`` does
-        not fit the schema."""
+        A data frame returns once queued; a control frame returns once
+        written to the socket. ``ValueError`` when ``data`` does not fit the
+        schema."""
         _check_name("topic", topic)
         _check_schema(schema)
         if priority not in ("data", "control"):
@@ -634,7 +643,9 @@ class Client:
             raise TypeError(f"data must be a mapping (dict), not {type(data).__name__}")
         self._require_connected()
         backend = self._backend
-        await backend.advertise(topic, schema)
+        ready = backend.advertised(topic)
+        if ready is None or not same_type_name(ready, schema):
+            await backend.advertise(topic, schema)  # the hot path skips this await
         try:
             message = backend.encode_publish(topic, data)
         except DecodeError as exc:
@@ -642,7 +653,10 @@ class Client:
         if _is_velocity_type(schema):
             self._velocity[topic] = schema
         if priority == "control":
+            # Queued, then written at once: not behind the writer's or the
+            # reader's next turn. Control frames queued meanwhile go first.
             self._outbox.put_control(topic, message)
+            await self._send_control()
         else:
             await self._outbox.put_data(topic, message)
 

@@ -85,6 +85,10 @@ class Backend(Protocol):
     def publishing(self) -> Mapping[str, str]:
         """Topics this client advertised, with their schema names."""
 
+    def advertised(self, topic: str) -> str | None:
+        """The schema ``topic`` is advertised with and ready to publish, or
+        None (then :meth:`advertise` first). Never waits."""
+
     def encode_publish(self, topic: str, data: Any) -> WireMessage:
         """Encode ``data`` for the advertised ``topic``. Raises
         ``DecodeError`` for data that does not fit the schema."""

@@ -317,6 +317,12 @@ class FoxgloveBackend:
     def publishing(self) -> Mapping[str, str]:
         return {topic: ch.schema for topic, ch in self._client_channels.items()}
 
+    def advertised(self, topic: str) -> str | None:
+        channel = self._client_channels.get(topic)
+        if channel is None or not channel.ready.is_set():
+            return None
+        return channel.schema
+
     def _publish_encoding(self, schema: str) -> str:
         supported = self.server_info.supported_encodings
         if "cdr" in supported and self.codecs.has_schema(schema):

@@ -57,7 +57,7 @@ class ConnectionLost(ConnectError):
 @dataclass(slots=True)
 class _Pending:
     opcode: Opcode
-    parts: list[bytes]
+    parts: list[bytes | bytearray]
     size: int
 
 
@@ -71,7 +71,7 @@ class WebSocket:
         self._proto = protocol
         self._max_size = max_size
         self._send_lock = anyio.Lock(fast_acquire=True)
-        self._messages: deque[str | bytes] = deque()
+        self._messages: deque[str | bytes | bytearray] = deque()
         self._fragment: _Pending | None = None
         self._pongs: dict[bytes, anyio.Event] = {}
         self._closed_reason: ConnectionLost | None = None
@@ -80,8 +80,9 @@ class WebSocket:
         """Seconds one send may take before the connection is declared lost."""
 
     # -- receiving ---------------------------------------------------------
-    async def receive(self) -> str | bytes:
-        """The next complete message: ``str`` for text, ``bytes`` for binary.
+    async def receive(self) -> str | bytes | bytearray:
+        """The next complete message: ``str`` for text, ``bytes`` or a
+        ``bytearray`` that nothing else holds for binary.
 
         Fragmented messages are reassembled. Raises :class:`ConnectionLost`
         once the connection is closed (the close is answered first)."""
@@ -132,7 +133,9 @@ class WebSocket:
 
     def _on_frame(self, frame: Frame) -> None:
         op = frame.opcode
-        data = frame.data if type(frame.data) is bytes else bytes(frame.data)
+        # websockets hands each frame a fresh bytes or bytearray (a slice of
+        # its read buffer), so it is kept as is: no copy per frame
+        data = frame.data if isinstance(frame.data, bytes | bytearray) else bytes(frame.data)
         if op is Opcode.TEXT or op is Opcode.BINARY:
             if frame.fin:
                 self._messages.append(data.decode() if op is Opcode.TEXT else data)
@@ -153,7 +156,7 @@ class WebSocket:
                 whole = b"".join(pending.parts)
                 self._messages.append(whole.decode() if pending.opcode is Opcode.TEXT else whole)
         elif op is Opcode.PONG:
-            event = self._pongs.pop(data, None)
+            event = self._pongs.pop(bytes(data), None)
             if event is not None:
                 event.set()
 
