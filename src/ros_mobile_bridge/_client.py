@@ -584,6 +584,8 @@ class Client:
                         await self._sync_topic(topic)
                     except ConnectError as exc:
                         self._log.debug("breaker change on %s not applied: %s", topic, exc)
+                    except Exception:  # a bug must not take the user's program down
+                        self._log.exception("breaker change on %s failed", topic)
 
     async def _remove_subscription(self, sub: Subscription) -> None:
         sub.close()
