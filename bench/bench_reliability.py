@@ -49,7 +49,6 @@ from __future__ import annotations
 import argparse
 import bisect
 import gc
-import importlib.metadata
 import json
 import os
 import platform
@@ -84,7 +83,7 @@ from ros_mobile_bridge.transport import connect_websocket
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _peer import CMD_TOPIC, IDLE_TOPIC, IMAGE_TOPIC, TWIST_TYPE
-from bench_foxglove import _where, steady_malloc
+from bench_foxglove import _where, steady_malloc, versions
 
 T = TypeVar("T")
 Backend = Literal["asyncio", "trio"]
@@ -1257,15 +1256,6 @@ def report_profiles(backend: Backend, profiles: dict[str, Profile]) -> dict[str,
             "inclusive": {w: k / n for w, k in p.inclusive.most_common(60)},
         }
     return out
-
-
-def versions() -> str:
-    names = ("ros-mobile-bridge", "websockets", "anyio", "trio", "rosbags", "foxglove-sdk")
-    found = []
-    for name in names:
-        with suppress(importlib.metadata.PackageNotFoundError):
-            found.append(f"{name} {importlib.metadata.version(name)}")
-    return f"python {platform.python_version()}, " + ", ".join(found)
 
 
 def main() -> None:
