@@ -111,8 +111,6 @@ class Client:
         mode = options.throttle_mode
         self._mode: Callable[[], ThrottleMode] = mode if callable(mode) else (lambda: mode)
         self._reopen = reopen
-        self._connected = anyio.Event()
-        self._connected.set()
         self._watched_parameters: dict[str, int] = {}
         self._options = options
         self._log: logging.Logger = options.logger
@@ -219,7 +217,6 @@ class Client:
         restored (subscriptions, advertisements, parameter watches)."""
         self._log.warning("connection lost: %s", error)
         self._last_error = error
-        self._connected = anyio.Event()
         self._backend.fail_pending(NotConnected(f"disconnected: {error}"))
         dropped = self._outbox.clear()
         if dropped:
@@ -277,7 +274,6 @@ class Client:
                     await backend.aclose()
                 raise
             self._log.info("reconnected after %d attempt(s)", attempt)
-            self._connected.set()
             self._status.set("connected")
             return True
         self._log.error("giving up after %d reconnect attempts", attempt)
@@ -295,24 +291,34 @@ class Client:
         if self._watched_parameters:
             await backend.subscribe_parameters(sorted(self._watched_parameters))
 
+    async def _next_connection(self, lost: Backend) -> bool:
+        """Wait until a connection other than ``lost`` is up (the reader
+        handles the loss and the reconnect). False once the client is closed
+        or has given up."""
+        async for status in self._status.watch():
+            if status in ("closed", "error"):
+                return False
+            if status == "connected" and self._backend is not lost:
+                return True
+        return False
+
     async def _writer(self) -> None:
         outbox = self._outbox
         while True:
             message = await outbox.get()
+            backend = self._backend
             try:
-                await self._backend.send(message)
+                await backend.send(message)
             except ConnectError:
-                await self._connected.wait()  # the reader handles the loss
+                if not await self._next_connection(backend):
+                    return
 
     async def _keepalive(self) -> None:
         while True:
             backend = self._backend
             await backend.keepalive()  # returns when that connection is gone
-            async for status in self._status.watch():
-                if status in ("closed", "error"):
-                    return
-                if status == "connected" and self._backend is not backend:
-                    break  # a fresh connection: keep it alive too
+            if not await self._next_connection(backend):
+                return
 
     async def _teardown(self) -> None:
         """Flush, zero Twist, confirm, in one shielded scope with a deadline."""
