@@ -107,10 +107,7 @@ class WebSocket:
                 raise self._closed_reason from exc  # type: ignore[misc]
             self._proto.receive_data(data)
             self._take_events()
-            chunks = self._proto.data_to_send()  # pongs, close replies: usually none
-            if chunks:
-                async with self._send_lock:
-                    await self._write(chunks)
+            await self._flush()  # pongs, close replies: usually nothing, and then no lock
         return messages.popleft()
 
     def _take_events(self) -> None:
@@ -186,6 +183,7 @@ class WebSocket:
             await self._flush_locked()
 
     async def _flush(self) -> None:
+        """Send what the protocol has queued, taking the lock only if anything."""
         chunks = self._proto.data_to_send()
         if chunks:
             async with self._send_lock:
