@@ -964,3 +964,25 @@ def test_a_frame_larger_than_the_byte_bound_is_still_delivered() -> None:
 def test_max_bytes_must_be_a_positive_int(max_bytes: object) -> None:
     with pytest.raises(ValueError, match="max_bytes"):
         FrameQueue(max_bytes=max_bytes)  # type: ignore[arg-type]
+
+
+# -- PendingRequests.request ------------------------------------------------------------
+async def test_request_sends_then_waits_and_a_failed_send_leaves_nothing_pending() -> None:
+    pending: PendingRequests[str] = PendingRequests()
+    sent: list[int] = []
+
+    async def send() -> None:
+        sent.append(1)
+        pending.resolve(1, "answer")  # answered as soon as it is on the wire
+
+    assert await pending.request(1, send) == "answer"
+    assert sent == [1]
+    assert len(pending) == 0
+
+    async def broken() -> None:
+        raise NotConnected("socket gone")
+
+    with pytest.raises(NotConnected, match="socket gone"):
+        await pending.request(2, broken)
+    assert 2 not in pending
+    assert len(pending) == 0

@@ -428,15 +428,10 @@ class FoxgloveBackend:
         else:
             payload = encode(request if request is not None else {})
         call_id = next(self._call_ids)
-        self._calls.register(call_id)
-        try:
-            await self._ws.send(
-                self._engine.service_call_request(svc.id, call_id, encoding, payload)
-            )
-        except BaseException:
-            self._calls.discard(call_id)
-            raise
-        response: fx.ServiceCallResponse = await self._calls.wait(call_id)
+        request_frame = self._engine.service_call_request(svc.id, call_id, encoding, payload)
+        response: fx.ServiceCallResponse = await self._calls.request(
+            call_id, lambda: self._ws.send(request_frame)
+        )
         decode = self._response_decoder(svc, response.encoding)
         if decode is None:
             return bytes(response.payload)
@@ -452,13 +447,7 @@ class FoxgloveBackend:
 
     async def _parameter_request(self, build: Any) -> dict[str, Any]:
         request_id = f"rmb-{next(self._param_ids)}"
-        self._params.register(request_id)
-        try:
-            await self._ws.send(build(request_id))
-        except BaseException:
-            self._params.discard(request_id)
-            raise
-        return await self._params.wait(request_id)
+        return await self._params.request(request_id, lambda: self._ws.send(build(request_id)))
 
     async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
         self._require("parameters")

@@ -4,7 +4,7 @@ goes away, so no call waits forever."""
 
 from __future__ import annotations
 
-from collections.abc import Hashable
+from collections.abc import Awaitable, Callable, Hashable
 from typing import Generic, TypeVar
 
 import anyio
@@ -45,6 +45,18 @@ class PendingRequests(Generic[T]):
         if key in self._slots:
             raise ValueError(f"request {key!r} is already pending")
         self._slots[key] = _Slot()
+
+    async def request(self, key: Hashable, send: Callable[[], Awaitable[object]]) -> T:
+        """Register ``key``, run ``send`` (which puts the request on the
+        wire), then wait for the answer. If ``send`` fails the registration
+        is dropped and its error raised."""
+        self.register(key)
+        try:
+            await send()
+        except BaseException:
+            self.discard(key)
+            raise
+        return await self.wait(key)
 
     def discard(self, key: Hashable) -> None:
         """Forget ``key`` without answering it (the request was never sent)."""
