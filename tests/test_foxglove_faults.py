@@ -192,8 +192,15 @@ async def test_server_accepting_no_subprotocol_is_a_protocol_mismatch() -> None:
     async with scripted_server(script, subprotocols=()) as url:
         with anyio.fail_after(5):
             with pytest.raises(rmb.ProtocolMismatchError, match="subprotocol"):
-                async with rmb.connect(url, options=options()):
+                async with rmb.connect(url, protocol="foxglove-ws", options=options()):
                     pytest.fail("connected without a negotiated subprotocol")
+        # "auto" reads a handshake without a subprotocol as rosbridge; the
+        # Foxglove greeting that follows then gives the server away
+        with anyio.fail_after(5):
+            with pytest.raises(rmb.ProtocolMismatchError) as caught:
+                async with rmb.connect(url, options=options()):
+                    pytest.fail("connected to a Foxglove greeting as rosbridge")
+        assert (caught.value.expected, caught.value.detected) == ("rosbridge", "foxglove-ws")
 
 
 # -- limits -----------------------------------------------------------------------------

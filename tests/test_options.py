@@ -21,6 +21,9 @@ FLOAT_FIELDS = {
     "service_timeout": False,
     "teardown_timeout": False,
     "advertise_settle": True,
+    "discovery_interval": False,
+    "latency_probe_interval": True,
+    "fragment_timeout": False,
 }
 # field -> smallest valid value
 INT_FIELDS = {"max_frame_size": 1024, "subscription_buffer": 1}
@@ -47,6 +50,9 @@ def test_defaults() -> None:
     assert opts.breaker == BreakerPolicy()
     assert opts.throttle_mode == "auto"
     assert opts.preset_overrides is None
+    assert opts.discovery_interval == 2.0
+    assert opts.latency_probe_interval == 5.0
+    assert opts.fragment_timeout == 10.0
 
 
 def test_every_field_is_covered_here() -> None:

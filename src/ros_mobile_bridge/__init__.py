@@ -1,5 +1,5 @@
 """ros-mobile-bridge: an async (asyncio and trio, via anyio) client for ROS 2
-robots over Foxglove WebSocket, without installing ROS.
+robots over Foxglove WebSocket or rosbridge v2, without installing ROS.
 
 Start with :func:`connect`; everything else is reached from the
 :class:`Client` it yields. See the README for the safety boundary: the
@@ -7,6 +7,7 @@ library sends a zero Twist on teardown while the socket is open, and cannot
 stop a robot after the network is gone."""
 
 from . import lag as lag
+from ._action import ActionGoal as ActionGoal
 from ._client import Client as Client
 from ._connect import Endpoint as Endpoint
 from ._connect import connect as connect
@@ -25,7 +26,10 @@ from ._options import BreakerPolicy as BreakerPolicy
 from ._options import ClientOptions as ClientOptions
 from ._options import ReconnectPolicy as ReconnectPolicy
 from ._types import DEFAULT_PORTS as DEFAULT_PORTS
+from ._types import ActionOutcome as ActionOutcome
+from ._types import Compression as Compression
 from ._types import Dispatch as Dispatch
+from ._types import GoalState as GoalState
 from ._types import Message as Message
 from ._types import Priority as Priority
 from ._types import ServerInfo as ServerInfo
@@ -48,18 +52,22 @@ __version__ = "0.1.0.dev0"
 __all__ = [
     "DEFAULT_PORTS",
     "DEFAULT_PRESETS",
+    "ActionGoal",
     "ActionGoalError",
+    "ActionOutcome",
     "BreakerPolicy",
     "BreakerState",
     "Bucket",
     "CircuitBreaker",
     "Client",
     "ClientOptions",
+    "Compression",
     "ConnectError",
     "DecodeError",
     "Dispatch",
     "Endpoint",
     "FieldDef",
+    "GoalState",
     "LagStats",
     "Message",
     "NotConnected",

@@ -20,9 +20,11 @@ import anyio
 import anyio.abc
 import anyio.lowlevel
 
+from ._action import ActionGoal
 from ._errors import ConnectError, DecodeError, NotConnected, NotSupportedError, ServiceTimeout
 from ._options import ClientOptions
 from ._types import (
+    Compression,
     Dispatch,
     Priority,
     ServerInfo,
@@ -488,6 +490,7 @@ class Client:
         dispatch: Dispatch = "all",
         schema: str | None = None,
         buffer: int | None = None,
+        compression: Compression | None = None,
     ) -> _SubscriptionContext:
         """Subscribe to ``topic``; an async context manager yielding a
         :class:`~ros_mobile_bridge.Subscription` (``async for msg in sub``).
@@ -501,10 +504,15 @@ class Client:
         the two, and a subscription with ``adaptive=False`` ignores the lag
         (and its breaker never trips on its own). ``dispatch="latest"`` keeps only the newest undelivered
         message; ``"all"`` queues up to ``buffer`` and drops the oldest when
-        the consumer falls behind. Arguments are checked here, at once."""
+        the consumer falls behind. ``compression`` (rosbridge only, ignored
+        elsewhere): ``"cbor"`` or ``"cbor-raw"`` (CDR, decoded here) instead
+        of JSON; images are far smaller and cheaper to decode. Arguments are
+        checked here, at once."""
         _check_name("topic", topic)
         if schema is not None:
             _check_schema(schema)
+        if compression is not None and compression not in ("cbor", "cbor-raw"):
+            raise ValueError(f"compression must be 'cbor', 'cbor-raw' or None, got {compression!r}")
         if not isinstance(adaptive, bool):
             raise TypeError("adaptive must be a bool")
         throttle = (
@@ -521,14 +529,17 @@ class Client:
         policy = self._options.breaker
         breaker = policy.build() if policy is not None else None
         sub = Subscription(topic, queue, logger=self._log, throttle=throttle, breaker=breaker)
-        return _SubscriptionContext(self, sub, SubscribeHints(max_hz=max_hz, schema=schema))
+        return _SubscriptionContext(
+            self, sub, SubscribeHints(max_hz=max_hz, schema=schema, compression=compression)
+        )
 
     def _merged_hints(self, topic: str) -> SubscribeHints:
         hints = [self._hints[s] for s in self._subs.get(topic, ()) if not s._queue.blocked]
         caps = [h.max_hz for h in hints]
         loosest = None if not caps or None in caps else max(c for c in caps if c is not None)
         schema = next((h.schema for h in hints if h.schema), None)
-        return SubscribeHints(max_hz=loosest, schema=schema)
+        compression = next((h.compression for h in hints if h.compression), None)
+        return SubscribeHints(max_hz=loosest, schema=schema, compression=compression)
 
     async def _add_subscription(self, sub: Subscription, hints: SubscribeHints) -> None:
         reconnecting = self._status.value == "reconnecting"
@@ -615,13 +626,17 @@ class Client:
                 self._log.debug("unsubscribe from %s failed: %s", sub.topic, exc)
 
     # -- publishing ---------------------------------------------------------
-    async def advertise(self, topic: str, schema: str) -> None:
+    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
         """Advertise ``topic`` with type ``schema`` ahead of the first publish,
-        taking the bridge's set-up time out of the hot path."""
+        taking the bridge's set-up time out of the hot path. ``latch=True``
+        (rosbridge) keeps the last message for subscribers that join later;
+        the Foxglove protocol cannot (``NotSupportedError``)."""
         _check_name("topic", topic)
         _check_schema(schema)
+        if not isinstance(latch, bool):
+            raise TypeError("latch must be a bool")
         self._require_connected()
-        await self._backend.advertise(topic, schema)
+        await self._backend.advertise(topic, schema, latch=latch)
 
     async def unadvertise(self, topic: str) -> None:
         """Stop publishing ``topic``. A velocity topic still gets its zero
@@ -695,30 +710,35 @@ class Client:
             raise TypeError(
                 f"request must be a mapping (dict) or None, not {type(request).__name__}"
             )
-        return await self._request(name, lambda: self._backend.call_service(name, request), timeout)
-
-    def _report_latency(self, start: float) -> None:
-        callback = self._options.on_latency
-        if callback is not None:
-            try:
-                callback((time.perf_counter() - start) * 1000.0)
-            except Exception:
-                self._log.exception("on_latency callback failed")
+        backend = self._backend
+        return await self._request(
+            name,
+            lambda limit: backend.call_service(name, request, limit),
+            timeout,
+            slack=backend.wire_timeout_slack,
+        )
 
     async def _request(
-        self, what: str, call: Callable[[], Awaitable[T]], timeout: float | None
+        self,
+        what: str,
+        call: Callable[[float], Awaitable[T]],
+        timeout: float | None,
+        *,
+        slack: float = 0.0,
     ) -> T:
         """Run one correlated request under its deadline (``timeout`` or
         ``options.service_timeout``) and report its round trip to
-        ``on_latency``. ``ServiceTimeout`` names ``what`` at the deadline."""
+        ``on_latency``. ``call`` gets the limit (a backend may forward it);
+        the local deadline is ``slack`` later, so the server's own timeout
+        answer arrives first. ``ServiceTimeout`` names ``what``."""
         limit = _check_timeout(timeout) or self._options.service_timeout
         self._require_connected()
         start = time.perf_counter()
-        with anyio.move_on_after(limit) as scope:
-            result = await call()
+        with anyio.move_on_after(limit + slack) as scope:
+            result = await call(limit)
         if scope.cancelled_caught:
             raise ServiceTimeout(what, limit)
-        self._report_latency(start)
+        self._options.report_latency((time.perf_counter() - start) * 1000.0)
         return result
 
     # -- parameters ---------------------------------------------------------
@@ -732,13 +752,13 @@ class Client:
             raise TypeError("names must be a sequence of str")
         names = list(names)
         return await self._request(
-            "getParameters", lambda: self._backend.get_parameters(names), timeout
+            "getParameters", lambda _limit: self._backend.get_parameters(names), timeout
         )
 
     async def list_parameters(self, *, timeout: float | None = None) -> dict[str, Any]:
         """Every parameter the server exposes, with its value."""
         return await self._request(
-            "getParameters", lambda: self._backend.get_parameters([]), timeout
+            "getParameters", lambda _limit: self._backend.get_parameters([]), timeout
         )
 
     async def set_parameters(
@@ -749,7 +769,7 @@ class Client:
             raise TypeError("values must be a mapping of parameter name to value")
         values = dict(values)
         return await self._request(
-            "setParameters", lambda: self._backend.set_parameters(values), timeout
+            "setParameters", lambda _limit: self._backend.set_parameters(values), timeout
         )
 
     @asynccontextmanager
@@ -807,10 +827,42 @@ class Client:
         return self._backend.codecs.definition(_check_schema(name))
 
     # -- actions ------------------------------------------------------------
-    def send_action_goal(self, action: str, action_type: str, goal: Mapping[str, Any]) -> Any:
-        """Not available on this transport yet (the Foxglove protocol has no
-        action operations); raises ``NotSupportedError``."""
-        raise NotSupportedError(f"actions are not supported over {self.protocol} yet")
+    @asynccontextmanager
+    async def send_action_goal(
+        self, action: str, action_type: str, goal: Mapping[str, Any]
+    ) -> AsyncIterator[ActionGoal]:
+        """Send ``goal`` to action server ``action`` (type ``action_type``,
+        e.g. ``"test_msgs/action/Fibonacci"``); an async context manager
+        yielding the :class:`~ros_mobile_bridge.ActionGoal`.
+
+        Leaving the block before the goal ended cancels it (shielded, within
+        ``options.teardown_timeout``). A lost connection fails the goal with
+        reason ``"disconnected"``. ``NotSupportedError`` over Foxglove, whose
+        protocol has no actions."""
+        _check_name("action", action)
+        _check_schema(action_type)
+        if not isinstance(goal, Mapping):
+            raise TypeError(f"goal must be a mapping (dict), not {type(goal).__name__}")
+        self._require_connected()
+        backend = self._backend
+        goal_id: list[str] = []
+
+        async def cancel() -> None:
+            if goal_id and self._backend is backend and self.connected:
+                await backend.cancel_action_goal(action, goal_id[0])
+
+        handle = ActionGoal(action, cancel)
+        goal_id.append(await backend.send_action_goal(action, action_type, dict(goal), handle))
+        try:
+            yield handle
+        finally:
+            if not handle.done:
+                with (
+                    anyio.CancelScope(shield=True),
+                    anyio.move_on_after(self._options.teardown_timeout),
+                    contextlib.suppress(ConnectError, NotConnected),
+                ):
+                    await handle.cancel()
 
 
 class _SubscriptionContext:

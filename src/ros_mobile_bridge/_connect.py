@@ -12,11 +12,13 @@ from typing import Final, Literal
 import anyio
 
 from ._client import Client
-from ._errors import NotSupportedError, ProtocolMismatchError
+from ._errors import NotSupportedError
 from ._options import ClientOptions
 from ._types import DEFAULT_PORTS
-from .backends import Backend, open_foxglove
+from .backends import Backend, open_foxglove, open_rosbridge, start_foxglove, start_rosbridge
 from .flow import resolve_presets
+from .transport import connect_websocket
+from .wire.foxglove import SUBPROTOCOLS
 
 __all__ = ["Endpoint", "connect", "parse_target"]
 
@@ -154,17 +156,22 @@ async def _open_backend(endpoint: Endpoint, protocol: str, options: ClientOption
     if endpoint.zenoh or protocol == "zenoh":
         raise NotSupportedError("the zenoh transport is not implemented yet (see ROADMAP.md)")
     if protocol == "rosbridge":
-        raise NotSupportedError("the rosbridge transport is not implemented yet (see ROADMAP.md)")
-    try:
+        return await open_rosbridge(endpoint.url, options)
+    if protocol == "foxglove-ws":
         return await open_foxglove(endpoint.url, options)
-    except ProtocolMismatchError as exc:
-        if protocol == "auto":
-            raise ProtocolMismatchError(
-                "foxglove-ws",
-                exc.detected,
-                f"{exc.detail}; rosbridge detection is not implemented yet",
-            ) from exc
-        raise
+    # auto: offer the Foxglove subprotocols; a Foxglove server picks one, a
+    # rosbridge server picks none. One handshake decides.
+    deadline = anyio.current_time() + options.connect_timeout
+    ws = await connect_websocket(
+        endpoint.url,
+        subprotocols=SUBPROTOCOLS,
+        max_size=options.max_frame_size,
+        ssl_context=options.ssl_context,
+        timeout=options.connect_timeout,
+    )
+    if ws.subprotocol is None:
+        return await start_rosbridge(ws, options, deadline)
+    return await start_foxglove(ws, options, deadline)
 
 
 @asynccontextmanager
@@ -183,6 +190,8 @@ async def connect(
     raise ``ValueError`` / ``TypeError`` at once. Connecting raises
     ``ConnectError`` (refused, timeout, TLS, HTTP rejection) or
     ``ProtocolMismatchError`` (the server speaks something else).
+    ``protocol="auto"`` offers the Foxglove subprotocols in the handshake:
+    a server that picks one is Foxglove, one that picks none is rosbridge.
 
     Leaving the block, normally, by an exception or by cancellation, runs
     the teardown in a shielded scope bounded by ``options.teardown_timeout``:

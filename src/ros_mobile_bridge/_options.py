@@ -154,7 +154,27 @@ class ClientOptions:
     (a lost connection then ends in status ``"error"``)."""
     on_latency: Callable[[float], None] | None = None
     """Called with the round-trip time in milliseconds of every correlated
-    request/response (service calls, parameter requests)."""
+    request/response (service calls, parameter requests) and of the idle
+    probe (Foxglove: WebSocket ping; rosbridge: ``/rosapi/get_time``)."""
+    discovery_interval: float = 2.0
+    """rosbridge: seconds between polls of ``/rosapi/topics`` and
+    ``/rosapi/services`` (the server announces nothing by itself)."""
+    latency_probe_interval: float = 5.0
+    """rosbridge: seconds between ``/rosapi/get_time`` latency probes (0
+    disables; the first failure turns the probe off)."""
+    fragment_timeout: float = 10.0
+    """rosbridge: seconds a fragmented message may take to arrive whole
+    before its parts are dropped."""
+
+    def report_latency(self, ms: float) -> None:
+        """Hand one round-trip time to :attr:`on_latency`; a failing callback
+        is logged, never raised."""
+        callback = self.on_latency
+        if callback is not None:
+            try:
+                callback(ms)
+            except Exception:
+                self.logger.exception("on_latency callback failed")
 
     def __post_init__(self) -> None:
         _positive("connect_timeout", self.connect_timeout)
@@ -164,6 +184,9 @@ class ClientOptions:
         _positive("service_timeout", self.service_timeout)
         _positive("teardown_timeout", self.teardown_timeout)
         _positive("advertise_settle", self.advertise_settle, allow_zero=True)
+        _positive("discovery_interval", self.discovery_interval)
+        _positive("latency_probe_interval", self.latency_probe_interval, allow_zero=True)
+        _positive("fragment_timeout", self.fragment_timeout)
         if isinstance(self.max_frame_size, bool) or not isinstance(self.max_frame_size, int):
             raise TypeError("max_frame_size must be an int")
         if self.max_frame_size < 1024:

@@ -8,7 +8,10 @@ from typing import Any, Literal
 
 __all__ = [
     "DEFAULT_PORTS",
+    "ActionOutcome",
+    "Compression",
     "Dispatch",
+    "GoalState",
     "Message",
     "Priority",
     "Protocol",
@@ -25,6 +28,8 @@ Status = Literal["connecting", "connected", "reconnecting", "closed", "error"]
 Priority = Literal["data", "control"]
 Dispatch = Literal["all", "latest"]
 SubscriptionState = Literal["pending", "active"]
+Compression = Literal["cbor", "cbor-raw"]
+GoalState = Literal["pending", "active", "succeeded", "canceled", "aborted", "failed"]
 
 DEFAULT_PORTS: Mapping[str, int] = {"foxglove-ws": 8765, "rosbridge": 9090, "zenoh": 7447}
 """The port each protocol's bridge listens on unless told otherwise."""
@@ -110,3 +115,12 @@ class SubscriptionStats:
     dropped_breaker: int = 0
     bucket: str = ""
     arrival_bytes_per_s: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class ActionOutcome:
+    """How an action goal ended: ``status`` is ``"succeeded"`` or
+    ``"canceled"``, ``result`` the action's result message (a dict)."""
+
+    status: Literal["succeeded", "canceled"]
+    result: Any

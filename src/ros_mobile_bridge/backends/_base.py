@@ -13,7 +13,7 @@ from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry
 from ..flow import RawFrame, WireMessage
 
-__all__ = ["Backend", "BackendEvents", "SubscribeHints"]
+__all__ = ["Backend", "BackendEvents", "GoalEvents", "SubscribeHints"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -23,6 +23,23 @@ class SubscribeHints:
 
     max_hz: float | None = None
     schema: str | None = None
+    compression: str | None = None
+    """rosbridge: ``"cbor"`` or ``"cbor-raw"`` (None: JSON). Other backends
+    ignore it."""
+
+
+class GoalEvents(Protocol):
+    """Callbacks the backend's reader makes for one action goal. All run in
+    the reader task and must not block."""
+
+    def on_feedback(self, values: Any) -> None:
+        """A feedback message for the goal."""
+
+    def on_result(self, status: int | None, values: Any, succeeded: bool) -> None:
+        """The goal ended: ``status`` is the ``GoalStatus`` code if known."""
+
+    def on_failed(self, reason: str) -> None:
+        """The goal is lost (refused by the server, or the connection went)."""
 
 
 class BackendEvents(Protocol):
@@ -76,9 +93,11 @@ class Backend(Protocol):
     async def unsubscribe(self, topic: str) -> None:
         """No local subscriber wants ``topic`` any more."""
 
-    async def advertise(self, topic: str, schema: str) -> None:
+    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
         """Make ``topic`` publishable with type ``schema`` (waits for the
-        bridge to be ready). A no-op when already advertised with it."""
+        bridge to be ready). A no-op when already advertised with it.
+        ``latch``: the bridge keeps the last message for late subscribers
+        (``NotSupportedError`` where the protocol cannot)."""
 
     async def unadvertise(self, topic: str) -> None: ...
 
@@ -93,9 +112,23 @@ class Backend(Protocol):
         """Encode ``data`` for the advertised ``topic``. Raises
         ``DecodeError`` for data that does not fit the schema."""
 
-    async def call_service(self, name: str, request: Any) -> Any:
-        """Call ``name`` and return the decoded response. No timeout here: the
-        client owns the deadline. Raises ``ServiceError`` on failure."""
+    wire_timeout_slack: float
+    """Seconds the client's deadline for a call runs past the ``timeout``
+    forwarded to the server (0 when the protocol forwards none)."""
+
+    async def call_service(self, name: str, request: Any, timeout: float) -> Any:
+        """Call ``name`` and return the decoded response. ``timeout`` is
+        forwarded where the protocol carries one; the client owns the
+        deadline. Raises ``ServiceError`` on failure."""
+
+    async def send_action_goal(
+        self, action: str, action_type: str, goal: Any, events: GoalEvents
+    ) -> str:
+        """Send a goal; returns its id. ``events`` hears what becomes of it.
+        ``NotSupportedError`` where the protocol has no actions."""
+
+    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
+        """Ask the server to cancel goal ``goal_id``."""
 
     async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]: ...
 

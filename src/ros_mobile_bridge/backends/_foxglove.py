@@ -27,9 +27,9 @@ from ..codec import CodecRegistry, same_type_name
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket, connect_websocket
 from ..wire import foxglove as fx
-from ._base import BackendEvents, SubscribeHints
+from ._base import BackendEvents, GoalEvents, SubscribeHints
 
-__all__ = ["FoxgloveBackend", "open_foxglove"]
+__all__ = ["FoxgloveBackend", "open_foxglove", "start_foxglove"]
 
 _EMPTY_CDR: Final = b"\x00\x01\x00\x00"
 """A CDR encapsulation header (little endian) with no body: an empty request."""
@@ -59,6 +59,14 @@ async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
         ssl_context=options.ssl_context,
         timeout=options.connect_timeout,
     )
+    return await start_foxglove(ws, options, deadline)
+
+
+async def start_foxglove(ws: WebSocket, options: ClientOptions, deadline: float) -> FoxgloveBackend:
+    """Speak Foxglove on an open WebSocket (opened offering
+    :data:`~ros_mobile_bridge.wire.foxglove.SUBPROTOCOLS`): wait for
+    ``serverInfo`` and the first advertisements until ``deadline``. Closes
+    ``ws`` on failure."""
     try:
         if ws.subprotocol is None:
             raise ProtocolMismatchError(
@@ -112,6 +120,7 @@ class FoxgloveBackend:
     """One Foxglove WebSocket connection (see :class:`~.Backend`)."""
 
     protocol = "foxglove-ws"
+    wire_timeout_slack = 0.0  # the protocol carries no timeout
 
     def __init__(
         self,
@@ -335,7 +344,9 @@ class FoxgloveBackend:
             )
         raise NotSupportedError(f"the server accepts none of our encodings: {', '.join(supported)}")
 
-    async def advertise(self, topic: str, schema: str) -> None:
+    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
+        if latch:
+            raise NotSupportedError("the Foxglove protocol has no latched publishing")
         existing = self._client_channels.get(topic)
         if existing is not None:
             if not same_type_name(existing.schema, schema):
@@ -407,7 +418,7 @@ class FoxgloveBackend:
         except SchemaError:
             return None
 
-    async def call_service(self, name: str, request: Any) -> Any:
+    async def call_service(self, name: str, request: Any, timeout: float) -> Any:
         if "services" not in self.server_info.capabilities:
             raise NotSupportedError("the server does not offer service calls")
         svc = self._service_for(name)
@@ -439,6 +450,15 @@ class FoxgloveBackend:
             return decode(response.payload)
         except DecodeError as exc:
             raise ServiceError(name, f"the response does not decode: {exc}") from exc
+
+    # -- actions --------------------------------------------------------------
+    async def send_action_goal(
+        self, action: str, action_type: str, goal: Any, events: GoalEvents
+    ) -> str:
+        raise NotSupportedError("the Foxglove protocol has no action operations")
+
+    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
+        raise NotSupportedError("the Foxglove protocol has no action operations")
 
     # -- parameters ---------------------------------------------------------
     def _require(self, capability: str) -> None:
@@ -483,15 +503,9 @@ class FoxgloveBackend:
     async def keepalive(self) -> None:
         interval = self._options.keepalive_interval
         if interval > 0:
-            await self._ws.keepalive(interval, self._options.keepalive_timeout, self._report_rtt)
-
-    def _report_rtt(self, rtt_ms: float) -> None:
-        callback = self._options.on_latency
-        if callback is not None:
-            try:
-                callback(rtt_ms)
-            except Exception:
-                self._log.exception("on_latency callback failed")
+            await self._ws.keepalive(
+                interval, self._options.keepalive_timeout, self._options.report_latency
+            )
 
     @property
     def closed(self) -> bool:

@@ -71,7 +71,7 @@ class WebSocket:
         self._proto = protocol
         self._max_size = max_size
         self._send_lock = anyio.Lock(fast_acquire=True)
-        self._messages: deque[str | bytes | bytearray] = deque()
+        self._messages: deque[tuple[bool, bytes | bytearray]] = deque()
         self._fragment: _Pending | None = None
         self._pongs: dict[bytes, anyio.Event] = {}
         self._closed_reason: ConnectionLost | None = None
@@ -86,6 +86,13 @@ class WebSocket:
 
         Fragmented messages are reassembled. Raises :class:`ConnectionLost`
         once the connection is closed (the close is answered first)."""
+        text, data = await self.receive_raw()
+        return data.decode() if text else data
+
+    async def receive_raw(self) -> tuple[bool, bytes | bytearray]:
+        """The next complete message as ``(is_text, data)``, a text message
+        left as its UTF-8 bytes (undecoded and unvalidated: a JSON parser
+        reads bytes directly). Otherwise as :meth:`receive`."""
         messages = self._messages
         while not messages:
             if self._closed_reason is not None:
@@ -135,7 +142,7 @@ class WebSocket:
         data = frame.data if isinstance(frame.data, bytes | bytearray) else bytes(frame.data)
         if op is Opcode.TEXT or op is Opcode.BINARY:
             if frame.fin:
-                self._messages.append(data.decode() if op is Opcode.TEXT else data)
+                self._messages.append((op is Opcode.TEXT, data))
             else:
                 self._fragment = _Pending(op, [data], len(data))
         elif op is Opcode.CONT:
@@ -151,7 +158,7 @@ class WebSocket:
             if frame.fin:
                 self._fragment = None
                 whole = b"".join(pending.parts)
-                self._messages.append(whole.decode() if pending.opcode is Opcode.TEXT else whole)
+                self._messages.append((pending.opcode is Opcode.TEXT, whole))
         elif op is Opcode.PONG:
             event = self._pongs.pop(bytes(data), None)
             if event is not None:

@@ -1,0 +1,718 @@
+"""The rosbridge v2 backend: the sans-IO rosbridge engine over the WebSocket
+transport. Discovery, parameters and the latency probe go through the
+bridge's ``/rosapi/*`` services; messages arrive as JSON, CBOR or cbor-raw
+(CDR decoded by the per-connection codec registry)."""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import json
+import logging
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Final
+
+import anyio
+
+from .._errors import (
+    ConnectError,
+    DecodeError,
+    NotConnected,
+    NotSupportedError,
+    ProtocolMismatchError,
+    RosBridgeError,
+    SchemaError,
+    ServiceError,
+    ServiceTimeout,
+)
+from .._options import ClientOptions
+from .._types import ServerInfo, ServiceInfo, TopicInfo
+from ..codec import CodecRegistry, same_type_name
+from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
+from ..transport import HandshakeRejected, WebSocket, connect_websocket
+from ..wire import foxglove as fx
+from ..wire import rosbridge as rb
+from ._base import BackendEvents, GoalEvents, SubscribeHints
+
+__all__ = ["RosbridgeBackend", "open_rosbridge", "start_rosbridge"]
+
+_INTERNAL_TIMEOUT: Final = 5.0
+"""Seconds for the backend's own rosapi requests (discovery, parameters)."""
+_WIRE_SLACK: Final = 0.5
+"""The client's deadline for a call runs this long past the forwarded one,
+so the server's own timeout answer arrives first."""
+_EMPTY_RETRY_DELAY: Final = 0.25
+_TYPE_LOOKUPS_PER_POLL: Final = 32
+COMPRESSIONS: Final = ("cbor", "cbor-raw")
+
+_ENCODING: Final[Mapping[str, str]] = {
+    "json": "json",
+    "parsed": "json",
+    "cbor": "cbor",
+    "cbor-raw": "cdr",
+}
+
+
+def _decode_json(payload: memoryview) -> Any:
+    try:
+        return rb.decode_json_msg(payload)
+    except (ValueError, RecursionError) as exc:
+        raise DecodeError(f"invalid JSON publish frame: {exc}") from None
+
+
+def _decode_cbor(payload: memoryview) -> Any:
+    try:
+        return rb.decode_cbor_msg(payload)
+    except ValueError as exc:
+        raise DecodeError(f"invalid CBOR publish frame: {exc}") from None
+
+
+def _is_foxglove_rejection(exc: HandshakeRejected) -> bool:
+    """The Foxglove SDK server's answer to a handshake without its
+    subprotocols: HTTP 400 naming the missing header."""
+    return exc.status == 400 and "sec-websocket-protocol" in exc.body.lower()
+
+
+async def open_rosbridge(url: str, options: ClientOptions) -> RosbridgeBackend:
+    """Connect to a rosbridge v2 server at ``url`` and learn its graph, all
+    within ``options.connect_timeout``.
+
+    Raises ``ProtocolMismatchError`` when the server speaks Foxglove (its
+    HTTP 400 for a handshake without the Foxglove subprotocols, or Foxglove
+    frames) or answers nothing."""
+    deadline = anyio.current_time() + options.connect_timeout
+    try:
+        ws = await connect_websocket(
+            url,
+            max_size=options.max_frame_size,
+            ssl_context=options.ssl_context,
+            timeout=options.connect_timeout,
+        )
+    except HandshakeRejected as exc:
+        if _is_foxglove_rejection(exc):
+            raise ProtocolMismatchError(
+                "rosbridge", "foxglove-ws", f"HTTP {exc.status}: {exc.body.strip()}"
+            ) from exc
+        raise
+    return await start_rosbridge(ws, options, deadline)
+
+
+async def start_rosbridge(
+    ws: WebSocket, options: ClientOptions, deadline: float
+) -> RosbridgeBackend:
+    """Speak rosbridge on an open WebSocket: discover the graph until
+    ``deadline``. Closes ``ws`` on failure."""
+    try:
+        if ws.subprotocol in fx.SUBPROTOCOLS:
+            raise ProtocolMismatchError(
+                "rosbridge", "foxglove-ws", f"the server chose subprotocol {ws.subprotocol}"
+            )
+        backend = RosbridgeBackend(ws, options)
+        await backend._bootstrap(deadline)
+    except BaseException:
+        await ws.aclose()
+        raise
+    return backend
+
+
+@dataclass(frozen=True, slots=True)
+class _WireSub:
+    """What was sent to the bridge for one topic."""
+
+    id: str
+    type: str | None
+    throttle_rate: int
+    queue_length: int
+    compression: str | None
+
+
+@dataclass(slots=True)
+class _Publisher:
+    id: str
+    schema: str
+    encode: Callable[[Mapping[str, Any]], bytes]
+    ready: anyio.Event
+    error: str | None = None
+
+
+class RosbridgeBackend:
+    """One rosbridge v2 connection (see :class:`~.Backend`)."""
+
+    protocol = "rosbridge"
+    wire_timeout_slack = _WIRE_SLACK
+
+    def __init__(self, ws: WebSocket, options: ClientOptions) -> None:
+        self._ws = ws
+        self._options = options
+        self._log: logging.Logger = options.logger
+        self._engine = rb.RosbridgeEngine(
+            max_message_size=options.max_frame_size, fragment_timeout=options.fragment_timeout
+        )
+        self.codecs = CodecRegistry()
+        self.server_info = ServerInfo(name="rosbridge", protocol=self.protocol)
+        self._ids = itertools.count(1)
+        self._topics: dict[str, str] = {}  # name -> type, from /rosapi/topics
+        self._services: dict[str, str] = {}  # name -> type ("" until looked up)
+        self._wanted: dict[str, SubscribeHints] = {}
+        self._subs: dict[str, _WireSub] = {}
+        self._sub_topics: dict[str, str] = {}  # subscribe id -> topic
+        self._live: set[str] = set()  # topics we reported active
+        self._decoders: dict[tuple[str, str], Decoder | None] = {}
+        self._stray: set[str] = set()  # topics we were sent but never subscribed
+        self._pubs: dict[str, _Publisher] = {}
+        self._calls: PendingRequests[rb.ServiceResponse] = PendingRequests()
+        self._call_names: dict[str, str] = {}
+        self._goals: dict[str, tuple[str, GoalEvents]] = {}
+        self._events: BackendEvents | None = None
+        self._rosapi_warned = False
+
+    # -- helpers ---------------------------------------------------------------
+    def _next_id(self, kind: str) -> str:
+        return f"rmb:{kind}:{next(self._ids)}"
+
+    async def _call(self, name: str, args: Any, timeout: float | None) -> Any:
+        """One ``call_service`` round trip; the response's ``values``.
+        Raises ``ServiceError`` (``ServiceTimeout`` for the server's
+        timeout) when it fails. No local deadline here."""
+        call_id = self._next_id("call")
+        frame = self._engine.call_service(name, args, id=call_id, timeout=timeout)
+        self._call_names[call_id] = name
+        try:
+            response = await self._calls.request(call_id, lambda: self._ws.send(frame))
+        finally:
+            self._call_names.pop(call_id, None)
+        if not response.result:
+            text = (
+                response.values
+                if isinstance(response.values, str)
+                else json.dumps(response.values, default=str)
+            )
+            if timeout is not None and "timed out" in text.lower():
+                raise ServiceTimeout(name, timeout)
+            raise ServiceError(name, text)
+        return response.values
+
+    async def _rosapi(self, name: str, args: Any = None) -> Any:
+        """A ``/rosapi/*`` call under the backend's own deadline."""
+        with anyio.fail_after(_INTERNAL_TIMEOUT):
+            return await self._call(name, args if args is not None else {}, _INTERNAL_TIMEOUT)
+
+    # -- connecting ------------------------------------------------------------
+    async def _bootstrap(self, deadline: float) -> None:
+        """The first discovery, with a temporary reader (the client's reader
+        starts after ``connect()`` returns)."""
+        lost: list[ConnectError] = []
+
+        async def read() -> None:
+            try:
+                await self._read(None)
+            except ConnectError as exc:
+                lost.append(exc)
+                self._calls.fail_all(exc)
+
+        failure: RosBridgeError | None = None
+        with anyio.move_on_after(max(deadline - anyio.current_time(), 0.0)) as scope:
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(read)
+                try:
+                    await self._discover(first=True)
+                except RosBridgeError as exc:  # raised below, outside the task group
+                    failure = exc
+                tg.cancel_scope.cancel()
+        if self._foreign is not None:
+            raise ProtocolMismatchError("rosbridge", "foxglove-ws", self._foreign)
+        if lost:
+            raise lost[0]
+        if failure is not None:
+            raise failure
+        if scope.cancelled_caught:
+            raise ProtocolMismatchError(
+                "rosbridge",
+                None,
+                f"no answer to /rosapi/topics within {self._options.connect_timeout:g} s",
+            )
+
+    _foreign: str | None = None
+
+    # -- the reader --------------------------------------------------------------
+    async def run(self, events: BackendEvents) -> None:
+        self._events = events
+        error: ConnectError | None = None
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(self._poll_discovery)
+            try:
+                await self._read(events)
+            except ConnectError as exc:
+                error = exc
+            tg.cancel_scope.cancel()
+        if error is not None:
+            raise error
+
+    async def _read(self, events: BackendEvents | None) -> None:
+        ws = self._ws
+        engine = self._engine
+        while True:
+            text, data = await ws.receive_raw()
+            if events is not None:
+                await events.before_inbound()
+            received_ns = time.time_ns()
+            batch = engine.receive_text(data) if text else engine.receive_binary(data)
+            for event in batch:
+                if type(event) is rb.Publish:
+                    if events is not None:
+                        self._on_publish(event, received_ns, events)
+                else:
+                    await self._handle(event)
+
+    def _on_publish(self, event: rb.Publish, received_ns: int, events: BackendEvents) -> None:
+        topic = event.topic
+        wire = self._subs.get(topic)
+        if wire is None:
+            if topic not in self._stray:
+                self._stray.add(topic)
+                self._log.warning(
+                    "skipped a message on %s, which this client never subscribed", topic
+                )
+            return
+        kind = event.kind
+        if kind == "parsed":
+            message = event.message
+            decode: Decoder | None = lambda _payload: message  # noqa: E731
+        else:
+            try:
+                decode = self._decoders[(topic, kind)]
+            except KeyError:
+                decode = self._make_decoder(topic, kind, wire.type)
+        if topic not in self._live:
+            self._set_live(topic, True)
+        events.on_frame(
+            RawFrame(
+                topic,
+                wire.type or "",
+                _ENCODING[kind],
+                event.payload,
+                event.log_time_ns,
+                received_ns,
+                decode,
+            )
+        )
+
+    def _make_decoder(self, topic: str, kind: str, schema: str | None) -> Decoder | None:
+        decode: Decoder | None
+        if kind == "json":
+            decode = _decode_json
+        elif kind == "cbor":
+            decode = _decode_cbor
+        else:
+            decode = None
+            try:
+                if schema is None:
+                    raise SchemaError("the topic's type is not known")
+                decode = self.codecs.decoder(schema, "cdr")
+            except SchemaError as exc:
+                self._log.warning(
+                    "%s: no CDR decoder, cbor-raw messages will be delivered raw: %s", topic, exc
+                )
+        self._decoders[(topic, kind)] = decode
+        return decode
+
+    async def _handle(self, event: rb.Event) -> None:
+        if isinstance(event, rb.ServiceResponse):
+            if event.id is None or not self._calls.resolve(event.id, event):
+                self._log.debug("a service_response nobody waits for (id %r)", event.id)
+        elif isinstance(event, rb.ActionFeedback):
+            goal = self._goals.get(event.id or "")
+            if goal is not None:
+                goal[1].on_feedback(event.values)
+        elif isinstance(event, rb.ActionResult):
+            entry = self._goals.pop(event.id or "", None)
+            if entry is not None:
+                entry[1].on_result(event.status, event.values, event.result)
+        elif isinstance(event, rb.Status):
+            self._on_status(event)
+        elif isinstance(event, rb.ForeignProtocol):
+            self._foreign = event.reason
+            self._calls.fail_all(ProtocolMismatchError("rosbridge", event.detected, event.reason))
+        elif isinstance(event, rb.ProtocolViolation):
+            self._log.warning("skipped a malformed message from the server: %s", event.reason)
+
+    def _on_status(self, event: rb.Status) -> None:
+        key = event.id or ""
+        error = event.level == "error"
+        if error and key in self._call_names:
+            self._calls.fail(key, ServiceError(self._call_names[key], event.msg))
+            return
+        if error and key in self._goals:
+            _action, goal = self._goals.pop(key)
+            goal.on_failed(event.msg)
+            return
+        for pub in self._pubs.values():
+            if pub.id == key and error:
+                pub.error = event.msg
+                return
+        topic = self._sub_topics.get(key)
+        if topic is not None and error:
+            self._log.warning("the bridge refused the subscription to %s: %s", topic, event.msg)
+            return
+        level = {"error": logging.ERROR, "warning": logging.WARNING}.get(event.level, logging.INFO)
+        self._log.log(level, "server status: %s", event.msg)
+
+    # -- discovery ---------------------------------------------------------------
+    @property
+    def topics(self) -> list[TopicInfo]:
+        return [TopicInfo(name, schema) for name, schema in sorted(self._topics.items())]
+
+    @property
+    def services(self) -> list[ServiceInfo]:
+        return [ServiceInfo(name, schema) for name, schema in sorted(self._services.items())]
+
+    def topic_active(self, topic: str) -> bool:
+        return topic in self._live
+
+    def _set_live(self, topic: str, live: bool) -> None:
+        if live:
+            self._live.add(topic)
+        else:
+            self._live.discard(topic)
+        if self._events is not None:
+            self._events.on_topic_state(topic, live)
+
+    async def _discover(self, *, first: bool = False) -> bool:
+        """Poll the graph once; True when it changed. A failing rosapi is
+        reported once and leaves the tables as they were."""
+        try:
+            answer = await self._rosapi("/rosapi/topics")
+            if first and not _names(answer, "topics"):
+                await anyio.sleep(_EMPTY_RETRY_DELAY)  # a bridge that just started
+                answer = await self._rosapi("/rosapi/topics")
+            services = await self._rosapi("/rosapi/services")
+        except (ServiceError, TimeoutError) as exc:
+            if not self._rosapi_warned:
+                self._rosapi_warned = True
+                self._log.warning(
+                    "discovery through /rosapi failed (%s): topic and service lists stay empty;"
+                    " subscribe with schema= and publish still work",
+                    exc,
+                )
+            return False
+        names = _names(answer, "topics")
+        types = _names(answer, "types")
+        topics = {n: (types[i] if i < len(types) else "") for i, n in enumerate(names)}
+        service_names = _names(services, "services")
+        old_services = self._services
+        new_services = {n: old_services.get(n, "") for n in service_names}
+        changed = topics != self._topics or new_services != self._services
+        self._topics = topics
+        self._services = new_services
+        return changed
+
+    async def _lookup_service_types(self) -> bool:
+        unknown = [n for n, t in self._services.items() if not t][:_TYPE_LOOKUPS_PER_POLL]
+        changed = False
+        for name in unknown:
+            try:
+                answer = await self._rosapi("/rosapi/service_type", {"service": name})
+            except (ServiceError, TimeoutError):
+                continue
+            schema = answer.get("type") if isinstance(answer, dict) else None
+            if isinstance(schema, str) and schema and name in self._services:
+                self._services[name] = schema
+                changed = True
+        return changed
+
+    async def _poll_discovery(self) -> None:
+        """Keep the graph current: right away (after a (re)connect), then every
+        ``options.discovery_interval``."""
+        events = self._events
+        assert events is not None
+        interval = self._options.discovery_interval
+        first = True
+        try:
+            while True:
+                changed = await self._discover() if not first else False
+                first = False
+                changed |= await self._lookup_service_types()
+                if changed:
+                    events.on_graph()
+                for topic in list(self._wanted):
+                    await self._sync(topic)
+                await anyio.sleep(interval)
+        except (ConnectError, NotConnected):
+            return  # the reader reports the loss
+
+    # -- subscriptions -----------------------------------------------------------
+    def _desired(self, topic: str, hints: SubscribeHints) -> _WireSub:
+        discovered = self._topics.get(topic) or None
+        schema = discovered or hints.schema
+        if discovered and hints.schema and not same_type_name(discovered, hints.schema):
+            self._log.warning(
+                "%s: subscribed as %s, but the graph has %s; using %s",
+                topic,
+                hints.schema,
+                discovered,
+                discovered,
+            )
+        rate = 0
+        if hints.max_hz is not None and hints.max_hz > 0 and math.isfinite(hints.max_hz):
+            rate = max(1, int(1000.0 / hints.max_hz))
+        current = self._subs.get(topic)
+        sub_id = current.id if current is not None else self._next_id(f"subscribe:{topic}")
+        return _WireSub(sub_id, schema, rate, 1 if rate else 0, hints.compression)
+
+    async def _sync(self, topic: str) -> None:
+        """Bring the bridge's subscription to ``topic`` in line with what the
+        client wants and what discovery knows."""
+        hints = self._wanted.get(topic)
+        if hints is None:
+            return
+        want = self._desired(topic, hints)
+        current = self._subs.get(topic)
+        if current == want:
+            if topic in self._topics and topic not in self._live:
+                self._set_live(topic, True)
+            return
+        if want.compression == "cbor-raw" and want.type and not self.codecs.has_schema(want.type):
+            await self._fetch_definition(want.type)
+        if current is not None and (
+            (current.type is not None and current.type != want.type)
+            or current.compression != want.compression
+        ):
+            # the server ignores a re-subscribe that conflicts with the first
+            await self._ws.send(self._engine.unsubscribe(topic, id=current.id))
+        self._subs[topic] = want
+        self._sub_topics[want.id] = topic
+        self._decoders.pop((topic, "cbor-raw"), None)
+        await self._ws.send(
+            self._engine.subscribe(
+                topic,
+                id=want.id,
+                type=want.type,
+                throttle_rate=want.throttle_rate,
+                queue_length=want.queue_length,
+                compression=want.compression,
+            )
+        )
+        if topic in self._topics and topic not in self._live:
+            self._set_live(topic, True)
+
+    async def _fetch_definition(self, schema: str) -> None:
+        """Register ``schema`` from ``/rosapi/message_details`` (for cbor-raw
+        of a type the bundled definitions lack)."""
+        try:
+            answer = await self._rosapi("/rosapi/message_details", {"type": schema})
+            self.codecs.add_schema(schema, "ros2msg", _typedefs_to_msg(schema, answer))
+        except (ServiceError, TimeoutError, SchemaError, ValueError) as exc:
+            self._log.warning("no definition of %s from /rosapi/message_details: %s", schema, exc)
+
+    async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
+        if hints.compression is not None and hints.compression not in COMPRESSIONS:
+            raise ValueError(f"compression must be one of {COMPRESSIONS} or None")
+        self._wanted[topic] = hints
+        await self._sync(topic)
+
+    async def unsubscribe(self, topic: str) -> None:
+        self._wanted.pop(topic, None)
+        wire = self._subs.pop(topic, None)
+        if topic in self._live:
+            self._live.discard(topic)
+        if wire is not None:
+            self._sub_topics.pop(wire.id, None)
+            if not self._ws.closed:
+                await self._ws.send(self._engine.unsubscribe(topic, id=wire.id))
+
+    # -- publishing --------------------------------------------------------------
+    def publishing(self) -> Mapping[str, str]:
+        return {topic: pub.schema for topic, pub in self._pubs.items()}
+
+    def advertised(self, topic: str) -> str | None:
+        pub = self._pubs.get(topic)
+        if pub is None or not pub.ready.is_set():
+            return None
+        return pub.schema
+
+    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
+        existing = self._pubs.get(topic)
+        if existing is not None:
+            if not same_type_name(existing.schema, schema):
+                raise ValueError(
+                    f"{topic} is advertised as {existing.schema}; unadvertise it before "
+                    f"publishing {schema}"
+                )
+            await existing.ready.wait()
+            return
+        pub = _Publisher(
+            self._next_id(f"advertise:{topic}"),
+            schema,
+            self.codecs.encoder(schema, "json"),
+            anyio.Event(),
+        )
+        self._pubs[topic] = pub
+        try:
+            start = anyio.current_time()
+            await self._ws.send(self._engine.advertise(topic, schema, id=pub.id, latch=latch))
+            await self._round_trip()  # a refusal arrives before this answer
+            if pub.error is not None:
+                raise SchemaError(
+                    f"the bridge refused to advertise {topic} as {schema}: {pub.error}"
+                )
+            settle = self._options.advertise_settle - (anyio.current_time() - start)
+            if settle > 0:
+                await anyio.sleep(settle)
+        except BaseException:
+            self._pubs.pop(topic, None)
+            raise
+        finally:
+            pub.ready.set()
+
+    async def unadvertise(self, topic: str) -> None:
+        pub = self._pubs.pop(topic, None)
+        if pub is not None:
+            # rosbridge_server_rs drops a publish sent right before unadvertise
+            await self._round_trip()
+            await self._ws.send(self._engine.unadvertise(topic, id=pub.id))
+
+    def encode_publish(self, topic: str, data: Any) -> WireMessage:
+        pub = self._pubs[topic]
+        return self._engine.publish(topic, pub.encode(data))
+
+    # -- services ------------------------------------------------------------------
+    async def call_service(self, name: str, request: Any, timeout: float) -> Any:
+        return await self._call(name, dict(request) if request is not None else {}, timeout)
+
+    # -- actions ---------------------------------------------------------------------
+    async def send_action_goal(
+        self, action: str, action_type: str, goal: Any, events: GoalEvents
+    ) -> str:
+        goal_id = self._next_id(f"goal:{action}")
+        frame = self._engine.send_action_goal(action, action_type, goal, id=goal_id)
+        self._goals[goal_id] = (action, events)
+        try:
+            await self._ws.send(frame)
+        except BaseException:
+            self._goals.pop(goal_id, None)
+            raise
+        return goal_id
+
+    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
+        await self._ws.send(self._engine.cancel_action_goal(action, id=goal_id))
+
+    # -- parameters --------------------------------------------------------------------
+    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
+        if not names:
+            answer = await self._param_call("/rosapi/get_param_names", {})
+            names = _names(answer, "names")
+        values: dict[str, Any] = {}
+        for name in names:
+            answer = await self._param_call("/rosapi/get_param", {"name": name})
+            raw = answer.get("value") if isinstance(answer, dict) else None
+            if isinstance(raw, str) and raw:
+                try:
+                    values[name] = json.loads(raw)
+                except ValueError:
+                    values[name] = raw
+        return values
+
+    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        for name, value in values.items():
+            await self._param_call("/rosapi/set_param", {"name": name, "value": json.dumps(value)})
+        return await self.get_parameters(list(values))
+
+    async def _param_call(self, service: str, args: Any) -> Any:
+        return await self._call(service, args, self._options.service_timeout)
+
+    async def subscribe_parameters(self, names: Sequence[str]) -> None:
+        raise NotSupportedError("rosbridge has no parameter updates to subscribe to")
+
+    async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
+        return None
+
+    # -- lifecycle -------------------------------------------------------------------
+    async def send(self, message: WireMessage) -> None:
+        await self._ws.send(message)
+
+    async def _round_trip(self) -> None:
+        """Return once the bridge has answered a request sent now, so every
+        frame sent before it has been handled. Any answer counts (an error
+        too): only its arrival matters."""
+        with contextlib.suppress(ServiceError):
+            await self._call("/rosapi/get_time", {}, _INTERNAL_TIMEOUT)
+
+    async def confirm_delivery(self) -> None:
+        await self._round_trip()
+
+    def fail_pending(self, error: Exception) -> None:
+        assert isinstance(error, RosBridgeError)
+        self._calls.fail_all(error)
+        goals, self._goals = self._goals, {}
+        for _action, goal in goals.values():
+            goal.on_failed("disconnected")
+
+    async def keepalive(self) -> None:
+        async with anyio.create_task_group() as tg:
+            if self._options.latency_probe_interval > 0:
+                tg.start_soon(self._probe_latency)
+            interval = self._options.keepalive_interval
+            if interval > 0:
+                await self._ws.keepalive(interval, self._options.keepalive_timeout)
+                tg.cancel_scope.cancel()
+
+    async def _probe_latency(self) -> None:
+        """Time ``/rosapi/get_time`` every ``latency_probe_interval``; the
+        first failure turns the probe off for this connection."""
+        interval = self._options.latency_probe_interval
+        while True:
+            await anyio.sleep(interval)
+            start = time.perf_counter()
+            try:
+                with anyio.fail_after(_INTERNAL_TIMEOUT):
+                    await self._call("/rosapi/get_time", {}, _INTERNAL_TIMEOUT)
+            except (ServiceError, TimeoutError) as exc:
+                self._log.info("latency probe off for this connection: %s", exc)
+                return
+            except (ConnectError, NotConnected):
+                return
+            self._options.report_latency((time.perf_counter() - start) * 1000.0)
+
+    @property
+    def closed(self) -> bool:
+        return self._ws.closed
+
+    async def aclose(self) -> None:
+        await self._ws.aclose()
+
+
+def _names(answer: Any, key: str) -> list[str]:
+    values = answer.get(key) if isinstance(answer, dict) else None
+    if not isinstance(values, list):
+        return []
+    return [v for v in values if isinstance(v, str)]
+
+
+def _typedefs_to_msg(schema: str, answer: Any) -> str:
+    """``/rosapi/message_details`` typedefs as concatenated ``.msg`` text."""
+    typedefs = answer.get("typedefs") if isinstance(answer, dict) else None
+    if not isinstance(typedefs, list) or not typedefs:
+        raise ValueError("no typedefs in the answer")
+    blocks: list[str] = []
+    main = None
+    for typedef in typedefs:
+        name = typedef.get("type")
+        fields = typedef.get("fieldnames", [])
+        types = typedef.get("fieldtypes", [])
+        lengths = typedef.get("fieldarraylen", [])
+        lines = []
+        for i, field in enumerate(fields):
+            length = lengths[i] if i < len(lengths) else -1
+            suffix = "" if length == -1 else ("[]" if length == 0 else f"[{length}]")
+            lines.append(f"{types[i]}{suffix} {field}")
+        text = "\n".join(lines) + "\n"
+        if main is None and same_type_name(str(name), schema):
+            main = text
+        else:
+            blocks.append(f"{'=' * 80}\nMSG: {name}\n{text}")
+    if main is None:
+        raise ValueError(f"the typedefs do not define {schema}")
+    return main + "".join(blocks)
