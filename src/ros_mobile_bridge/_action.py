@@ -99,6 +99,12 @@ class ActionGoal:
     def on_result(self, status: int | None, values: Any, succeeded: bool) -> None:
         if self.done:
             return
+        if not succeeded and isinstance(values, str):
+            # the bridge's own failures (a rejected goal, bad arguments) come
+            # as a result with the reason as text
+            self._accepted.set()
+            self._fail("failed", values)
+            return
         name = _STATUS.get(status) if status is not None else None
         if name is None:
             name = "succeeded" if succeeded else ("canceled" if self._cancel_sent else "aborted")

@@ -64,11 +64,14 @@ class ServiceError(RosBridgeError):
 
 
 class ServiceTimeout(ServiceError, TimeoutError):
-    """A service call got no answer before its deadline."""
+    """A service call got no answer before its deadline: the local one, or
+    the server's own (rosbridge forwards the timeout; ``detail`` then holds
+    the server's words)."""
 
-    def __init__(self, service: str, timeout: float) -> None:
+    def __init__(self, service: str, timeout: float, detail: str = "") -> None:
         self.timeout = timeout
-        super().__init__(service, f"no response within {timeout:g} s")
+        text = f"no response within {timeout:g} s"
+        super().__init__(service, f"{text} ({detail})" if detail else text)
 
 
 class ActionGoalError(RosBridgeError):

@@ -18,6 +18,7 @@ from typing import Any, Final
 import anyio
 
 from .._errors import (
+    ActionGoalError,
     ConnectError,
     DecodeError,
     NotConnected,
@@ -190,8 +191,9 @@ class RosbridgeBackend:
                 if isinstance(response.values, str)
                 else json.dumps(response.values, default=str)
             )
-            if timeout is not None and "timed out" in text.lower():
-                raise ServiceTimeout(name, timeout)
+            if timeout is not None and "timeout" in text.lower():
+                # "Timeout exceeded while waiting for service response"
+                raise ServiceTimeout(name, timeout, f"the bridge: {text}")
             raise ServiceError(name, text)
         return response.values
 
@@ -355,7 +357,13 @@ class RosbridgeBackend:
                 return
         topic = self._sub_topics.get(key)
         if topic is not None and error:
-            self._log.warning("the bridge refused the subscription to %s: %s", topic, event.msg)
+            wire = self._subs.get(topic)
+            if wire is not None and wire.type is None:
+                # no type yet and the graph lacks the topic: discovery will
+                # learn the type and subscribe again
+                self._log.info("%s is not in the graph yet: %s", topic, event.msg)
+            else:
+                self._log.warning("the bridge refused the subscription to %s: %s", topic, event.msg)
             return
         level = {"error": logging.ERROR, "warning": logging.WARNING}.get(event.level, logging.INFO)
         self._log.log(level, "server status: %s", event.msg)
@@ -586,6 +594,15 @@ class RosbridgeBackend:
     async def send_action_goal(
         self, action: str, action_type: str, goal: Any, events: GoalEvents
     ) -> str:
+        # The bridge never answers a goal for an action nobody serves, so
+        # such a goal would wait forever: refuse it here.
+        try:
+            servers = _names(await self._rosapi("/rosapi/action_servers"), "action_servers")
+        except (ServiceError, TimeoutError) as exc:
+            self._log.debug("cannot list action servers (%s); sending the goal anyway", exc)
+        else:
+            if action not in servers:
+                raise ActionGoalError(action, "no action server offers it")
         goal_id = self._next_id(f"goal:{action}")
         frame = self._engine.send_action_goal(action, action_type, goal, id=goal_id)
         self._goals[goal_id] = (action, events)
@@ -607,9 +624,11 @@ class RosbridgeBackend:
         values: dict[str, Any] = {}
         for name in names:
             answer = await self._param_call("/rosapi/get_param", {"name": name})
-            raw = answer.get("value") if isinstance(answer, dict) else None
+            if not isinstance(answer, dict) or answer.get("successful") is False:
+                continue  # "Parameter not found": absent from the result
+            raw = answer.get("value")
             if isinstance(raw, str) and raw:
-                try:
+                try:  # the value is a JSON document in a string
                     values[name] = json.loads(raw)
                 except ValueError:
                     values[name] = raw
@@ -617,7 +636,13 @@ class RosbridgeBackend:
 
     async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
         for name, value in values.items():
-            await self._param_call("/rosapi/set_param", {"name": name, "value": json.dumps(value)})
+            answer = await self._param_call(
+                "/rosapi/set_param", {"name": name, "value": json.dumps(value)}
+            )
+            if isinstance(answer, dict) and answer.get("successful") is False:
+                raise ServiceError(
+                    "/rosapi/set_param", f"{name}: {answer.get('reason') or 'refused'}"
+                )
         return await self.get_parameters(list(values))
 
     async def _param_call(self, service: str, args: Any) -> Any:
