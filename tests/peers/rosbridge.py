@@ -422,6 +422,15 @@ class RosBridge(_Process):
         want_services = set(services)
         want_actions = set(actions)
         deadline = time.monotonic() + timeout
+        # Its own "listening" line first: a port taken by another server must
+        # not pass for this bridge being ready.
+        listening = f"listening address=127.0.0.1:{self.port}"
+        while listening not in tail(self.log_path, 200):
+            if not self.alive():
+                raise self._failure("the bridge exited during startup")
+            if time.monotonic() > deadline:
+                raise self._failure(f"no '{listening}' line within {timeout} s")
+            time.sleep(0.05)
         missing: str | None = "a WebSocket connection"
         while time.monotonic() < deadline:
             if not self.alive():
