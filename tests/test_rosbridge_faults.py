@@ -221,7 +221,7 @@ async def test_incomplete_late_and_oversized_fragments_are_dropped(
                 with anyio.move_on_after(0.3):
                     got += await first_messages(sub, 1)
     assert [m.data for m in got] == [{"data": "whole"}]
-    assert "over 2048 bytes" in caplog.text
+    assert "over 2048 characters" in caplog.text
 
 
 async def test_call_service_forwards_its_timeout_and_never_zero() -> None:

@@ -105,6 +105,13 @@ def only_violation(events: list[Event]) -> str:
     return event.reason
 
 
+def raw_engine(topic: str) -> RosbridgeEngine:
+    """An engine that subscribed ``topic`` with ``cbor-raw``."""
+    engine = RosbridgeEngine()
+    engine.subscribe(topic, id="s", compression="cbor-raw")
+    return engine
+
+
 def one_publish(events: list[Event]) -> Publish:
     event = one(events)
     assert isinstance(event, Publish), event
@@ -413,7 +420,7 @@ def test_publish_cbor_topic_bad_utf8_is_a_violation() -> None:
 
 
 def test_publish_cbor_raw_real_frame_zero_copy() -> None:
-    event = one_publish(RosbridgeEngine().receive_binary(PUBLISH_CBOR_RAW))
+    event = one_publish(raw_engine("/chatter").receive_binary(PUBLISH_CBOR_RAW))
     assert (event.topic, event.kind) == ("/chatter", "cbor-raw")
     assert event.message is None
     assert event.payload.obj is PUBLISH_CBOR_RAW  # a slice of the frame, not a copy
@@ -428,7 +435,7 @@ def test_publish_cbor_raw_from_bytearray_and_other_orders() -> None:
         for top in itertools.permutations(["msg", "topic", "op"]):
             fields = {"op": "publish", "topic": "/r", "msg": dict(msg_order)}
             buf = bytearray(cbor2.dumps({k: fields[k] for k in top}))
-            event = one_publish(RosbridgeEngine().receive_binary(buf))
+            event = one_publish(raw_engine("/r").receive_binary(buf))
             assert event.kind == "cbor-raw"
             assert event.payload.obj is buf
             assert event.payload.tobytes() == b"\x01\x02\x03"
@@ -447,7 +454,7 @@ def test_publish_cbor_raw_from_bytearray_and_other_orders() -> None:
 )
 def test_publish_cbor_raw_stamps(msg: dict[str, Any], stamp: int | None) -> None:
     frame = cbor2.dumps({"op": "publish", "topic": "/r", "msg": msg})
-    event = one_publish(RosbridgeEngine().receive_binary(frame))
+    event = one_publish(raw_engine("/r").receive_binary(frame))
     assert event.kind == "cbor-raw"
     assert event.payload.tobytes() == msg["bytes"]
     assert event.log_time_ns == stamp
@@ -456,9 +463,22 @@ def test_publish_cbor_raw_stamps(msg: dict[str, Any], stamp: int | None) -> None
 def test_publish_cbor_raw_large_payload() -> None:
     blob = bytes(range(256)) * 400  # a 4-byte length head
     frame = cbor2.dumps({"op": "publish", "topic": "/big", "msg": {"bytes": blob, "secs": 1}})
-    event = one_publish(RosbridgeEngine().receive_binary(frame))
+    event = one_publish(raw_engine("/big").receive_binary(frame))
     assert event.kind == "cbor-raw"
     assert event.payload.tobytes() == blob
+
+
+def test_a_bytes_field_is_cbor_unless_the_topic_was_subscribed_raw() -> None:
+    frame = cbor2.dumps({"op": "publish", "topic": "/r", "msg": {"bytes": b"abc", "secs": 1}})
+    plain = one_publish(RosbridgeEngine().receive_binary(frame))
+    assert plain.kind == "cbor"
+    assert decode_cbor_msg(plain.payload) == {"bytes": b"abc", "secs": 1}
+    engine = raw_engine("/r")
+    assert one_publish(engine.receive_binary(frame)).kind == "cbor-raw"
+    engine.unsubscribe("/r", id="s")
+    assert one_publish(engine.receive_binary(frame)).kind == "cbor"
+    engine.subscribe("/r", id="s", compression="cbor")
+    assert one_publish(engine.receive_binary(frame)).kind == "cbor"
 
 
 @pytest.mark.parametrize(
@@ -821,7 +841,6 @@ def _indefinite_map(obj: dict[str, Any]) -> bytes:
         (cbor2.dumps({"topic": "/t", "msg": {}}), "without an 'op'"),
         (cbor2.dumps({"op": "bogus"}), "unknown op 'bogus'"),
         (cbor2.dumps({"op": "publish", "msg": {}}), "without a topic"),
-        (cbor2.dumps({"op": "publish", "topic": "/t", "msg": {"bytes": 5}}), "without 'bytes'"),
         (cbor2.dumps({"op": "service_response", "service": "/s", "result": 1}), "'result'"),
         (cbor2.dumps({"op": "action_result", "action": "/a", "status": "4"}), "'status'"),
     ],
@@ -950,7 +969,7 @@ def test_fragment_over_max_message_size_is_dropped() -> None:
     assert e.receive_text(frag("big", "x" * 40, 0, 4)) == []
     assert e.receive_text(frag("big", "x" * 40, 1, 4)) == []
     reason = only_violation(e.receive_text(frag("big", "x" * 40, 2, 4)))
-    assert "over 100 bytes" in reason
+    assert "over 100 characters" in reason
     assert "dropped" in reason
     assert e.fragments_pending == 0
     # The rest of it never makes a message.
@@ -968,7 +987,7 @@ def test_fragment_over_max_message_size_is_dropped() -> None:
 def test_fragment_single_part_over_max_message_size() -> None:
     e = RosbridgeEngine(max_message_size=10)
     reason = only_violation(e.receive_text(frag("k", '{"op":"status","msg":"x"}', 0, 1)))
-    assert "over 10 bytes" in reason
+    assert "over 10 characters" in reason
     assert e.fragments_pending == 0
 
 
@@ -985,7 +1004,7 @@ def test_fragments_held_in_total_are_bounded() -> None:
     """``max_message_size`` also bounds what all messages in reassembly hold."""
     e = RosbridgeEngine(max_message_size=100)
     assert e.receive_text(frag("a", "x" * 60, 0, 2)) == []
-    assert "over 100 bytes" in only_violation(e.receive_text(frag("b", "y" * 60, 0, 2)))
+    assert "over 100 characters" in only_violation(e.receive_text(frag("b", "y" * 60, 0, 2)))
     assert e.fragments_pending == 1
     # Two messages that fit together both complete ...
     whole = '{"op":"status","msg":"' + "z" * 10 + '"}'  # 34 characters
@@ -996,7 +1015,7 @@ def test_fragments_held_in_total_are_bounded() -> None:
     # ... and a completed message releases its share: 60 held, 39 more fit.
     assert e2.receive_text(frag("c", "w" * 39, 0, 2)) == []
     assert e2.fragments_pending == 2
-    assert "over 100 bytes" in only_violation(e2.receive_text(frag("d", "v" * 2, 0, 2)))
+    assert "over 100 characters" in only_violation(e2.receive_text(frag("d", "v" * 2, 0, 2)))
 
 
 def test_fragments_time_out() -> None:
@@ -1108,13 +1127,13 @@ def test_missing_fragment_fields() -> None:
 
 
 def test_subscribe_minimal() -> None:
-    text = RosbridgeEngine.subscribe("/chatter", id="s1")
+    text = RosbridgeEngine().subscribe("/chatter", id="s1")
     assert json.loads(text) == {"op": "subscribe", "id": "s1", "topic": "/chatter"}
     assert '"type"' not in text
 
 
 def test_subscribe_all_options() -> None:
-    text = RosbridgeEngine.subscribe(
+    text = RosbridgeEngine().subscribe(
         "/chatter",
         id="s2",
         type="std_msgs/msg/String",
@@ -1137,37 +1156,37 @@ def test_subscribe_all_options() -> None:
 
 def test_subscribe_zero_options_are_omitted() -> None:
     obj = json.loads(
-        RosbridgeEngine.subscribe("/t", id="s", throttle_rate=0, queue_length=0, compression=None)
+        RosbridgeEngine().subscribe("/t", id="s", throttle_rate=0, queue_length=0, compression=None)
     )
     assert obj == {"op": "subscribe", "id": "s", "topic": "/t"}
 
 
 @pytest.mark.parametrize(("compression", "sent"), [("cbor", "cbor"), ("cbor-raw", "cbor-raw")])
 def test_subscribe_compression(compression: str, sent: str) -> None:
-    obj = json.loads(RosbridgeEngine.subscribe("/t", id="s", compression=compression))
+    obj = json.loads(RosbridgeEngine().subscribe("/t", id="s", compression=compression))
     assert obj["compression"] == sent
 
 
 @pytest.mark.parametrize("compression", ["none", None])
 def test_subscribe_no_compression_is_omitted(compression: str | None) -> None:
-    obj = json.loads(RosbridgeEngine.subscribe("/t", id="s", compression=compression))
+    obj = json.loads(RosbridgeEngine().subscribe("/t", id="s", compression=compression))
     assert "compression" not in obj
 
 
 def test_subscribe_png_compression_is_allowed() -> None:
-    obj = json.loads(RosbridgeEngine.subscribe("/t", id="s", compression="png"))
+    obj = json.loads(RosbridgeEngine().subscribe("/t", id="s", compression="png"))
     assert obj["compression"] == "png"
 
 
 @pytest.mark.parametrize("compression", ["", "CBOR", "gzip", "json"])
 def test_subscribe_unknown_compression(compression: str) -> None:
     with pytest.raises(ValueError, match="compression"):
-        RosbridgeEngine.subscribe("/t", id="s", compression=compression)
+        RosbridgeEngine().subscribe("/t", id="s", compression=compression)
 
 
 def test_subscribe_empty_type_is_refused() -> None:
     with pytest.raises(TypeError, match="type"):
-        RosbridgeEngine.subscribe("/t", id="s", type="")
+        RosbridgeEngine().subscribe("/t", id="s", type="")
 
 
 @pytest.mark.parametrize(
@@ -1175,22 +1194,22 @@ def test_subscribe_empty_type_is_refused() -> None:
 )
 def test_subscribe_negative_numbers(kwargs: dict[str, int]) -> None:
     with pytest.raises(ValueError, match=r"must not be negative|must be positive"):
-        RosbridgeEngine.subscribe("/t", id="s", **kwargs)  # type: ignore[arg-type]
+        RosbridgeEngine().subscribe("/t", id="s", **kwargs)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize(("topic", "id_"), [("", "s"), ("/t", ""), (None, "s"), ("/t", 5)])
 def test_subscribe_bad_topic_or_id(topic: Any, id_: Any) -> None:
     with pytest.raises(TypeError, match="non-empty str"):
-        RosbridgeEngine.subscribe(topic, id=id_)
+        RosbridgeEngine().subscribe(topic, id=id_)
 
 
 def test_subscribe_escapes_the_topic() -> None:
     topic = '/a"b\\c/é'
-    assert json.loads(RosbridgeEngine.subscribe(topic, id="s"))["topic"] == topic
+    assert json.loads(RosbridgeEngine().subscribe(topic, id="s"))["topic"] == topic
 
 
 def test_unsubscribe_unadvertise() -> None:
-    assert json.loads(RosbridgeEngine.unsubscribe("/t", id="s1")) == {
+    assert json.loads(RosbridgeEngine().unsubscribe("/t", id="s1")) == {
         "op": "unsubscribe",
         "id": "s1",
         "topic": "/t",
@@ -1200,7 +1219,7 @@ def test_unsubscribe_unadvertise() -> None:
         "id": "a1",
         "topic": "/t",
     }
-    for builder in (RosbridgeEngine.unsubscribe, RosbridgeEngine.unadvertise):
+    for builder in (RosbridgeEngine().unsubscribe, RosbridgeEngine.unadvertise):
         with pytest.raises(TypeError):
             builder("", id="x")
         with pytest.raises(TypeError):
@@ -1384,8 +1403,7 @@ def test_json_publish_property(
 def test_cbor_publish_property(
     topic: str, msg: dict[str, Any], order: list[str], with_id: bool, kind: type
 ) -> None:
-    # A msg made only of "bytes"/"secs"/"nsecs" is read as a cbor-raw message.
-    assume(not ("bytes" in msg and set(msg) <= {"bytes", "secs", "nsecs"}))
+    # no cbor-raw subscription: even a msg shaped like cbor-raw is plain CBOR
     fields = {"op": "publish", "topic": topic, "msg": msg, "id": "p1"}
     frame = kind(cbor2.dumps({k: fields[k] for k in order if with_id or k != "id"}))
     event = one_publish(RosbridgeEngine().receive_binary(frame))
@@ -1400,11 +1418,12 @@ def test_cbor_publish_property(
 def test_cbor_raw_publish_property(
     topic: str, payload: bytes, secs: int | None, nsecs: int
 ) -> None:
+    assume(topic)  # an empty topic cannot be subscribed
     msg: dict[str, Any] = {"bytes": payload}
     if secs is not None:
         msg |= {"secs": secs, "nsecs": nsecs}
     frame = cbor2.dumps({"op": "publish", "topic": topic, "msg": msg})
-    event = one_publish(RosbridgeEngine().receive_binary(frame))
+    event = one_publish(raw_engine(topic).receive_binary(frame))
     assert (event.topic, event.kind) == (topic, "cbor-raw")
     assert event.payload.obj is frame
     assert event.payload.tobytes() == payload

@@ -54,6 +54,7 @@ __all__ = ["Client"]
 _TWIST: Final = "geometry_msgs/msg/Twist"
 _READER_YIELD_EVERY: Final = 64
 _RELIABILITY_TICK: Final = 0.2
+_DRAIN_POLL: Final = 0.002
 T = TypeVar("T")
 _TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
 
@@ -127,6 +128,7 @@ class Client:
         self._velocity: dict[str, str] = {}
         self._task_scopes: dict[str, anyio.CancelScope] = {}
         self._closing = False
+        self._writing = False
         self._inbound = 0
 
     # -- lifecycle ----------------------------------------------------------
@@ -309,11 +311,21 @@ class Client:
         while True:
             message = await outbox.get()
             backend = self._backend
+            self._writing = True  # a frame taken from the outbox is not lost
             try:
                 await backend.send(message)
             except ConnectError:
                 if not await self._next_connection(backend):
                     return
+            finally:
+                self._writing = False
+
+    async def _drain_writer(self, budget: float) -> None:
+        """Let the writer send what is queued (control first, then data) and
+        finish the frame it holds, for at most ``budget`` seconds."""
+        with anyio.move_on_after(budget):
+            while len(self._outbox) or self._writing:
+                await anyio.sleep(_DRAIN_POLL)
 
     async def _keepalive(self) -> None:
         while True:
@@ -355,13 +367,13 @@ class Client:
     async def _flush_and_stop(self) -> None:
         backend = self._backend
         outbox = self._outbox
+        # The writer sends what is queued: cancelling it while it holds a
+        # frame would lose that frame.
+        await self._drain_writer(self._options.teardown_timeout / 2)
         self._task_scopes["rmb-writer"].cancel()  # from here on the teardown writes
         try:
             while (message := outbox.pop_control()) is not None:
                 await backend.send(message)
-            with anyio.move_on_after(self._options.teardown_timeout / 2):
-                while (message := outbox.pop()) is not None:
-                    await backend.send(message)
             dropped = outbox.drop_data()
             if dropped:
                 self._log.warning("teardown: %d queued data frames were not sent", dropped)

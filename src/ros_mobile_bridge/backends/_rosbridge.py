@@ -169,6 +169,7 @@ class RosbridgeBackend:
         self._goals: dict[str, tuple[str, GoalEvents]] = {}
         self._events: BackendEvents | None = None
         self._rosapi_warned = False
+        self._discovery_ok = False
 
     # -- helpers ---------------------------------------------------------------
     def _next_id(self, kind: str) -> str:
@@ -280,6 +281,9 @@ class RosbridgeBackend:
                 )
             return
         kind = event.kind
+        if kind != wire.compression and kind in COMPRESSIONS:
+            return  # still in flight from before a change of compression
+        schema = wire.type or self._topics.get(topic, "")
         if kind == "parsed":
             message = event.message
             decode: Decoder | None = lambda _payload: message  # noqa: E731
@@ -287,13 +291,13 @@ class RosbridgeBackend:
             try:
                 decode = self._decoders[(topic, kind)]
             except KeyError:
-                decode = self._make_decoder(topic, kind, wire.type)
+                decode = self._make_decoder(topic, kind, schema or None)
         if topic not in self._live:
             self._set_live(topic, True)
         events.on_frame(
             RawFrame(
                 topic,
-                wire.type or "",
+                schema,
                 _ENCODING[kind],
                 event.payload,
                 event.log_time_ns,
@@ -405,7 +409,9 @@ class RosbridgeBackend:
                     " subscribe with schema= and publish still work",
                     exc,
                 )
+            self._discovery_ok = False
             return False
+        self._discovery_ok = True
         names = _names(answer, "topics")
         types = _names(answer, "types")
         topics = {n: (types[i] if i < len(types) else "") for i, n in enumerate(names)}
@@ -453,8 +459,14 @@ class RosbridgeBackend:
 
     # -- subscriptions -----------------------------------------------------------
     def _desired(self, topic: str, hints: SubscribeHints) -> _WireSub:
+        """What to send for ``topic``. The type is the graph's. A ``schema=``
+        hint is sent only while discovery does not work: the bridge creates
+        a ROS subscription of whatever type it is given, so a wrong hint for
+        a topic not in the graph yet would stay there beside the real type.
+        Without either the type is omitted (the bridge infers it from the
+        graph, or refuses until discovery learns it)."""
         discovered = self._topics.get(topic) or None
-        schema = discovered or hints.schema
+        schema = discovered or (None if self._discovery_ok else hints.schema)
         if discovered and hints.schema and not same_type_name(discovered, hints.schema):
             self._log.warning(
                 "%s: subscribed as %s, but the graph has %s; using %s",
@@ -560,7 +572,9 @@ class RosbridgeBackend:
         self._pubs[topic] = pub
         try:
             start = anyio.current_time()
-            await self._ws.send(self._engine.advertise(topic, schema, id=pub.id, latch=latch))
+            await self._ws.send(
+                self._engine.advertise(topic, schema, id=pub.id, latch=latch, queue_size=100)
+            )
             await self._round_trip()  # a refusal arrives before this answer
             if pub.error is not None:
                 raise SchemaError(

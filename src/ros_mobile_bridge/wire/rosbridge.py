@@ -191,7 +191,8 @@ Event = (
 
 def decode_json_msg(payload: memoryview) -> Any:
     """The ``msg`` of a JSON ``publish`` frame. Raises ``ValueError`` for a
-    frame that is not JSON or has no ``msg``."""
+    frame that is not JSON or has no ``msg`` (``RecursionError`` for one
+    nested too deeply)."""
     obj = payload.obj
     data = obj if isinstance(obj, bytes | bytearray) and len(obj) == payload.nbytes else payload
     frame = json.loads(bytes(data) if isinstance(data, memoryview) else data)
@@ -212,8 +213,9 @@ def _typed_array(tag: cbor2.CBORTag, immutable: bool) -> Any:
 
 
 def cbor_loads(data: bytes | bytearray | memoryview) -> Any:
-    """Decode CBOR, RFC 8746 typed arrays as read-only numpy arrays.
-    Raises ``ValueError`` for malformed input."""
+    """Decode CBOR, RFC 8746 typed arrays as numpy arrays (read-only views
+    when little endian, converted copies when big endian). Raises
+    ``ValueError`` for malformed input."""
     try:
         return cbor2.loads(data, tag_hook=_typed_array, max_depth=_MAX_CBOR_DEPTH)
     except cbor2.CBORError as exc:
@@ -327,9 +329,11 @@ def _raw_message(buf: bytes | bytearray, pos: int) -> tuple[int, int, int | None
     return start, end, stamp
 
 
-def _peek_cbor_publish(buf: bytes | bytearray) -> Publish | None:
+def _peek_cbor_publish(buf: bytes | bytearray, raw_topics: set[str]) -> Publish | None:
     """A :class:`Publish` for a CBOR publish frame, or None when the frame is
-    some other op (then parse it whole). Raises ``_Malformed``."""
+    some other op (then parse it whole). A topic in ``raw_topics`` (subscribed
+    with ``cbor-raw``) whose ``msg`` has the cbor-raw shape is read as CDR.
+    Raises ``_Malformed``."""
     count, pos = _map_entries(buf, 0)
     op = topic = None
     msg_at = -1
@@ -351,7 +355,7 @@ def _peek_cbor_publish(buf: bytes | bytearray) -> Publish | None:
         raise _Malformed("a publish without a topic or msg")
     view = memoryview(buf)
     major, _, _ = _head(buf, msg_at)
-    if major == 5 and _is_raw(buf, msg_at):
+    if topic in raw_topics and major == 5 and _is_raw(buf, msg_at):
         start, end, stamp = _raw_message(buf, msg_at)
         return Publish(topic, "cbor-raw", view[start:end], None, stamp)
     return Publish(topic, "cbor", view)
@@ -378,13 +382,22 @@ def _is_raw(buf: bytes | bytearray, pos: int) -> bool:
 @dataclass(slots=True)
 class _Partial:
     total: int
-    started: float
+    last: float  # when the latest part arrived
     parts: dict[int, str] = field(default_factory=dict)
     size: int = 0
 
 
 def _json(value: Any) -> str:
     return json.dumps(value, separators=(",", ":"), allow_nan=True)
+
+
+def _as_text(value: Any) -> str:
+    """A server value as text for an id or a message: JSON when it is JSON,
+    else its ``repr`` (CBOR can carry bytes, tags, huge integers)."""
+    try:
+        return _json(value)
+    except (TypeError, ValueError, RecursionError):
+        return repr(value)[:1000]
 
 
 def _check_str(name: str, value: object) -> str:
@@ -397,9 +410,12 @@ class RosbridgeEngine:
     """The client side of one rosbridge v2 connection.
 
     ``max_message_size`` bounds a reassembled ``fragment`` message (and the
-    total held in reassembly); ``fragment_timeout`` drops a fragmented message
-    whose parts stop arriving. ``clock`` (monotonic seconds) is injectable for
-    tests."""
+    total held in reassembly), in characters of its JSON text;
+    ``fragment_timeout`` drops a fragmented message when no part of it came
+    for that long, and ignores its late parts. ``clock`` (monotonic seconds)
+    is injectable for tests. The engine remembers which topics were
+    subscribed with ``cbor-raw`` (see :meth:`subscribe`), to tell their
+    frames from a CBOR message with a ``bytes`` field."""
 
     def __init__(
         self,
@@ -416,14 +432,22 @@ class RosbridgeEngine:
         self.fragment_timeout = fragment_timeout
         self._clock = clock
         self._partials: dict[str, _Partial] = {}
+        self._dropped: dict[str, float] = {}  # id -> when, so late parts stay dropped
+        self._raw_topics: set[str] = set()
         self._held = 0
 
     # -- inbound -------------------------------------------------------------
-    def receive_text(self, data: bytes | bytearray | str) -> list[Event]:
+    def receive_text(self, data: bytes | bytearray | memoryview | str) -> list[Event]:
         """Handle one text frame: JSON, one operation."""
-        if self._partials:
+        if self._partials or self._dropped:
             self._expire()
-        raw = data.encode() if isinstance(data, str) else data
+        if isinstance(data, str):
+            try:
+                raw: bytes | bytearray = data.encode()
+            except UnicodeEncodeError:
+                return [ProtocolViolation("a text frame that is not valid Unicode")]
+        else:
+            raw = data if isinstance(data, bytes | bytearray) else bytes(data)
         match = _PEEK_OP_FIRST.match(raw) or _PEEK_TOPIC_FIRST.match(raw)
         if match is not None:
             topic_bytes = match.group(1)
@@ -441,12 +465,14 @@ class RosbridgeEngine:
             return [ProtocolViolation(f"not JSON: {exc}")]
         return self._handle(obj, raw)
 
-    def receive_binary(self, data: bytes | bytearray) -> list[Event]:
+    def receive_binary(self, data: bytes | bytearray | memoryview) -> list[Event]:
         """Handle one binary frame: CBOR, one operation."""
-        if self._partials:
+        if self._partials or self._dropped:
             self._expire()
+        if isinstance(data, memoryview):
+            data = bytes(data)
         try:
-            publish = _peek_cbor_publish(data)
+            publish = _peek_cbor_publish(data, self._raw_topics)
         except _Malformed as exc:
             return [ProtocolViolation(f"malformed CBOR frame: {exc}")]
         if publish is not None:
@@ -503,8 +529,9 @@ class RosbridgeEngine:
     @staticmethod
     def _status(obj: dict[str, Any]) -> Status:
         level = obj.get("level", "")
+        level = level if isinstance(level, str) else _as_text(level)
         msg = obj.get("msg", "")
-        return Status(str(level), msg if isinstance(msg, str) else _json(msg), _opt_id(obj))
+        return Status(level, msg if isinstance(msg, str) else _as_text(msg), _opt_id(obj))
 
     @staticmethod
     def _action_result(obj: dict[str, Any]) -> ActionResult:
@@ -521,29 +548,41 @@ class RosbridgeEngine:
     # -- fragments -------------------------------------------------------------
     def _expire(self) -> None:
         now = self._clock()
-        for key in [
-            k for k, p in self._partials.items() if now - p.started > self.fragment_timeout
-        ]:
+        timeout = self.fragment_timeout
+        for key in [k for k, p in self._partials.items() if now - p.last > timeout]:
             self._drop(key)
+        for key in [k for k, t in self._dropped.items() if now - t > timeout]:
+            del self._dropped[key]
 
     def _drop(self, key: str) -> None:
         partial = self._partials.pop(key, None)
         if partial is not None:
             self._held -= partial.size
+            if len(self._dropped) >= 4 * _MAX_FRAGMENTED:
+                del self._dropped[next(iter(self._dropped))]
+            self._dropped[key] = self._clock()
 
     def _fragment(self, obj: dict[str, Any]) -> list[Event]:
         key = obj.get("id")
         data, num, total = obj.get("data"), obj.get("num"), obj.get("total")
         if not isinstance(key, str) or not isinstance(data, str):
             return [ProtocolViolation("fragment: 'id' and 'data' must be strings")]
-        if not (isinstance(num, int) and isinstance(total, int)) or not 0 <= num < total:
+        if (
+            not (isinstance(num, int) and isinstance(total, int))
+            or isinstance(num, bool)
+            or isinstance(total, bool)
+            or not 0 <= num < total
+        ):
             return [ProtocolViolation(f"fragment {key!r}: bad 'num'/'total'")]
+        if key in self._dropped:
+            return [ProtocolViolation(f"fragment {key!r}: part of a dropped message; ignored")]
         partial = self._partials.get(key)
+        now = self._clock()
         if partial is None:
             if len(self._partials) >= _MAX_FRAGMENTED:
-                oldest = min(self._partials, key=lambda k: self._partials[k].started)
+                oldest = min(self._partials, key=lambda k: self._partials[k].last)
                 self._drop(oldest)
-            partial = self._partials[key] = _Partial(total, self._clock())
+            partial = self._partials[key] = _Partial(total, now)
         elif partial.total != total:
             self._drop(key)
             return [ProtocolViolation(f"fragment {key!r}: 'total' changed; message dropped")]
@@ -554,15 +593,17 @@ class RosbridgeEngine:
             self._drop(key)
             return [
                 ProtocolViolation(
-                    f"fragment {key!r}: over {self.max_message_size} bytes; message dropped"
+                    f"fragment {key!r}: over {self.max_message_size} characters; message dropped"
                 )
             ]
         partial.parts[num] = data
+        partial.last = now
         partial.size += size
         self._held += size
         if len(partial.parts) < total:
             return []
-        self._drop(key)
+        self._partials.pop(key)  # complete, not dropped
+        self._held -= partial.size
         whole = "".join(partial.parts[i] for i in range(total))
         try:
             inner = json.loads(whole)
@@ -580,8 +621,8 @@ class RosbridgeEngine:
         return len(self._partials)
 
     # -- outbound ----------------------------------------------------------------
-    @staticmethod
     def subscribe(
+        self,
         topic: str,
         *,
         id: str,
@@ -611,11 +652,15 @@ class RosbridgeEngine:
             if fragment_size <= 0:
                 raise ValueError("fragment_size must be positive")
             obj["fragment_size"] = int(fragment_size)
+        if compression == "cbor-raw":
+            self._raw_topics.add(topic)
+        else:
+            self._raw_topics.discard(topic)
         return _json(obj)
 
-    @staticmethod
-    def unsubscribe(topic: str, *, id: str) -> str:
+    def unsubscribe(self, topic: str, *, id: str) -> str:
         _check_str("topic", topic)
+        self._raw_topics.discard(topic)
         return _json({"op": "unsubscribe", "id": _check_str("id", id), "topic": topic})
 
     @staticmethod
@@ -706,7 +751,7 @@ def _opt_id(obj: Mapping[str, Any]) -> str | None:
     value = obj.get("id")
     if value is None:
         return None
-    return value if isinstance(value, str) else _json(value)
+    return value if isinstance(value, str) else _as_text(value)
 
 
 def _str(obj: Mapping[str, Any], key: str, default: str | None = None) -> str:
