@@ -13,7 +13,7 @@ import anyio
 
 from ._errors import ActionGoalError
 from ._types import ActionOutcome, GoalState
-from .flow import Watchable
+from .flow import Watchable, Watcher
 
 __all__ = ["ActionGoal"]
 
@@ -58,13 +58,9 @@ class ActionGoal:
     @property
     def feedback(self) -> AsyncIterator[Any]:
         """Async iterator over feedback messages, newest wins; it ends when
-        the goal does."""
-        return self._feedback_values()
-
-    async def _feedback_values(self) -> AsyncIterator[Any]:
-        async for value in self._feedback.watch():
-            if value is not None:
-                yield value
+        the goal does. (A plain iterator, not an async generator: leaving an
+        ``async for`` early needs no cleanup.)"""
+        return _Feedback(self._feedback.watch())
 
     async def accepted(self) -> None:
         """Return once the server has evidently accepted the goal (feedback
@@ -136,3 +132,19 @@ class ActionGoal:
     def _finish(self) -> None:
         self._feedback.close()
         self._done.set()
+
+
+class _Feedback:
+    """The feedback values of a :class:`Watcher`, skipping the initial None."""
+
+    def __init__(self, watcher: Watcher[Any]) -> None:
+        self._watcher = watcher
+
+    def __aiter__(self) -> _Feedback:
+        return self
+
+    async def __anext__(self) -> Any:
+        while True:
+            value = await self._watcher.__anext__()
+            if value is not None:
+                return value

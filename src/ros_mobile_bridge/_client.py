@@ -54,7 +54,6 @@ __all__ = ["Client"]
 _TWIST: Final = "geometry_msgs/msg/Twist"
 _READER_YIELD_EVERY: Final = 64
 _RELIABILITY_TICK: Final = 0.2
-_DRAIN_POLL: Final = 0.002
 T = TypeVar("T")
 _TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
 
@@ -129,6 +128,7 @@ class Client:
         self._task_scopes: dict[str, anyio.CancelScope] = {}
         self._closing = False
         self._writing = False
+        self._wrote = anyio.Event()  # set after each frame the writer sends
         self._inbound = 0
 
     # -- lifecycle ----------------------------------------------------------
@@ -319,13 +319,15 @@ class Client:
                     return
             finally:
                 self._writing = False
+                self._wrote.set()
 
     async def _drain_writer(self, budget: float) -> None:
         """Let the writer send what is queued (control first, then data) and
         finish the frame it holds, for at most ``budget`` seconds."""
         with anyio.move_on_after(budget):
             while len(self._outbox) or self._writing:
-                await anyio.sleep(_DRAIN_POLL)
+                self._wrote = anyio.Event()
+                await self._wrote.wait()
 
     async def _keepalive(self) -> None:
         while True:

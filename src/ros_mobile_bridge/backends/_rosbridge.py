@@ -136,6 +136,7 @@ class _Publisher:
     schema: str
     encode: Callable[[Mapping[str, Any]], bytes]
     ready: anyio.Event
+    check: Callable[[Mapping[str, Any]], bytes] | None
     error: str | None = None
 
 
@@ -568,6 +569,9 @@ class RosbridgeBackend:
             schema,
             self.codecs.encoder(schema, "json"),
             anyio.Event(),
+            # a known type is checked here (the bridge would only log a bad
+            # field, with no id to tell whose publish it was)
+            self.codecs.encoder(schema, "cdr") if self.codecs.has_schema(schema) else None,
         )
         self._pubs[topic] = pub
         try:
@@ -598,6 +602,8 @@ class RosbridgeBackend:
 
     def encode_publish(self, topic: str, data: Any) -> WireMessage:
         pub = self._pubs[topic]
+        if pub.check is not None:
+            pub.check(data)  # DecodeError naming the field
         return self._engine.publish(topic, pub.encode(data))
 
     # -- services ------------------------------------------------------------------
