@@ -1,5 +1,6 @@
 """Transport backends behind the one :class:`~ros_mobile_bridge.Client` API."""
 
+from ._base import Advertisement as Advertisement
 from ._base import Backend as Backend
 from ._base import BackendEvents as BackendEvents
 from ._base import GoalEvents as GoalEvents

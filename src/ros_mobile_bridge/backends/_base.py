@@ -9,11 +9,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+import anyio
+
 from .._types import ServerInfo, ServiceInfo, TopicInfo
-from ..codec import CodecRegistry
+from ..codec import CodecRegistry, same_type_name
 from ..flow import RawFrame, WireMessage
 
-__all__ = ["Backend", "BackendEvents", "GoalEvents", "SubscribeHints"]
+__all__ = ["Advertisement", "Backend", "BackendEvents", "GoalEvents", "SubscribeHints"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -26,6 +28,29 @@ class SubscribeHints:
     compression: str | None = None
     """rosbridge: ``"cbor"`` or ``"cbor-raw"`` (None: JSON). Other backends
     ignore it."""
+
+
+@dataclass(slots=True)
+class Advertisement:
+    """What every backend keeps for a topic this client publishes: its type,
+    and whether the bridge is ready for it (set once the advertise is done)."""
+
+    schema: str
+    ready: anyio.Event
+
+    async def reuse(self, topic: str, schema: str) -> None:
+        """Advertising ``topic`` again: fine with the same type (wait until
+        ready), ``ValueError`` with another."""
+        if not same_type_name(self.schema, schema):
+            raise ValueError(
+                f"{topic} is advertised as {self.schema}; unadvertise it before publishing {schema}"
+            )
+        await self.ready.wait()
+
+    @staticmethod
+    def ready_schema(ad: Advertisement | None) -> str | None:
+        """``ad``'s type once it is ready to publish, else None."""
+        return ad.schema if ad is not None and ad.ready.is_set() else None
 
 
 class GoalEvents(Protocol):

@@ -23,11 +23,11 @@ from .._errors import (
 )
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
-from ..codec import CodecRegistry, same_type_name
+from ..codec import CodecRegistry
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket, connect_websocket
 from ..wire import foxglove as fx
-from ._base import BackendEvents, GoalEvents, SubscribeHints
+from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints
 
 __all__ = ["FoxgloveBackend", "open_foxglove", "start_foxglove"]
 
@@ -36,13 +36,11 @@ _EMPTY_CDR: Final = b"\x00\x01\x00\x00"
 
 
 @dataclass(slots=True)
-class _ClientChannel:
+class _ClientChannel(Advertisement):
     id: int
     topic: str
-    schema: str
     encoding: str
     encode: Any
-    ready: anyio.Event
 
 
 async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
@@ -327,10 +325,7 @@ class FoxgloveBackend:
         return {topic: ch.schema for topic, ch in self._client_channels.items()}
 
     def advertised(self, topic: str) -> str | None:
-        channel = self._client_channels.get(topic)
-        if channel is None or not channel.ready.is_set():
-            return None
-        return channel.schema
+        return Advertisement.ready_schema(self._client_channels.get(topic))
 
     def _publish_encoding(self, schema: str) -> str:
         supported = self.server_info.supported_encodings
@@ -349,12 +344,7 @@ class FoxgloveBackend:
             raise NotSupportedError("the Foxglove protocol has no latched publishing")
         existing = self._client_channels.get(topic)
         if existing is not None:
-            if not same_type_name(existing.schema, schema):
-                raise ValueError(
-                    f"{topic} is advertised as {existing.schema}; unadvertise it before "
-                    f"publishing {schema}"
-                )
-            await existing.ready.wait()
+            await existing.reuse(topic, schema)
             return
         if "clientPublish" not in self.server_info.capabilities:
             raise NotSupportedError(
@@ -365,7 +355,7 @@ class FoxgloveBackend:
         channel_id, message = self._engine.advertise(topic, encoding, schema)
         ready = anyio.Event()
         self._client_channels[topic] = _ClientChannel(
-            channel_id, topic, schema, encoding, encode, ready
+            schema, ready, channel_id, topic, encoding, encode
         )
         try:
             await self._ws.send(message)

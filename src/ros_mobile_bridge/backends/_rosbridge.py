@@ -36,7 +36,7 @@ from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket, connect_websocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
-from ._base import BackendEvents, GoalEvents, SubscribeHints
+from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints
 
 __all__ = ["RosbridgeBackend", "open_rosbridge", "start_rosbridge"]
 
@@ -131,11 +131,9 @@ class _WireSub:
 
 
 @dataclass(slots=True)
-class _Publisher:
+class _Publisher(Advertisement):
     id: str
-    schema: str
     encode: Callable[[Mapping[str, Any]], bytes]
-    ready: anyio.Event
     check: Callable[[Mapping[str, Any]], bytes] | None
     error: str | None = None
 
@@ -549,26 +547,18 @@ class RosbridgeBackend:
         return {topic: pub.schema for topic, pub in self._pubs.items()}
 
     def advertised(self, topic: str) -> str | None:
-        pub = self._pubs.get(topic)
-        if pub is None or not pub.ready.is_set():
-            return None
-        return pub.schema
+        return Advertisement.ready_schema(self._pubs.get(topic))
 
     async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
         existing = self._pubs.get(topic)
         if existing is not None:
-            if not same_type_name(existing.schema, schema):
-                raise ValueError(
-                    f"{topic} is advertised as {existing.schema}; unadvertise it before "
-                    f"publishing {schema}"
-                )
-            await existing.ready.wait()
+            await existing.reuse(topic, schema)
             return
         pub = _Publisher(
-            self._next_id(f"advertise:{topic}"),
             schema,
-            self.codecs.encoder(schema, "json"),
             anyio.Event(),
+            self._next_id(f"advertise:{topic}"),
+            self.codecs.encoder(schema, "json"),
             # a known type is checked here (the bridge would only log a bad
             # field, with no id to tell whose publish it was)
             self.codecs.encoder(schema, "cdr") if self.codecs.has_schema(schema) else None,
