@@ -11,7 +11,10 @@ from __future__ import annotations
 
 import base64
 import itertools
+import json
 import logging
+import subprocess
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -501,3 +504,24 @@ async def test_latency_probe_turns_off_after_one_failure(
     assert seen == []
     assert caplog.text.count("latency probe off") == 1
     assert caplog.text.count("discovery through /rosapi failed") == 1
+
+
+# -- the command line ---------------------------------------------------------------
+
+
+def test_command_line_against_the_bridge(rosbridge: RosBridge) -> None:
+    """``rmb`` with the default ``--protocol auto`` finds the rosbridge server."""
+    rmb_cli = [sys.executable, "-m", "ros_mobile_bridge"]
+    topics = subprocess.run(
+        [*rmb_cli, "topics", rosbridge.url], capture_output=True, text=True, timeout=60
+    )
+    assert topics.returncode == 0, topics.stderr
+    assert "/chatter" in topics.stdout.split()
+    call = subprocess.run(
+        [*rmb_cli, "call", rosbridge.url, "/set_flag", '{"data": true}'],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert call.returncode == 0, call.stderr
+    assert json.loads(call.stdout) == {"success": True, "message": "flag set to True"}
