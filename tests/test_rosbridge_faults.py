@@ -354,3 +354,41 @@ async def test_oversized_frame_fails_the_connection_clearly() -> None:
                         pytest.fail("an oversized message was delivered")
             await wait_until(lambda: robot.status == "error")
             assert "2048" in str(robot.last_error) or "1009" in str(robot.last_error)
+
+
+def test_message_details_become_a_definition_the_codec_reads() -> None:
+    """``/rosapi/message_details`` as rosbridge_server_rs answers it (IDL-ish
+    primitive names, ``pkg/Name`` types, -1 / 0 / N array lengths) turns
+    into ``.msg`` text that decodes CDR (the cbor-raw path for types the
+    bundled definitions lack)."""
+    from ros_mobile_bridge.backends._rosbridge import _typedefs_to_msg
+    from ros_mobile_bridge.codec import CodecRegistry
+
+    answer = {
+        "typedefs": [
+            {
+                "type": "my_pkg/Reading",
+                "fieldnames": ["header", "ok", "raw", "gain", "values", "corners"],
+                "fieldtypes": ["std_msgs/Header", "boolean", "octet", "float", "double", "double"],
+                "fieldarraylen": [-1, -1, -1, -1, 0, 4],
+            },
+            {
+                "type": "std_msgs/Header",
+                "fieldnames": ["stamp", "frame_id"],
+                "fieldtypes": ["builtin_interfaces/Time", "string"],
+                "fieldarraylen": [-1, -1],
+            },
+        ]
+    }
+    text = _typedefs_to_msg("my_pkg/msg/Reading", answer)
+    assert "bool ok" in text and "byte raw" in text and "float32 gain" in text
+    assert "float64[] values" in text and "float64[4] corners" in text
+    codecs = CodecRegistry()
+    codecs.add_schema("my_pkg/msg/Reading", "ros2msg", text)
+    data = {"ok": True, "raw": 7, "gain": 0.5, "values": [1.5, 2.5], "corners": [1, 2, 3, 4]}
+    encoded = codecs.encoder("my_pkg/msg/Reading", "cdr")(data)
+    decoded = codecs.decoder("my_pkg/msg/Reading", "cdr")(memoryview(encoded))
+    assert decoded["ok"] is True and decoded["raw"] == 7 and decoded["gain"] == 0.5
+    assert list(decoded["values"]) == [1.5, 2.5] and list(decoded["corners"]) == [1, 2, 3, 4]
+    with pytest.raises(ValueError, match="do not define"):
+        _typedefs_to_msg("other/msg/Thing", answer)

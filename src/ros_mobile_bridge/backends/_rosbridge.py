@@ -48,6 +48,13 @@ so the server's own timeout answer arrives first."""
 _EMPTY_RETRY_DELAY: Final = 0.25
 _TYPE_LOOKUPS_PER_POLL: Final = 32
 COMPRESSIONS: Final = ("cbor", "cbor-raw")
+_IDL_TO_MSG: Final[Mapping[str, str]] = {
+    "boolean": "bool",
+    "octet": "byte",
+    "float": "float32",
+    "double": "float64",
+}
+"""``/rosapi/message_details`` names some primitives as IDL does."""
 
 _ENCODING: Final[Mapping[str, str]] = {
     "json": "json",
@@ -169,6 +176,7 @@ class RosbridgeBackend:
         self._events: BackendEvents | None = None
         self._rosapi_warned = False
         self._discovery_ok = False
+        self._no_definition: set[str] = set()
 
     # -- helpers ---------------------------------------------------------------
     def _next_id(self, kind: str) -> str:
@@ -493,7 +501,12 @@ class RosbridgeBackend:
             if topic in self._topics and topic not in self._live:
                 self._set_live(topic, True)
             return
-        if want.compression == "cbor-raw" and want.type and not self.codecs.has_schema(want.type):
+        if (
+            want.compression == "cbor-raw"
+            and want.type
+            and want.type not in self._no_definition
+            and not self.codecs.has_schema(want.type)
+        ):
             await self._fetch_definition(want.type)
         if current is not None and (
             (current.type is not None and current.type != want.type)
@@ -524,6 +537,7 @@ class RosbridgeBackend:
             answer = await self._rosapi("/rosapi/message_details", {"type": schema})
             self.codecs.add_schema(schema, "ros2msg", _typedefs_to_msg(schema, answer))
         except (ServiceError, TimeoutError, SchemaError, ValueError) as exc:
+            self._no_definition.add(schema)  # asked once per connection
             self._log.warning("no definition of %s from /rosapi/message_details: %s", schema, exc)
 
     async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
@@ -742,7 +756,8 @@ def _typedefs_to_msg(schema: str, answer: Any) -> str:
         for i, field in enumerate(fields):
             length = lengths[i] if i < len(lengths) else -1
             suffix = "" if length == -1 else ("[]" if length == 0 else f"[{length}]")
-            lines.append(f"{types[i]}{suffix} {field}")
+            base = _IDL_TO_MSG.get(types[i], types[i])
+            lines.append(f"{base}{suffix} {field}")
         text = "\n".join(lines) + "\n"
         if main is None and same_type_name(str(name), schema):
             main = text
