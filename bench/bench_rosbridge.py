@@ -1,7 +1,10 @@
 """rosbridge receive benchmark: this library against roslibpy on one real bridge (stand-alone script).
 
     .venv/bin/python bench/bench_rosbridge.py [--only small|images] [--seconds 5]
-        [--repeats 3] [--warmup 1.5] [--json PATH]
+        [--repeats 3] [--warmup 1.5] [--json PATH] [--profile]
+
+Needs ``pip install roslibpy`` (not a project dependency; the script says so
+and exits if it is missing) and, for ``--profile``, ``py-spy``.
 
 One run starts its own ROS 2 graph and Rust rosbridge server (the test peers:
 ``tests/peers``, a ROS 2 Jazzy environment with ``rosbridge_server_rs``, built
@@ -24,15 +27,19 @@ see :func:`make_take`): the library on asyncio and on trio, with JSON and, for
 images, ``compression="cbor"`` and ``"cbor-raw"``; roslibpy (its default
 twisted transport; it has no CBOR: it refuses any ``compression`` but ``png``
 and ``none``, and raises on binary frames); a raw ``websockets`` asyncio loop
-that sends the ``subscribe`` op and ``json.loads`` every frame (the floor).
+that sends the ``subscribe`` op and ``json.loads`` every frame (the floor),
+and the same loop on this library's own WebSocket (``transport.connect_websocket``).
 
 In each client process, after the first message and a warm-up, a window of
-``--seconds`` is measured: messages received, ``time.process_time()`` (user +
-system CPU of every thread of the process), the sequence numbers of the last
+``--seconds`` is measured: messages received, ``getrusage(RUSAGE_SELF)`` (user
+and system CPU time of every thread of the process, voluntary context
+switches), the sequence numbers of the last
 message before and at the end of the window (so messages lost in the window
 are counted exactly), and the publisher's own count at both ends (so the
 actual published rate is known). Repetitions rotate the order of the
-clients; the table shows medians. See ``bench/README.md``.
+clients; the table shows medians. ``--profile`` adds one window per library
+client with ``py-spy record --nonblocking`` attached for its duration. See
+``bench/README.md``.
 """
 
 from __future__ import annotations
