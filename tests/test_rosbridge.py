@@ -94,7 +94,8 @@ async def test_connects_and_discovers_the_graph(peer: RosPeer) -> None:
         await wait_until(
             lambda: (
                 {s.name: s.type for s in robot.services}.get("/set_flag") == "std_srvs/srv/SetBool"
-            )
+            ),
+            30,
         )
 
 

@@ -46,7 +46,9 @@ _WIRE_SLACK: Final = 0.5
 """The client's deadline for a call runs this long past the forwarded one,
 so the server's own timeout answer arrives first."""
 _EMPTY_RETRY_DELAY: Final = 0.25
-_TYPE_LOOKUPS_PER_POLL: Final = 32
+_TYPE_LOOKUPS_PER_POLL: Final = 4
+"""Service types looked up per discovery poll: a burst of rosapi calls makes
+rosbridge_server_rs drop messages of busy topics (measured at 5 kHz)."""
 COMPRESSIONS: Final = ("cbor", "cbor-raw")
 _IDL_TO_MSG: Final[Mapping[str, str]] = {
     "boolean": "bool",
