@@ -26,7 +26,6 @@ or import it and call :func:`run` (``tests/test_fuzz_rosbridge_smoke.py`` does).
 
 from __future__ import annotations
 
-import argparse
 import json
 import struct
 import sys
@@ -35,8 +34,6 @@ from pathlib import Path
 from typing import Any
 
 import cbor2
-from hypothesis import HealthCheck, given, settings
-from hypothesis import seed as hypothesis_seed
 from hypothesis import strategies as st
 
 try:
@@ -44,6 +41,12 @@ try:
 except ImportError:  # a checkout that is not installed: use its src/
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
     from ros_mobile_bridge.wire import rosbridge as rb
+
+try:
+    from _harness import cli_main, run_sessions
+except ImportError:  # loaded by its path (the smoke tests): the harness is beside it
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from _harness import cli_main, run_sessions
 
 __all__ = ["SEED_BINARY", "SEED_TEXT", "STATS", "run", "run_session"]
 
@@ -514,32 +517,11 @@ def run_session(data: st.DataObject) -> None:
 def run(max_examples: int = 1000, seed: int | None = None) -> None:
     """Run ``max_examples`` random sessions; raises on the first contract breach.
     A ``seed`` makes the run reproducible."""
-
-    @settings(
-        max_examples=max_examples,
-        deadline=None,
-        database=None,
-        suppress_health_check=list(HealthCheck),
-    )
-    @given(st.data())
-    def fuzz(data: st.DataObject) -> None:
-        run_session(data)
-
-    if seed is not None:
-        fuzz = hypothesis_seed(seed)(fuzz)
-    fuzz()
+    run_sessions(run_session, max_examples, seed)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
-    parser.add_argument("--examples", type=int, default=20_000, help="sessions to run")
-    parser.add_argument("--seed", type=int, default=None, help="make the run reproducible")
-    args = parser.parse_args(argv)
-    run(args.examples, args.seed)
-    print(f"ok: {args.examples} sessions, no exception escaped the engine")
-    for name, count in STATS.most_common():
-        print(f"  {name:24} {count}")
-    return 0
+    return cli_main(__doc__, run, STATS, argv)
 
 
 if __name__ == "__main__":
