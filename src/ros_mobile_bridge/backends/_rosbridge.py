@@ -179,6 +179,7 @@ class RosbridgeBackend:
         self._rosapi_warned = False
         self._discovery_ok = False
         self._no_definition: set[str] = set()
+        self._foreign: str | None = None  # why the server looks like Foxglove
 
     # -- helpers ---------------------------------------------------------------
     def _next_id(self, kind: str) -> str:
@@ -246,8 +247,6 @@ class RosbridgeBackend:
                 None,
                 f"no answer to /rosapi/topics within {self._options.connect_timeout:g} s",
             )
-
-    _foreign: str | None = None
 
     # -- the reader --------------------------------------------------------------
     async def run(self, events: BackendEvents) -> None:
@@ -718,8 +717,7 @@ class RosbridgeBackend:
             await anyio.sleep(interval)
             start = time.perf_counter()
             try:
-                with anyio.fail_after(_INTERNAL_TIMEOUT):
-                    await self._call("/rosapi/get_time", {}, _INTERNAL_TIMEOUT)
+                await self._rosapi("/rosapi/get_time")
             except (ServiceError, TimeoutError) as exc:
                 self._log.info("latency probe off for this connection: %s", exc)
                 return
