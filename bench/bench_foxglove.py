@@ -45,7 +45,6 @@ import argparse
 import collections
 import ctypes
 import ctypes.util
-import importlib.metadata
 import json
 import os
 import platform
@@ -56,7 +55,7 @@ import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
-from contextlib import AbstractAsyncContextManager, asynccontextmanager, suppress
+from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from types import FrameType
@@ -70,6 +69,8 @@ import ros_mobile_bridge as rmb
 from ros_mobile_bridge.transport import connect_websocket
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import subscription_counts
+from _common import versions as common_versions
 from _peer import IMAGE_TOPIC, STRING_TOPIC, payloads
 
 Backend = Literal["asyncio", "trio"]
@@ -215,13 +216,7 @@ def library(max_hz: float | None = None) -> ClientFactory:
                         got.finish()
 
             def extra() -> dict[str, int]:
-                s = sub.stats
-                return {
-                    "delivered": s.delivered,
-                    "dropped_throttle": s.dropped_throttle,
-                    "dropped_overflow": s.dropped_overflow,
-                    "decode_failures": s.decode_failures,
-                }
+                return subscription_counts(sub.stats)
 
             progress = (lambda: sub.stats.received) if max_hz else None
             yield Receiver(run, got, progress, extra)
@@ -563,12 +558,9 @@ def report(backend: Backend, result: Result) -> dict[str, dict[str, dict[str, fl
 
 
 def versions() -> str:
-    names = ("ros-mobile-bridge", "websockets", "anyio", "trio", "rosbags", "foxglove-sdk")
-    found = []
-    for name in names:
-        with suppress(importlib.metadata.PackageNotFoundError):
-            found.append(f"{name} {importlib.metadata.version(name)}")
-    return f"python {platform.python_version()}, " + ", ".join(found)
+    return common_versions(
+        ("ros-mobile-bridge", "websockets", "anyio", "trio", "rosbags", "foxglove-sdk")
+    )
 
 
 def steady_malloc() -> None:

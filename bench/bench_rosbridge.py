@@ -68,6 +68,9 @@ from typing import Any, Final
 
 HERE: Final = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
+sys.path.insert(0, str(HERE))
+from _common import subscription_counts  # noqa: E402
+from _common import versions as common_versions  # noqa: E402
 
 STRING_TYPE: Final = "std_msgs/msg/String"
 IMAGE_TYPE: Final = "sensor_msgs/msg/Image"
@@ -208,14 +211,7 @@ def child_library(args: argparse.Namespace, backend: str, compression: str | Non
                         first.set()
 
             def extra() -> dict[str, int]:
-                s = sub.stats
-                return {
-                    "received": s.received,
-                    "delivered": s.delivered,
-                    "dropped_overflow": s.dropped_overflow,
-                    "dropped_throttle": s.dropped_throttle,
-                    "decode_failures": s.decode_failures,
-                }
+                return subscription_counts(sub.stats)
 
             async with anyio.create_task_group() as tg:
                 tg.start_soon(consume)
@@ -822,22 +818,19 @@ def report_profile(case: Case, profiled: dict[str, Sample]) -> None:
 
 
 def versions() -> str:
-    names = (
-        "ros-mobile-bridge",
-        "roslibpy",
-        "twisted",
-        "autobahn",
-        "websockets",
-        "anyio",
-        "trio",
-        "cbor2",
-        "numpy",
+    return common_versions(
+        (
+            "ros-mobile-bridge",
+            "roslibpy",
+            "twisted",
+            "autobahn",
+            "websockets",
+            "anyio",
+            "trio",
+            "cbor2",
+            "numpy",
+        )
     )
-    found = []
-    for name in names:
-        with suppress(importlib.metadata.PackageNotFoundError):
-            found.append(f"{name} {importlib.metadata.version(name)}")
-    return f"python {platform.python_version()}, " + ", ".join(found)
 
 
 def main() -> None:
