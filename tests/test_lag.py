@@ -108,9 +108,14 @@ def test_sustained_lag_is_the_p90_of_the_last_four_seconds() -> None:
     # at t = 4.0 the sample at t = 0.0 (lag 1) leaves; 40 samples 2..40 and 0
     monitor.record(0.0, now=4.0)
     assert monitor.sustained_lag_ms() == 36.0
-    # at t = 8.0 everything older than 4 s is gone: the window is one sample
+    # at t = 8.0 everything older than 4 s is gone: one sample is not
+    # sustained; three are
     monitor.record(3.0, now=8.0)
-    assert monitor.sustained_lag_ms() == 3.0
+    assert monitor.sustained_lag_ms() == 0.0
+    monitor.record(5.0, now=8.1)
+    assert monitor.sustained_lag_ms() == 0.0
+    monitor.record(4.0, now=8.2)
+    assert monitor.sustained_lag_ms() == 3.0  # what all three reached
 
 
 def test_sustained_lag_ignores_a_single_spike() -> None:
@@ -122,6 +127,79 @@ def test_sustained_lag_ignores_a_single_spike() -> None:
     monitor.record(400.0, now=4.0)
     assert monitor.max_lag_ms() == 400.0
     assert monitor.sustained_lag_ms() == 2.0
+
+
+def test_sustained_lag_needs_three_samples_even_in_a_short_window() -> None:
+    # 10 samples: the p90 would be the 9th smallest (the 2nd largest), but
+    # only what three samples reached counts
+    monitor = LagMonitor(clock=FakeClock())
+    for i in range(10):
+        monitor.record(500.0 if i in (3, 7) else 1.0, now=i * 0.1)
+    assert monitor.sustained_lag_ms() == 1.0
+    monitor.record(400.0, now=1.0)
+    assert monitor.sustained_lag_ms() == 400.0
+
+
+def test_recurring_lag_needs_three_samples_of_the_last_second() -> None:
+    monitor = LagMonitor(clock=FakeClock())
+    monitor.record(300.0, now=0.0)
+    monitor.record(300.0, now=0.05)
+    assert monitor.recurring_lag_ms() == 0.0  # fewer than three samples
+    monitor.record(5.0, now=0.1)
+    assert monitor.recurring_lag_ms() == 5.0  # 300, 300, 5: three reached 5
+    monitor.record(200.0, now=0.15)
+    assert monitor.recurring_lag_ms() == 200.0  # 300, 300, 200
+    assert monitor.max_lag_ms() == 300.0
+
+
+def test_one_stall_moves_the_max_but_never_the_recurring_or_sustained_lag() -> None:
+    monitor = LagMonitor(clock=FakeClock())
+    t = 0.0
+    for _ in range(80):  # a calm loop: 2 ms lag every 50 ms
+        t += 0.052
+        monitor.record(2.0, now=t)
+    t += 1.0  # user code blocked the loop for a second
+    monitor.record(1000.0, now=t)
+    assert monitor.max_lag_ms() == 1000.0
+    assert monitor.recurring_lag_ms() == 2.0
+    assert monitor.sustained_lag_ms() == 2.0
+    for _ in range(30):  # the backlog is handled: calm again
+        t += 0.052
+        monitor.record(2.0, now=t)
+        assert monitor.recurring_lag_ms() == 2.0
+        assert monitor.sustained_lag_ms() == 2.0
+
+
+def test_two_stalls_in_a_row_are_not_sustained_either() -> None:
+    monitor = LagMonitor(clock=FakeClock())
+    for i in range(20):
+        monitor.record(1.0, now=i * 0.05)
+    monitor.record(55.0, now=1.1)  # a decoder build
+    monitor.record(60.0, now=1.2)  # another subscriber's
+    assert monitor.recurring_lag_ms() == 1.0
+    assert monitor.sustained_lag_ms() == 1.0
+
+
+def test_a_loop_sampled_less_than_three_times_a_second_still_shows_recurring_lag() -> None:
+    # 500 ms lag per sample: samples 0.55 s apart, two per second; the
+    # window reaches back to the newest three
+    monitor = LagMonitor(clock=FakeClock())
+    monitor.record(500.0, now=0.55)
+    monitor.record(500.0, now=1.10)
+    assert monitor.recurring_lag_ms() == 0.0
+    monitor.record(500.0, now=1.65)
+    assert monitor.recurring_lag_ms() == 500.0
+
+
+def test_clear_also_zeroes_the_recurring_lag() -> None:
+    monitor = LagMonitor(clock=FakeClock())
+    for i in range(3):
+        monitor.record(100.0, now=i * 0.1)
+    assert monitor.recurring_lag_ms() == 100.0
+    monitor.clear()
+    assert monitor.recurring_lag_ms() == 0.0
+    monitor.record(100.0, now=1.0)
+    assert monitor.recurring_lag_ms() == 0.0
 
 
 def test_history_is_trimmed_to_history_seconds() -> None:
@@ -199,6 +277,9 @@ def test_clear_forgets_samples_and_zeroes_the_signals() -> None:
     assert monitor.history_csv() == "time_s,lag_ms\n"
     monitor.record(3.0, now=1.0)
     assert monitor.max_lag_ms() == 3.0
+    assert monitor.sustained_lag_ms() == 0.0  # the old samples do not count
+    monitor.record(3.0, now=1.05)
+    monitor.record(3.0, now=1.1)
     assert monitor.sustained_lag_ms() == 3.0
 
 
@@ -345,23 +426,34 @@ async def test_participate_samples_the_current_loop() -> None:
 async def test_public_readers_read_the_current_loop_monitor() -> None:
     monitor = current_monitor()
     assert lag.max_lag_ms() == 0.0
+    assert lag.recurring_lag_ms() == 0.0
     assert lag.sustained_lag_ms() == 0.0
     assert lag.stats() == lag.LagStats(0.0, 0.0, 0.0, 0.0, 0)
     assert lag.history_csv() == "time_s,lag_ms\n"
     monitor.record(12.0, now=0.0)
     monitor.record(30.0, now=0.05)
+    monitor.record(20.0, now=0.10)
     assert lag.max_lag_ms() == 30.0
-    assert lag.sustained_lag_ms() == 30.0
-    assert lag.stats() == lag.LagStats(12.0, 30.0, 30.0, 30.0, 2)
-    assert lag.history_csv() == "time_s,lag_ms\n0.000,12.000\n0.050,30.000\n"
+    assert lag.recurring_lag_ms() == 12.0
+    assert lag.sustained_lag_ms() == 12.0
+    assert lag.stats() == lag.LagStats(20.0, 30.0, 30.0, 30.0, 3)
+    assert lag.history_csv() == "time_s,lag_ms\n0.000,12.000\n0.050,30.000\n0.100,20.000\n"
     lag.clear()
     assert lag.stats().count == 0
     assert lag.max_lag_ms() == 0.0
+    assert lag.recurring_lag_ms() == 0.0
 
 
 @pytest.mark.parametrize(
     "reader",
-    [lag.max_lag_ms, lag.sustained_lag_ms, lag.stats, lag.history_csv, lag.clear],
+    [
+        lag.max_lag_ms,
+        lag.recurring_lag_ms,
+        lag.sustained_lag_ms,
+        lag.stats,
+        lag.history_csv,
+        lag.clear,
+    ],
     ids=lambda f: f.__name__,
 )
 def test_readers_outside_an_event_loop_raise_runtime_error(reader: Callable[[], object]) -> None:
@@ -375,6 +467,7 @@ def test_the_public_module_exports_exactly_the_readers() -> None:
         "clear",
         "history_csv",
         "max_lag_ms",
+        "recurring_lag_ms",
         "stats",
         "sustained_lag_ms",
     ]

@@ -3,7 +3,8 @@ server: the adaptive throttle ahead of decoding, the circuit breaker removing
 and restoring the subscription at the bridge, the control outbox under a
 flood, the lag monitor's lifetime, and the idle latency probe.
 
-Lag is injected into this event loop's monitor (``LagMonitor.record``), so
+Lag is injected into this event loop's monitor (``LagMonitor.record``, three
+samples, since one alone is a stall the throttle ignores), so
 the tests assert what the layer does with a given lag, not how fast the
 machine is."""
 
@@ -33,6 +34,13 @@ def server() -> Iterator[SdkServer]:
         yield srv
 
 
+def saturate(lag_ms: float) -> None:
+    """Inject a recurring lag: three samples, as a busy loop gives (one
+    sample alone is a stall, which the throttle ignores)."""
+    for _ in range(3):
+        current_monitor().record(lag_ms)
+
+
 def options(**kw: Any) -> rmb.ClientOptions:
     kw.setdefault("advertise_settle", 0.0)
     kw.setdefault("zero_twist_on_exit", False)
@@ -47,7 +55,7 @@ async def test_adaptive_throttle_caps_a_subscription_ahead_of_decoding(server: S
             robot.subscribe("/fast", adaptive=False, buffer=100) as fixed,
         ):
             await wait_until(lambda: "/fast" in server.subscribed())
-            current_monitor().record(200.0)  # a 200 ms stall: "auto" goes to its 4 Hz bucket
+            saturate(200.0)  # a recurring 200 ms lag: "auto" goes to its 4 Hz bucket
             for i in range(40):
                 chatter.log(string_msg(f"m{i}"))
             await wait_until(lambda: fixed.stats.received == 40 and adaptive.stats.received == 40)
@@ -74,7 +82,7 @@ async def test_throttle_mode_callable_is_read_on_every_message(server: SdkServer
     ) as robot:
         async with robot.subscribe("/m", buffer=100) as sub:
             await wait_until(lambda: "/m" in server.subscribed())
-            current_monitor().record(60.0)
+            saturate(60.0)
             chatter.log(string_msg("a"))
             await wait_until(lambda: sub.stats.received == 1)
             assert sub.stats.bucket == "30 Hz"  # performance at 60 ms
@@ -99,7 +107,7 @@ async def test_breaker_trips_removes_the_subscription_at_the_bridge_and_recovers
             async with anyio.create_task_group() as tg:
                 tg.start_soon(watch)
                 await wait_until(lambda: "/cam" in server.subscribed())
-                current_monitor().record(1000.0)  # saturated, at the deepest bucket
+                saturate(1000.0)  # saturated, at the deepest bucket
                 await wait_until(lambda: sub.breaker.state == "tripped_auto", what="trip")
                 assert sub.breaker.next_retry_at is not None
                 # no frames cross the network while tripped

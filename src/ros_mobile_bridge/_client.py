@@ -530,7 +530,9 @@ class Client:
         if not isinstance(adaptive, bool):
             raise TypeError("adaptive must be a bool")
         throttle = (
-            AdaptiveThrottle(self._presets, self._mode, current_monitor(), logger=self._log)
+            AdaptiveThrottle(
+                self._presets, self._mode, current_monitor(), logger=self._log, name=topic
+            )
             if adaptive
             else None
         )
@@ -593,7 +595,7 @@ class Client:
             await anyio.sleep(_RELIABILITY_TICK)
             if self._status.value != "connected":
                 continue
-            lag = monitor.max_lag_ms()
+            lag = monitor.recurring_lag_ms()
             for topic, subs in list(self._subs.items()):
                 changed = False
                 for sub in subs:

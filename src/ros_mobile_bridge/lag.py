@@ -8,6 +8,7 @@ history::
     import ros_mobile_bridge as rmb
 
     print(f"max loop lag over the last second: {rmb.lag.max_lag_ms():.1f} ms")
+    print(f"lag the throttle acts on: {rmb.lag.recurring_lag_ms():.1f} ms")
     print(rmb.lag.stats())          # LagStats(p50_ms, p90_ms, p99_ms, max_ms, count)
     report = rmb.lag.history_csv()  # "time_s,lag_ms\\n..." for bug reports
 
@@ -22,7 +23,16 @@ from .flow._lag import LagStats as LagStats
 from .flow._lag import clear as clear
 from .flow._lag import history_csv as history_csv
 from .flow._lag import max_lag_ms as max_lag_ms
+from .flow._lag import recurring_lag_ms as recurring_lag_ms
 from .flow._lag import stats as stats
 from .flow._lag import sustained_lag_ms as sustained_lag_ms
 
-__all__ = ["LagStats", "clear", "history_csv", "max_lag_ms", "stats", "sustained_lag_ms"]
+__all__ = [
+    "LagStats",
+    "clear",
+    "history_csv",
+    "max_lag_ms",
+    "recurring_lag_ms",
+    "stats",
+    "sustained_lag_ms",
+]

@@ -6,14 +6,24 @@ than asked it wakes up is the loop's lag (time the loop spent on other work,
 or blocked). One monitor serves one event loop, whatever the number of
 clients on it.
 
-Two signals are kept up to date on every sample, so reading them costs O(1)
-(the throttle reads them for every received frame):
+Three signals are kept up to date on every sample, so reading them costs
+O(1) (the throttle reads them for every received frame):
 
-- :meth:`LagMonitor.max_lag_ms`: the largest sample of the last second. It
-  rises at once with a spike: the TIGHTEN signal.
+- :meth:`LagMonitor.recurring_lag_ms`: the highest lag that at least three
+  samples of the last second reached (the third-largest sample; when the
+  last second holds fewer than three samples, the newest three count). A
+  loop that stays busy raises it within a few samples; one stall (user code
+  blocking the loop once, a one-off build) never does. The TIGHTEN signal.
 - :meth:`LagMonitor.sustained_lag_ms`: the 90th percentile of the last four
-  seconds. One spike does not move it, and it falls only once the loop has
-  been calm for a while: the RELAX signal.
+  seconds, and never more than three samples reached. One spike does not
+  move it, and it falls only once the loop has been calm for a while: the
+  RELAX signal (and a slower TIGHTEN signal for a loop so busy that it
+  samples less than three times a second).
+- :meth:`LagMonitor.max_lag_ms`: the largest sample of the last second. It
+  rises at once with a spike; a diagnostic, not used to throttle.
+
+With fewer than three samples (a monitor that just started) the recurring
+and sustained signals read 0.0: nothing is sustained yet.
 
 Percentiles use the nearest-rank method: the p-th percentile of ``n`` samples
 is the ``ceil(p * n / 100)``-th smallest. A sample belongs to a window of
@@ -31,6 +41,7 @@ sampling stops; the history stays readable until :meth:`LagMonitor.clear`.
 from __future__ import annotations
 
 import bisect
+import heapq
 import math
 import time
 from collections import deque
@@ -49,6 +60,7 @@ __all__ = [
     "history_csv",
     "max_lag_ms",
     "participate",
+    "recurring_lag_ms",
     "stats",
     "sustained_lag_ms",
 ]
@@ -56,6 +68,9 @@ __all__ = [
 Clock = Callable[[], float]
 
 _SUSTAINED_PERCENTILE: Final = 90
+RECURRING_SAMPLES: Final = 3
+"""How many samples must reach a lag before the recurring and sustained
+signals report it: one or two stalls are not saturation."""
 
 
 def _check_positive(name: str, value: object) -> float:
@@ -120,7 +135,10 @@ class LagMonitor:
         # the sustained window in time order, and its lags sorted
         self._sustained_window: deque[tuple[float, float]] = deque()
         self._sustained_sorted: list[float] = []
+        # the last second's samples, and at least the newest RECURRING_SAMPLES
+        self._recent: deque[tuple[float, float]] = deque()
         self._max_lag_ms = 0.0
+        self._recurring_lag_ms = 0.0
         self._sustained_lag_ms = 0.0
         self._participants = 0
         self._sampling = False
@@ -129,13 +147,23 @@ class LagMonitor:
     # -- signals (O(1)) --------------------------------------------------------
     def max_lag_ms(self) -> float:
         """The largest lag of the last ``max_window_s`` (1 s) before the
-        newest sample, in ms; 0.0 with no samples. The TIGHTEN signal."""
+        newest sample, in ms; 0.0 with no samples. A diagnostic: one stall
+        shows here at once, and the throttle does not react to it."""
         return self._max_lag_ms
 
+    def recurring_lag_ms(self) -> float:
+        """The highest lag at least three samples of the last
+        ``max_window_s`` (1 s) reached, in ms (the window reaches back to
+        the newest three samples when it holds fewer); 0.0 with fewer than
+        three samples. The TIGHTEN signal: a loop that stays busy raises it
+        within three samples, a single stall never does."""
+        return self._recurring_lag_ms
+
     def sustained_lag_ms(self) -> float:
-        """The 90th percentile of the lag over the last ``sustained_window_s``
-        (4 s) before the newest sample, in ms; 0.0 with no samples. The
-        RELAX signal."""
+        """The 90th percentile (nearest rank) of the lag over the last
+        ``sustained_window_s`` (4 s) before the newest sample, capped at
+        what at least three samples reached, in ms; 0.0 with fewer than
+        three samples in the window. The RELAX signal."""
         return self._sustained_lag_ms
 
     # -- recording -----------------------------------------------------------
@@ -164,6 +192,16 @@ class LagMonitor:
             max_window.popleft()
         self._max_lag_ms = max_window[0][1]
 
+        recent = self._recent
+        recent.append(sample)
+        while len(recent) > RECURRING_SAMPLES and recent[0][0] <= cutoff:
+            recent.popleft()
+        self._recurring_lag_ms = (
+            heapq.nlargest(RECURRING_SAMPLES, [lag for _, lag in recent])[-1]
+            if len(recent) >= RECURRING_SAMPLES
+            else 0.0
+        )
+
         window = self._sustained_window
         ordered = self._sustained_sorted
         window.append(sample)
@@ -172,7 +210,12 @@ class LagMonitor:
         while window[0][0] <= cutoff:
             _, old = window.popleft()
             del ordered[bisect.bisect_left(ordered, old)]
-        self._sustained_lag_ms = _nearest_rank(ordered, _SUSTAINED_PERCENTILE)
+        n = len(ordered)
+        if n < RECURRING_SAMPLES:
+            self._sustained_lag_ms = 0.0
+        else:
+            rank = min(-(-_SUSTAINED_PERCENTILE * n // 100), n - RECURRING_SAMPLES + 1)
+            self._sustained_lag_ms = ordered[rank - 1]
 
     def clear(self) -> None:
         """Forget every sample; both signals read 0.0 until the next one."""
@@ -180,7 +223,9 @@ class LagMonitor:
         self._max_window.clear()
         self._sustained_window.clear()
         self._sustained_sorted.clear()
+        self._recent.clear()
         self._max_lag_ms = 0.0
+        self._recurring_lag_ms = 0.0
         self._sustained_lag_ms = 0.0
 
     # -- diagnostics -----------------------------------------------------------
@@ -297,9 +342,17 @@ def max_lag_ms() -> float:
     return current_monitor().max_lag_ms()
 
 
+def recurring_lag_ms() -> float:
+    """The highest lag at least three samples of the current event loop's
+    last second reached, in ms (0.0 before three samples): the throttle's
+    TIGHTEN signal. Raises ``RuntimeError`` outside an event loop."""
+    return current_monitor().recurring_lag_ms()
+
+
 def sustained_lag_ms() -> float:
     """The current event loop's 90th-percentile lag over the last four
-    seconds, in ms (0.0 before any sample). Raises ``RuntimeError`` outside
+    seconds, capped at what at least three samples reached, in ms (0.0
+    before three samples). Raises ``RuntimeError`` outside
     an event loop."""
     return current_monitor().sustained_lag_ms()
 

@@ -22,9 +22,13 @@ desktop with headroom); ``efficient`` is capped from the start and caps hard
 (a phone on battery); ``auto`` sits between. A client may replace any curve
 (:func:`resolve_presets`).
 
-The rules (:class:`AdaptiveThrottle`): tighten at once on the 1-second max
-lag, relax on the 4-second 90th-percentile lag with a deadband, and always
-jump straight to the justified bucket.
+The rules (:class:`AdaptiveThrottle`): tighten at once on the lag that
+recurs (at least three samples of the last second reached it), relax on the
+4-second 90th-percentile lag with a deadband, and always jump straight to
+the justified bucket. One stall never tightens: the frames that queued up
+behind it already crossed the socket, and dropping them saves nothing.
+Every change of bucket is logged at INFO with the topic, the old and new
+interval and the lag that caused it.
 """
 
 from __future__ import annotations
@@ -191,7 +195,7 @@ class LagSource(Protocol):
     """What the throttle reads: both signals in ms, O(1) (see
     :class:`~ros_mobile_bridge.flow._lag.LagMonitor`)."""
 
-    def max_lag_ms(self) -> float: ...
+    def recurring_lag_ms(self) -> float: ...
 
     def sustained_lag_ms(self) -> float: ...
 
@@ -208,18 +212,24 @@ class AdaptiveThrottle:
     The rules, where a curve's bucket *justified* by a lag is the deepest
     whose threshold is at most that lag:
 
-    - TIGHTEN at once: when ``max(max_lag, sustained_lag)`` justifies a
-      deeper bucket than the current one, jump straight to it.
+    - TIGHTEN at once: when ``max(recurring_lag, sustained_lag)`` justifies
+      a deeper bucket than the current one, jump straight to it. Both
+      signals need at least three samples at a lag, so a single stall
+      (user code blocking the loop once, a decoder build) never tightens.
     - RELAX with a deadband: only when ``sustained_lag`` is at least
       ``deadband_ms`` below the current bucket's threshold, then jump
-      straight to the bucket justified by ``max(max_lag, sustained_lag)``.
+      straight to the bucket justified by ``max(recurring_lag,
+      sustained_lag)``.
     - On a mode change, the new curve's justified bucket applies at once.
 
     So the chosen bucket ``i`` always satisfies
-    ``justified(max(max_lag, sustained)) <= i <=
-    justified(max(max_lag, sustained + deadband_ms))``: never shallower than
-    the lag justifies, and deeper only by the deadband's hysteresis, which
-    stops hunting when the lag hovers around a threshold.
+    ``justified(max(recurring, sustained)) <= i <=
+    justified(max(recurring, sustained + deadband_ms))``: never shallower
+    than the lag justifies, and deeper only by the deadband's hysteresis,
+    which stops hunting when the lag hovers around a threshold.
+
+    ``name`` (the topic) labels the INFO line logged on ``logger`` at every
+    change of bucket or mode.
 
     :meth:`interval_s` is O(1) in the common case (the lag signals change
     about every 50 ms; between changes the last answer is reused). The
@@ -234,21 +244,23 @@ class AdaptiveThrottle:
         *,
         deadband_ms: float = 10.0,
         logger: logging.Logger | None = None,
+        name: str = "",
     ) -> None:
+        self._name = name
         deadband = _number(deadband_ms)
         if deadband is None or deadband < 0:
             raise ValueError(f"deadband_ms must be a finite number >= 0, got {deadband_ms!r}")
         curves: dict[ThrottleMode, tuple[Bucket, ...]] = {}
-        for name in THROTTLE_MODES:
-            if name not in presets:
-                raise ValueError(f"presets has no curve for mode {name!r}")
-            curve, reason = _validate_curve(presets[name])
+        for mode_name in THROTTLE_MODES:
+            if mode_name not in presets:
+                raise ValueError(f"presets has no curve for mode {mode_name!r}")
+            curve, reason = _validate_curve(presets[mode_name])
             if curve is None:
-                raise ValueError(f"invalid curve for mode {name!r}: {reason}")
-            curves[name] = curve
+                raise ValueError(f"invalid curve for mode {mode_name!r}: {reason}")
+            curves[mode_name] = curve
         self._curves = curves
         self._thresholds = {
-            name: tuple(bucket.threshold_ms for bucket in curve) for name, curve in curves.items()
+            key: tuple(bucket.threshold_ms for bucket in curve) for key, curve in curves.items()
         }
         self._mode_fn = mode
         self._lag = lag
@@ -258,13 +270,13 @@ class AdaptiveThrottle:
         self._transitions = 0
         # the inputs of the last evaluation, and its outcome
         self._raw_mode: object = None
-        self._max = math.nan
+        self._recurring = math.nan
         self._sustained = math.nan
         self._mode: ThrottleMode = "auto"
         self._curve = curves["auto"]
         self._index = 0
         self._interval = 0.0
-        self._evaluate(mode(), lag.max_lag_ms(), lag.sustained_lag_ms(), initial=True)
+        self._evaluate(mode(), lag.recurring_lag_ms(), lag.sustained_lag_ms(), initial=True)
 
     def interval_s(self) -> float:
         """The minimum interval between delivered messages now, in seconds
@@ -272,27 +284,31 @@ class AdaptiveThrottle:
         and the lag signals and moves the bucket by the rules above."""
         raw_mode = self._mode_fn()
         lag = self._lag
-        max_lag = lag.max_lag_ms()
+        recurring = lag.recurring_lag_ms()
         sustained = lag.sustained_lag_ms()
-        if max_lag == self._max and sustained == self._sustained and raw_mode == self._raw_mode:
+        if (
+            recurring == self._recurring
+            and sustained == self._sustained
+            and raw_mode == self._raw_mode
+        ):
             return self._interval
-        self._evaluate(raw_mode, max_lag, sustained, initial=False)
+        self._evaluate(raw_mode, recurring, sustained, initial=False)
         return self._interval
 
     def _justified(self, mode: ThrottleMode, lag_ms: float) -> int:
         return max(bisect.bisect_right(self._thresholds[mode], lag_ms) - 1, 0)
 
     def _evaluate(
-        self, raw_mode: object, max_lag: float, sustained: float, *, initial: bool
+        self, raw_mode: object, recurring: float, sustained: float, *, initial: bool
     ) -> None:
         if raw_mode != self._raw_mode or initial:
             mode = self._effective_mode(raw_mode)
             self._raw_mode = raw_mode
         else:
             mode = self._mode
-        self._max = max_lag
+        self._recurring = recurring
         self._sustained = sustained
-        floor = self._justified(mode, max(max_lag, sustained))
+        floor = self._justified(mode, max(recurring, sustained))
         if mode != self._mode or initial:
             index = floor  # a new curve: no hysteresis to carry over
         else:
@@ -304,6 +320,20 @@ class AdaptiveThrottle:
         curve = self._curves[mode]
         if not initial and (mode != self._mode or index != self._index):
             self._transitions += 1
+            old = self._curve[self._index]
+            new = curve[index]
+            self._logger.info(
+                "throttle %s: %s -> %s (%g -> %g ms between messages, mode %s); "
+                "event-loop lag %.0f ms recurring, %.0f ms sustained",
+                self._name or "(unnamed)",
+                old.label,
+                new.label,
+                old.min_interval_ms,
+                new.min_interval_ms,
+                mode,
+                recurring,
+                sustained,
+            )
         self._mode = mode
         self._curve = curve
         self._index = index
