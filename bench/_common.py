@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import importlib.metadata
 import platform
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from contextlib import suppress
 
 import ros_mobile_bridge as rmb
 
-__all__ = ["subscription_counts", "versions"]
+__all__ = ["DROP_REASONS", "check_fates", "subscription_counts", "versions"]
+
+DROP_REASONS = ("dropped_throttle", "dropped_conflated", "dropped_overflow", "dropped_breaker")
+"""Every way a received frame can leave a subscription without being delivered."""
 
 
 def versions(names: Sequence[str]) -> str:
@@ -21,12 +24,38 @@ def versions(names: Sequence[str]) -> str:
     return f"python {platform.python_version()}, " + ", ".join(found)
 
 
-def subscription_counts(stats: rmb.SubscriptionStats) -> dict[str, int]:
-    """A subscription's frame counters, for a benchmark's JSON."""
-    return {
-        "received": stats.received,
-        "delivered": stats.delivered,
-        "dropped_throttle": stats.dropped_throttle,
-        "dropped_overflow": stats.dropped_overflow,
-        "decode_failures": stats.decode_failures,
-    }
+def subscription_counts(sub: rmb.Subscription) -> dict[str, int]:
+    """The fate of every frame a subscription received, for a benchmark's
+    JSON: delivered, each drop reason, still queued; plus decode failures
+    (delivered raw)."""
+    stats = sub.stats
+    counts = {"received": stats.received, "delivered": stats.delivered}
+    counts.update({reason: getattr(stats, reason) for reason in DROP_REASONS})
+    counts["queued"] = len(sub._queue)
+    counts["decode_failures"] = stats.decode_failures
+    return counts
+
+
+def check_fates(
+    counts: Mapping[str, int], *, sent: int | None = None, may_drop: Sequence[str] = ()
+) -> list[str]:
+    """What is wrong with one run's :func:`subscription_counts`: frames that
+    vanished inside the library (received but neither delivered, dropped
+    for a counted reason nor still queued), drops for a reason the case does
+    not allow (``may_drop``), and, given ``sent``, frames the client never
+    received or delivered although nothing was allowed to drop them."""
+    problems = []
+    accounted = counts["delivered"] + counts["queued"] + sum(counts[r] for r in DROP_REASONS)
+    if accounted != counts["received"]:
+        problems.append(
+            f"{counts['received'] - accounted} frames vanished"
+            f" (received {counts['received']}, accounted for {accounted})"
+        )
+    for reason in DROP_REASONS:
+        if counts[reason] and reason not in may_drop:
+            problems.append(f"{counts[reason]} frames {reason.replace('_', ' ')}")
+    if sent is not None and not may_drop and counts["delivered"] + counts["queued"] < sent:
+        problems.append(
+            f"only {counts['delivered']} of {sent} frames delivered ({counts['queued']} queued)"
+        )
+    return problems

@@ -69,7 +69,7 @@ import ros_mobile_bridge as rmb
 from ros_mobile_bridge.transport import connect_websocket
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import subscription_counts
+from _common import DROP_REASONS, check_fates, subscription_counts
 from _common import versions as common_versions
 from _peer import IMAGE_TOPIC, STRING_TOPIC, payloads
 
@@ -216,7 +216,7 @@ def library(max_hz: float | None = None) -> ClientFactory:
                         got.finish()
 
             def extra() -> dict[str, int]:
-                return subscription_counts(sub.stats)
+                return subscription_counts(sub)
 
             progress = (lambda: sub.stats.received) if max_hz else None
             yield Receiver(run, got, progress, extra)
@@ -392,6 +392,8 @@ class Result:
     counts: dict[str, int]
     cases: list[Case]
     samples: dict[str, dict[str, list[Sample]]]
+    problems: list[str] = field(default_factory=list)
+    """Frames that vanished or were dropped where nothing may drop them."""
 
 
 async def run_backend(peer: Peer, backend: Backend, seconds: float, reps: int) -> Result:
@@ -523,6 +525,32 @@ def report(backend: Backend, result: Result) -> dict[str, dict[str, dict[str, fl
                 f" {s['faults_per_frame']:12.1f} {s['lost']:4.0f}"
             )
 
+    print("  fate of every frame the library received (sums over the repetitions):")
+    print(
+        f"  {'case':<22} {'client':<18} {'sent':>8} {'delivered':>9} {'throttle':>8}"
+        f" {'conflated':>9} {'overflow':>8} {'breaker':>7} {'queued':>6}  verdict"
+    )
+    for case in result.cases:
+        sent = counts["paced"] if case.pace else counts[case.topic]
+        for name, samples in result.samples[case.key].items():
+            if not name.startswith("library"):
+                continue
+            may_drop = ("dropped_throttle",) if "max_hz" in name else ()
+            problems = [
+                f"{case.label} / {name}, repetition {i + 1}: {problem}"
+                for i, sample in enumerate(samples)
+                for problem in check_fates(sample.extra, sent=sent, may_drop=may_drop)
+            ]
+            result.problems.extend(problems)
+            total = {k: sum(s.extra.get(k, 0) for s in samples) for k in samples[0].extra}
+            print(
+                f"  {case.label:<22} {name:<18} {sent * len(samples):8d} {total['delivered']:9d}"
+                + "".join(
+                    f" {total[r]:{w}d}" for r, w in zip(DROP_REASONS, (8, 9, 8, 7), strict=True)
+                )
+                + f" {total['queued']:6d}  {'FAIL' if problems else 'ok'}"
+            )
+
     def ratio(key: str, a: str, b: str) -> str:
         x, y = table[key][a], table[key][b]
         return (
@@ -607,6 +635,7 @@ def main() -> None:
             out[backend] = {
                 "counts": result.counts,
                 "summary": report(backend, result),
+                "problems": result.problems,
                 "samples": {
                     key: {name: [asdict(s) for s in lst] for name, lst in by_client.items()}
                     for key, by_client in result.samples.items()
@@ -618,9 +647,16 @@ def main() -> None:
                     anyio.run(profile_library, peer, topic, count, backend, backend=backend)
     finally:
         peer.close()
+    problems = [p for backend in backends for p in out[backend]["problems"]]
+    out["problems"] = problems
     if args.json:
         args.json.write_text(json.dumps(out, indent=2))
         print(f"\nwrote {args.json}")
+    if problems:
+        print("\nFAILED: the library lost frames it must deliver:", file=sys.stderr)
+        for problem in problems:
+            print(f"  {problem}", file=sys.stderr)
+        raise SystemExit(1)
 
 
 if __name__ == "__main__":

@@ -69,7 +69,7 @@ from typing import Any, Final
 HERE: Final = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 sys.path.insert(0, str(HERE))
-from _common import subscription_counts  # noqa: E402
+from _common import DROP_REASONS, check_fates, subscription_counts  # noqa: E402
 from _common import versions as common_versions  # noqa: E402
 
 STRING_TYPE: Final = "std_msgs/msg/String"
@@ -211,7 +211,7 @@ def child_library(args: argparse.Namespace, backend: str, compression: str | Non
                         first.set()
 
             def extra() -> dict[str, int]:
-                return subscription_counts(sub.stats)
+                return subscription_counts(sub)
 
             async with anyio.create_task_group() as tg:
                 tg.start_soon(consume)
@@ -756,6 +756,20 @@ def summarize(samples: list[Sample]) -> dict[str, float]:
     }
 
 
+def fate_problems(case: Case, samples: dict[str, list[Sample]]) -> list[str]:
+    """Frames a library client received in a window and then lost: vanished
+    (not delivered, not dropped for a counted reason, not queued) or dropped
+    at all (no case here has a cap or a reason to drop)."""
+    return [
+        f"{case.label} / {name}, window {i + 1}: {problem}"
+        for name, lst in samples.items()
+        if name.startswith("library")
+        for i, sample in enumerate(lst)
+        if sample.extra
+        for problem in check_fates(sample.extra)
+    ]
+
+
 def report(case: Case, samples: dict[str, list[Sample]]) -> dict[str, dict[str, float]]:
     table = {name: summarize(lst) for name, lst in samples.items()}
     n = len(next(iter(samples.values())))
@@ -769,7 +783,7 @@ def report(case: Case, samples: dict[str, list[Sample]]) -> dict[str, dict[str, 
     base = table["roslibpy"]["cpu_us_per_msg"]
     for name, s in table.items():
         drops = (
-            f"{s['dropped_overflow_total'] + s['dropped_throttle_total']:9.0f}"
+            f"{sum(s[f'{r}_total'] for r in DROP_REASONS):9.0f}"
             if "dropped_overflow_total" in s
             else f"{'-':>9}"
         )
@@ -877,6 +891,7 @@ def main() -> None:
     out["args"] = {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()}
     graph = RosGraph.start(env)
     bridge = None
+    problems: list[str] = []
     try:
         bridge = RosBridge.start(env, graph.domain_id)
         for case in all_cases(args.only):
@@ -884,6 +899,7 @@ def main() -> None:
                 case, env, graph, bridge, args.seconds, args.repeats, args.warmup, args.profile
             )
             summary = report(case, samples)
+            problems += fate_problems(case, samples)
             report_profile(case, profiled)
             out[case.key] = {
                 "summary": summary,
@@ -897,9 +913,15 @@ def main() -> None:
         if bridge is not None:
             bridge.stop()
         graph.stop()
+    out["problems"] = problems
     if args.json:
         args.json.write_text(json.dumps(out, indent=2))
         print(f"\nwrote {args.json}")
+    if problems:
+        print("\nFAILED: the library lost frames it received:", file=sys.stderr)
+        for problem in problems:
+            print(f"  {problem}", file=sys.stderr)
+        raise SystemExit(1)
 
 
 if __name__ == "__main__":
