@@ -21,7 +21,10 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from peers.rosbridge import RosBridge, RosGraph
 from ros_mobile_bridge.demo import DemoRobot
+
+pytest_plugins = ["peers.ros_fixtures"]
 
 ROOT = Path(__file__).resolve().parent.parent
 SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
@@ -208,6 +211,32 @@ def test_rmb_pub_killed_sends_the_zero_twist_and_exits_128_plus_signal(
     wait_for(lambda: robot.received_cmd_vel()[-1].linear_x == 0.0, 5)
     got = [c.linear_x for c in robot.received_cmd_vel()[before:]]
     assert got[-1] == 0.0 and set(got[:-1]) == {0.3}, got
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_rmb_pub_killed_stops_a_ros_robot_through_rosbridge(
+    rosbridge: RosBridge, ros_graph: RosGraph, backend: str
+) -> None:
+    ros_graph.command({"cmd": "clear", "topic": "/cmd_vel"})
+
+    def received() -> list[float]:
+        return [
+            m["linear"]["x"] for m in ros_graph.command({"cmd": "received", "topic": "/cmd_vel"})
+        ]
+
+    proc = rmb_cli(
+        backend, "pub", "-r", "10", rosbridge.url, "/cmd_vel", "geometry_msgs/msg/Twist", TWIST_03
+    )
+    try:
+        wait_for(lambda: len(received()) >= 3)
+        proc.send_signal(signal.SIGTERM)
+        _out, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    wait_for(lambda: received()[-1] == 0.0, 10)  # DDS may still be delivering
+    got = received()
+    assert set(got[:-1]) == {0.3}, got
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
