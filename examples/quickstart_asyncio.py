@@ -13,8 +13,10 @@ import sys
 import ros_mobile_bridge as rmb
 
 
-async def main(url: str) -> None:
-    async with rmb.connect(url) as robot:
+async def main(url: str) -> int:
+    # Ctrl-C, SIGTERM (timeout, systemd, docker stop) or SIGHUP cancel the
+    # block below, so the teardown still sends its zero Twist.
+    async with rmb.cancel_on_signals() as stop, rmb.connect(url) as robot:
         print("topics:", [t.name for t in robot.topics])
         async with robot.subscribe("/odom", max_hz=10) as sub:
             async for msg in sub:
@@ -29,7 +31,8 @@ async def main(url: str) -> None:
             )
             await asyncio.sleep(0.1)
     # leaving the block sent a zero Twist to /cmd_vel, then closed the socket
+    return stop.exit_code or 0  # 128 + signal when a signal ended it
 
 
 if __name__ == "__main__":
-    asyncio.run(main(sys.argv[1] if len(sys.argv) > 1 else "ws://127.0.0.1:8765"))
+    sys.exit(asyncio.run(main(sys.argv[1] if len(sys.argv) > 1 else "ws://127.0.0.1:8765")))

@@ -13,8 +13,9 @@ import trio
 import ros_mobile_bridge as rmb
 
 
-async def main(url: str) -> None:
-    async with rmb.connect(url) as robot:
+async def main(url: str) -> int:
+    # SIGINT, SIGTERM and SIGHUP cancel the block (the teardown still runs)
+    async with rmb.cancel_on_signals() as stop, rmb.connect(url) as robot:
         async with trio.open_nursery() as nursery:
 
             async def battery() -> None:
@@ -25,7 +26,8 @@ async def main(url: str) -> None:
 
             nursery.start_soon(battery)
         print("parameters:", await robot.list_parameters())
+    return stop.exit_code or 0
 
 
 if __name__ == "__main__":
-    trio.run(main, sys.argv[1] if len(sys.argv) > 1 else "ws://127.0.0.1:8765")
+    sys.exit(trio.run(main, sys.argv[1] if len(sys.argv) > 1 else "ws://127.0.0.1:8765"))

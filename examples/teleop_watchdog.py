@@ -1,9 +1,10 @@
 """A teleoperation loop that is safe to interrupt.
 
 Velocity commands go out at control priority (ahead of queued data, newest
-value wins). Ctrl-C, an exception or a cancelled scope all leave the
-``connect()`` block, whose teardown sends a zero Twist while the socket is
-still open. If the network itself is gone, nothing the client does can reach
+value wins). Ctrl-C, SIGTERM or SIGHUP (``rmb.cancel_on_signals``), an
+exception or a cancelled scope all leave the ``connect()`` block, whose
+teardown sends a zero Twist while the socket is still open; a second signal
+exits at once. If the network itself is gone, nothing the client does can reach
 the robot: the robot must run its own cmd_vel watchdog (the demo robot stops
 0.5 s after its last command).
 
@@ -20,9 +21,12 @@ import anyio
 import ros_mobile_bridge as rmb
 
 
-async def main(url: str, seconds: float) -> None:
+async def main(url: str, seconds: float) -> int:
     options = rmb.ClientOptions(stop_topics=("/cmd_vel",), teardown_timeout=2.0)
-    async with rmb.connect(url, options=options) as robot:
+    async with (
+        rmb.cancel_on_signals() as stop,
+        rmb.connect(url, options=options) as robot,
+    ):
         await robot.advertise("/cmd_vel", "geometry_msgs/msg/Twist")  # no set-up pause later
         with anyio.move_on_after(seconds):
             while True:
@@ -33,9 +37,13 @@ async def main(url: str, seconds: float) -> None:
                     priority="control",
                 )
                 await anyio.sleep(0.05)
+    if stop.signal is not None:
+        print(f"stopped by {stop.signal.name}: zero Twist sent on teardown")
+        return 128 + stop.signal
     print("stopped: zero Twist sent on teardown")
+    return 0
 
 
 if __name__ == "__main__":
     url = sys.argv[1] if len(sys.argv) > 1 else "ws://127.0.0.1:8765"
-    anyio.run(main, url, float(sys.argv[2]) if len(sys.argv) > 2 else 2.0)
+    sys.exit(anyio.run(main, url, float(sys.argv[2]) if len(sys.argv) > 2 else 2.0))

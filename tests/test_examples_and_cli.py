@@ -101,3 +101,40 @@ def test_rmb_reports_errors_plainly() -> None:
     bad = run("-m", "ros_mobile_bridge", "topics", "host:notaport")
     assert bad.returncode == 2
     assert "invalid port" in bad.stderr
+
+
+@pytest.mark.parametrize(
+    ("schema", "data", "named"),
+    [
+        ("geometry_msgs/msg/Twst", '{"linear": {"x": 0.3}}', "geometry_msgs/msg/Twst"),
+        ("std_msgs/msg/String", '{"data": "go"}', "std_msgs/msg/String"),
+    ],
+)
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_rmb_pub_refuses_a_wrong_type_on_cmd_vel_in_one_line(
+    robot: DemoRobot, schema: str, data: str, named: str, backend: str
+) -> None:
+    before = len(robot.received_cmd_vel())
+    pub = run(
+        "-m", "ros_mobile_bridge", "--backend", backend, "pub", robot.url, "/cmd_vel", schema, data
+    )
+    assert pub.returncode == 1
+    lines = pub.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rmb: SchemaError: "), pub.stderr
+    assert named in lines[0]
+    assert robot.received_cmd_vel()[before:] == []  # nothing reached the robot
+
+
+def test_rmb_pub_no_velocity_check_sends_what_it_is_told(robot: DemoRobot) -> None:
+    pub = run(
+        "-m",
+        "ros_mobile_bridge",
+        "pub",
+        robot.url,
+        "/cmd_vel",
+        "std_msgs/msg/String",
+        '{"data": "go"}',
+        "--no-velocity-check",
+    )
+    assert pub.returncode == 0, pub.stderr
+    assert pub.stdout.count("publishing #") == 1

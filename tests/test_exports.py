@@ -90,6 +90,20 @@ def test_connect_and_parse_target_are_in_all(name: str) -> None:
     assert name in rmb.__all__
 
 
+@pytest.mark.parametrize(
+    ("name", "module"),
+    [("cancel_on_signals", "_signals"), ("SignalScope", "_signals")],
+)
+def test_signal_helper_is_public(name: str, module: str) -> None:
+    assert name in rmb.__all__
+    assert getattr(rmb, name).__module__ == f"{PACKAGE}.{module}"
+
+
+def test_register_type_and_check_velocity_are_public_api() -> None:
+    assert rmb.Client.register_type.__doc__
+    assert "check_velocity" in inspect.signature(rmb.Client.publish).parameters
+
+
 def test_star_import_gives_exactly_all() -> None:
     namespace: dict[str, object] = {}
     exec(f"from {PACKAGE} import *", namespace)  # the point of the test

@@ -25,6 +25,8 @@ from ._errors import ServiceTimeout as ServiceTimeout
 from ._options import BreakerPolicy as BreakerPolicy
 from ._options import ClientOptions as ClientOptions
 from ._options import ReconnectPolicy as ReconnectPolicy
+from ._signals import SignalScope as SignalScope
+from ._signals import cancel_on_signals as cancel_on_signals
 from ._types import DEFAULT_PORTS as DEFAULT_PORTS
 from ._types import ActionOutcome as ActionOutcome
 from ._types import Compression as Compression
@@ -81,6 +83,7 @@ __all__ = [
     "ServiceError",
     "ServiceInfo",
     "ServiceTimeout",
+    "SignalScope",
     "Status",
     "Subscription",
     "SubscriptionState",
@@ -88,6 +91,7 @@ __all__ = [
     "ThrottleMode",
     "TopicInfo",
     "__version__",
+    "cancel_on_signals",
     "connect",
     "lag",
     "parse_target",

@@ -21,7 +21,14 @@ import anyio.abc
 import anyio.lowlevel
 
 from ._action import ActionGoal
-from ._errors import ConnectError, DecodeError, NotConnected, NotSupportedError, ServiceTimeout
+from ._errors import (
+    ConnectError,
+    DecodeError,
+    NotConnected,
+    NotSupportedError,
+    SchemaError,
+    ServiceTimeout,
+)
 from ._options import ClientOptions
 from ._types import (
     Compression,
@@ -33,7 +40,7 @@ from ._types import (
     TopicInfo,
 )
 from .backends import Backend, SubscribeHints
-from .codec import FieldDef, same_type_name
+from .codec import CodecRegistry, FieldDef, same_type_name
 from .flow import (
     AdaptiveThrottle,
     Bucket,
@@ -130,6 +137,10 @@ class Client:
         self._writing = False
         self._wrote = anyio.Event()  # set after each frame the writer sends
         self._inbound = 0
+        self._user_types: dict[str, tuple[str, str | bytes]] = {}
+        self._user_types_in: Backend | None = None  # the backend that holds them
+        self._publish_checked: set[tuple[str, str, bool]] = set()
+        self._publish_checked_for: tuple[Backend, list[TopicInfo]] | None = None
 
     # -- lifecycle ----------------------------------------------------------
     @property
@@ -662,9 +673,26 @@ class Client:
         await self._backend.unadvertise(topic)
 
     async def publish(
-        self, topic: str, schema: str, data: Mapping[str, Any], *, priority: Priority = "data"
+        self,
+        topic: str,
+        schema: str,
+        data: Mapping[str, Any],
+        *,
+        priority: Priority = "data",
+        check_velocity: bool = True,
     ) -> None:
         """Publish ``data`` (a dict; missing fields are zero) on ``topic``.
+
+        Before anything is advertised or sent, the type is checked and a
+        mistake raises :class:`~ros_mobile_bridge.SchemaError` naming it: a
+        type with no definition (none bundled, none from the server - a
+        channel's schema, the graph's topic types, rosbridge's
+        ``/rosapi/message_details`` - and none given to
+        :meth:`register_type`); a type that contradicts the one the graph
+        reports for ``topic`` (:attr:`topics`); anything but
+        ``geometry_msgs/msg/Twist`` or ``TwistStamped`` on a velocity topic
+        (a name ending in ``cmd_vel``, or one in ``options.stop_topics``)
+        unless ``check_velocity=False``.
 
         The first publish on a topic advertises it (and waits
         ``options.advertise_settle``). ``priority="control"`` puts the frame
@@ -680,7 +708,10 @@ class Client:
             raise ValueError(f"priority must be 'data' or 'control', got {priority!r}")
         if not isinstance(data, Mapping):
             raise TypeError(f"data must be a mapping (dict), not {type(data).__name__}")
+        if not isinstance(check_velocity, bool):
+            raise TypeError("check_velocity must be a bool")
         self._require_connected()
+        await self._check_publish(topic, schema, check_velocity)
         backend = self._backend
         ready = backend.advertised(topic)
         if ready is None or not same_type_name(ready, schema):
@@ -698,6 +729,88 @@ class Client:
             await self._send_control()
         else:
             await self._outbox.put_data(topic, message)
+
+    async def _check_publish(self, topic: str, schema: str, check_velocity: bool) -> None:
+        """The type checks of :meth:`publish` (``SchemaError``); nothing is
+        sent unless resolving ``schema`` needs the server's definition. A
+        passed check is remembered until the graph or the connection
+        changes, so the hot path pays one set lookup."""
+        backend = self._backend
+        graph = self._topics.value
+        seen = self._publish_checked_for
+        if seen is None or seen[0] is not backend or seen[1] is not graph:
+            self._publish_checked = set()
+            self._publish_checked_for = (backend, graph)
+        key = (topic, schema, check_velocity)
+        if key in self._publish_checked:
+            return
+        self._apply_user_types(backend)
+        velocity_topic = topic.endswith("cmd_vel") or topic in self._options.stop_topics
+        resolved = backend.codecs.resolves(schema) or any(
+            same_type_name(t.schema_name, schema) for t in graph
+        )
+        if not resolved and not (check_velocity and velocity_topic):
+            # (a velocity topic refuses an unresolved type anyway: no round trip)
+            fetch = getattr(backend, "fetch_definition", None)
+            if fetch is not None:
+                resolved = bool(await fetch(schema))
+        if not resolved:
+            raise SchemaError(
+                f"unknown type {schema!r} for {topic}: no definition is bundled, the server "
+                "offers none and none was registered (Client.register_type); misspelled?"
+            )
+        for info in graph:
+            if (
+                info.name == topic
+                and info.schema_name
+                and not same_type_name(info.schema_name, schema)
+            ):
+                raise SchemaError(
+                    f"{topic} carries {info.schema_name!r} on the robot; publishing {schema!r} "
+                    "there contradicts it"
+                )
+        if check_velocity and velocity_topic and not _is_velocity_type(schema):
+            raise SchemaError(
+                f"{topic} is a velocity topic and {schema!r} is not geometry_msgs/msg/Twist or "
+                "TwistStamped: the robot would not obey it, nor stop on it "
+                "(check_velocity=False, or rmb pub --no-velocity-check, sends it anyway)"
+            )
+        self._publish_checked.add(key)
+
+    def register_type(
+        self, name: str, definition: str | bytes, *, encoding: str = "ros2msg"
+    ) -> None:
+        """Make message type ``name`` known to this client (and to every
+        connection it re-opens), for publishing a type that is neither
+        bundled nor offered by the server, and for :meth:`schema_template`.
+
+        ``definition`` is ``.msg`` text (``encoding="ros2msg"``; nested types
+        it uses must be bundled, registered before, or appended in the
+        concatenated ``=====`` / ``MSG: pkg/msg/Type`` form) or IDL text
+        (``"ros2idl"``). It is checked at once: ``SchemaError`` when it does
+        not parse or uses an unknown type, ``ValueError`` / ``TypeError`` for
+        bad arguments. A server's own definition of the same name wins for
+        the messages it sends."""
+        _check_schema(name)
+        if not isinstance(definition, str | bytes):
+            raise TypeError(f"definition must be str or bytes, not {type(definition).__name__}")
+        if encoding not in ("ros2msg", "ros2idl"):
+            raise ValueError(f"encoding must be 'ros2msg' or 'ros2idl', got {encoding!r}")
+        scratch = CodecRegistry()
+        for known, (known_encoding, text) in self._user_types.items():
+            scratch.add_schema(known, known_encoding, text)
+        scratch.add_schema(name, encoding, definition)
+        scratch.encoder(name, "cdr")  # every type it uses resolves
+        self._user_types[name] = (encoding, definition)
+        self._user_types_in = None
+        self._publish_checked = set()
+        self._apply_user_types(self._backend)
+
+    def _apply_user_types(self, backend: Backend) -> None:
+        if self._user_types and self._user_types_in is not backend:
+            for name, (encoding, text) in self._user_types.items():
+                backend.codecs.add_schema(name, encoding, text)
+            self._user_types_in = backend
 
     async def publish_zero_twist(self, topic: str = "/cmd_vel", schema: str | None = None) -> None:
         """Publish a zero velocity at control priority. ``schema`` defaults to

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
+import signal
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -20,6 +22,7 @@ import anyio
 from . import _connect
 from ._errors import RosBridgeError
 from ._options import ClientOptions
+from ._signals import cancel_on_signals
 from ._types import Message, Priority
 
 __all__ = ["main"]
@@ -138,16 +141,28 @@ def _print_message(msg: Message, *, as_json: bool, full: bool) -> None:
 async def _pub(args: argparse.Namespace) -> int:
     data = _parse_json_arg(args.data, "DATA")
     priority: Priority = "control" if args.control else "data"
+    rate = 1.0 if args.rate is None else args.rate
+    if not rate > 0 or math.isinf(rate):
+        raise ValueError(f"--rate must be a positive number of Hz, got {rate!r}")
+    # -r without -n publishes until stopped (a signal), like ``ros2 topic pub``
+    count = args.count if args.count is not None else (0 if args.rate is not None else 1)
+    if count < 0:
+        raise ValueError(f"--count must be 0 (until stopped) or more, got {count}")
     async with _connect.connect(args.url, protocol=args.protocol, options=_options(args)) as robot:
         sent = 0
-        period = 1.0 / args.rate if args.rate else 0.0
         while True:
-            await robot.publish(args.topic, args.type, data, priority=priority)
+            await robot.publish(
+                args.topic,
+                args.type,
+                data,
+                priority=priority,
+                check_velocity=not args.no_velocity_check,
+            )
             sent += 1
             print(f"publishing #{sent}: {json.dumps(data)}", flush=True)
-            if sent >= args.count:
+            if count and sent >= count:
                 break
-            await anyio.sleep(period)
+            await anyio.sleep(1.0 / rate)
     return 0
 
 
@@ -264,6 +279,12 @@ def _readout(state: Mapping[str, Any], rates: _Rates) -> str:
     return f"  {pose}  {batt}  | {rates.line()}"
 
 
+async def _serve_until_signalled(url: str) -> None:
+    # said once the signals are ours, so a supervisor may stop us from here on
+    print(f"demo robot serving Foxglove WebSocket on {url} (Ctrl-C to stop)", flush=True)
+    await anyio.sleep_forever()
+
+
 def _demo(args: argparse.Namespace) -> int:
     try:
         from .demo import DemoRobot
@@ -277,22 +298,17 @@ def _demo(args: argparse.Namespace) -> int:
     robot.start()
     try:
         if args.serve:
-            print(
-                f"demo robot serving Foxglove WebSocket on {robot.url} (Ctrl-C to stop)", flush=True
-            )
-            try:
-                while True:
-                    time.sleep(3600)
-            except KeyboardInterrupt:
-                return 0
+            return _run_signalled(_serve_until_signalled, robot.url, backend=args.backend)
         print(f"demo robot started on {robot.url}", flush=True)
-        anyio.run(
+        code = _run_signalled(
             _drive_demo,
             robot.url,
             args.seconds,
             lambda s: print(s, flush=True),
             backend=args.backend,
         )
+        if code:
+            return code
         # the zero Twist is the last command the robot received
         deadline = time.monotonic() + 2.0
         while time.monotonic() < deadline:
@@ -321,6 +337,36 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 # -- entry point ----------------------------------------------------------------------
+
+
+def _run_signalled(fn: Callable[..., Any], *args: Any, backend: str) -> int:
+    """Run ``fn(*args)`` on ``backend``, cancelled by SIGINT, SIGTERM or
+    SIGHUP (so every ``connect()`` block runs its teardown); the exit status
+    is 128 + signal then, else what ``fn`` returned (None: 0). A second
+    signal ends the process at once."""
+
+    async def signalled() -> int:
+        code: Any = 0
+        async with cancel_on_signals() as stop:
+            code = await fn(*args)
+        if stop.exit_code is not None:
+            return stop.exit_code
+        return int(code or 0)
+
+    return int(anyio.run(signalled, backend=backend))
+
+
+def _stdout_closed() -> int:
+    """stdout's reader went away (``rmb echo ... | head -1``): the teardown
+    already ran as the error left the ``connect()`` block. Point stdout at
+    the null device so the interpreter's last flush cannot fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
+    return 128 + signal.SIGPIPE if hasattr(signal, "SIGPIPE") else 1
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -374,9 +420,22 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("topic")
     p.add_argument("type", help="e.g. geometry_msgs/msg/Twist")
     p.add_argument("data", help='JSON object, e.g. \'{"linear": {"x": 0.1}}\'')
-    p.add_argument("-r", "--rate", type=float, default=1.0, help="Hz (default 1)")
-    p.add_argument("-n", "--count", type=int, default=1, help="messages to send (default 1)")
+    p.add_argument(
+        "-r", "--rate", type=float, default=None, help="Hz (default 1); alone: until stopped"
+    )
+    p.add_argument(
+        "-n",
+        "--count",
+        type=int,
+        default=None,
+        help="messages to send, 0: until stopped (default 1, or 0 with --rate)",
+    )
     p.add_argument("--control", action="store_true", help="control priority")
+    p.add_argument(
+        "--no-velocity-check",
+        action="store_true",
+        help="allow a type other than Twist/TwistStamped on a velocity topic (*cmd_vel)",
+    )
     p.set_defaults(run_async=_pub)
 
     p = sub.add_parser("call", help="call a service")
@@ -400,7 +459,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if hasattr(args, "run"):
             return int(args.run(args))
-        return int(anyio.run(args.run_async, args, backend=args.backend))
+        return _run_signalled(args.run_async, args, backend=args.backend)
+    except BrokenPipeError:
+        return _stdout_closed()
     except RosBridgeError as exc:
         print(f"rmb: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1

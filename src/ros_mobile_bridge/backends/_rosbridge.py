@@ -541,6 +541,15 @@ class RosbridgeBackend:
             self._no_definition.add(schema)  # asked once per connection
             self._log.warning("no definition of %s from /rosapi/message_details: %s", schema, exc)
 
+    async def fetch_definition(self, schema: str) -> bool:
+        """Whether a definition of ``schema`` is known, asking the bridge
+        (``/rosapi/message_details``, once per connection and type) when it
+        is not. The client asks before publishing a type it cannot resolve
+        from the bundled definitions, the graph or the user's own."""
+        if schema not in self._no_definition and not self.codecs.has_schema(schema):
+            await self._fetch_definition(schema)
+        return self.codecs.resolves(schema)
+
     async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
         if hints.compression is not None and hints.compression not in COMPRESSIONS:
             raise ValueError(f"compression must be one of {COMPRESSIONS} or None")

@@ -14,7 +14,13 @@ from rosbags.typesys.store import Typestore
 from .._errors import DecodeError, SchemaError
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
 from ._model import FieldDef, MsgDef
-from ._names import canonical_name, is_valid_type_name, lookup_candidates, service_type_names
+from ._names import (
+    canonical_name,
+    is_valid_type_name,
+    lookup_candidates,
+    same_type_name,
+    service_type_names,
+)
 from ._parse import parse_jsonschema, parse_ros2idl, parse_ros2msg
 from ._templates import json_definition, json_template, ros_template
 from ._wellknown import builtin_definitions, wellknown_definitions
@@ -286,6 +292,17 @@ class CodecRegistry:
                 return self._find(name, ros_only=False) is not None
         except (TypeError, ValueError):
             return False
+
+    def resolves(self, name: str) -> bool:
+        """Like :meth:`has_schema`, but an explicit kind segment must match
+        (``pkg/srv/Twist`` does not find ``pkg/msg/Twist``): whether a
+        publish of type ``name`` has a definition to go by."""
+        try:
+            with self._lock:
+                found = self._find(name, ros_only=False)
+        except (TypeError, ValueError):
+            return False
+        return found is not None and same_type_name(found[0], name)
 
     def _find(self, name: str, *, ros_only: bool) -> tuple[str, MsgDef | _JsonSchema] | None:
         layers: tuple[Mapping[str, MsgDef | _JsonSchema], ...] = (
