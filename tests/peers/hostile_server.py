@@ -221,6 +221,7 @@ class Foxglove:
         self.client_channels: dict[int, str] = {}
         self._subscribed: dict[int, trio.Event] = {}
         self._next_channel = 1
+        self.client_advertised = trio.Event()
         self.topics = dict(topics or {"/chatter": "std_msgs/msg/String"})
 
     def channel(self, topic: str, schema_name: str, schema: str | None = None) -> dict[str, Any]:
@@ -274,6 +275,7 @@ class Foxglove:
                 elif obj.get("op") == "advertise":
                     for c in obj["channels"]:
                         self.client_channels[c["id"]] = c["topic"]
+                    self.client_advertised.set()
         except ConnectionClosed:
             return
 
@@ -315,6 +317,7 @@ class Rosbridge:
         self._subscribed: dict[str, trio.Event] = {}
         self.on_call: Callable[[dict[str, Any]], Awaitable[None]] | None = None
         self.on_goal: Callable[[dict[str, Any]], Awaitable[None]] | None = None
+        self.client_advertised = trio.Event()
 
     async def greet(self) -> None:
         """rosbridge says nothing first."""
@@ -336,6 +339,8 @@ class Rosbridge:
                 elif op == "subscribe":
                     self.subs.add(obj["topic"])
                     self._event(obj["topic"]).set()
+                elif op == "advertise":
+                    self.client_advertised.set()
                 elif op == "unsubscribe":
                     self.subs.discard(obj["topic"])
                     self._subscribed.pop(obj["topic"], None)
