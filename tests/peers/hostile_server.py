@@ -87,7 +87,6 @@ class GatedStream(trio.abc.HalfCloseableStream):
         self.inner = inner
         self._lock = trio.Lock()
         self._reading = True
-        self._resumed = trio.Event()
 
     def stop_reading(self) -> None:
         self._reading = False
