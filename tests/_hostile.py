@@ -1,0 +1,62 @@
+"""Helpers shared by the ``test_hostile_*`` tests (the hostile server is
+``peers.hostile``)."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+from typing import Any
+
+import anyio
+import sniffio
+
+import ros_mobile_bridge as rmb
+
+WIRE = {"foxglove": "foxglove-ws", "rosbridge": "rosbridge"}
+
+
+def options(**kw: Any) -> rmb.ClientOptions:
+    base: dict[str, Any] = {
+        "connect_timeout": 5.0,
+        "reconnect": None,
+        "discovery_grace": 0.05,
+        "advertise_settle": 0.0,
+        "teardown_timeout": 1.0,
+        "latency_probe_interval": 0,
+    }
+    base.update(kw)
+    return rmb.ClientOptions(**base)
+
+
+async def until_data(sub: rmb.Subscription, data: str, timeout: float = 10.0) -> rmb.Message:
+    """The first message of ``sub`` whose ``data`` field is ``data``."""
+    with anyio.fail_after(timeout):
+        async for msg in sub:
+            if msg.data.get("data") == data:
+                return msg
+    raise AssertionError(f"the subscription ended before {data!r}")
+
+
+def task_count() -> int:
+    """Tasks alive in the running event loop (asyncio or trio)."""
+    if sniffio.current_async_library() == "asyncio":
+        return len(asyncio.all_tasks())
+    import trio
+
+    def count(task: trio.lowlevel.Task) -> int:
+        return 1 + sum(count(t) for n in task.child_nurseries for t in n.child_tasks)
+
+    return count(trio.lowlevel.current_root_task())
+
+
+def fd_count() -> int:
+    return len(os.listdir("/proc/self/fd"))
+
+
+def rss_bytes() -> int:
+    """Resident set size of this process."""
+    with open("/proc/self/status", encoding="ascii") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    raise RuntimeError("no VmRSS in /proc/self/status")

@@ -1,0 +1,25 @@
+"""Foxglove: after the greeting (``/chatter``), one advertise of
+``channels`` (default 100,000) String channels ``/c/<n>``, then after
+``delay`` seconds (default 1) a small advertise of ``/late``."""
+
+from __future__ import annotations
+
+import trio
+
+from peers.hostile_server import Conn, Foxglove, stream_strings
+
+PROTOCOL = "foxglove"
+
+
+async def run(conn: Conn) -> None:
+    b = Foxglove(conn)
+    await b.greet()
+    count = int(conn.arg("channels", "100000"))
+    await b.advertise([b.channel(f"/c/{n}", "std_msgs/msg/String") for n in range(count)])
+    conn.record("sent_channels", count=count)
+    async with trio.open_nursery() as nursery:
+        nursery.start_soon(b.serve)
+        nursery.start_soon(stream_strings, b, "/chatter")
+        await trio.sleep(float(conn.arg("delay", "1")))
+        await b.advertise([b.channel("/late", "std_msgs/msg/String")])
+        conn.record("sent_late")
