@@ -5,6 +5,7 @@ reading while the client streams."""
 
 from __future__ import annotations
 
+import json
 import tracemalloc
 
 import anyio
@@ -86,10 +87,38 @@ async def test_a_fragmented_message_over_max_size_closes_with_1009() -> None:
     assert closes[0].code == 1009
 
 
-async def test_the_servers_close_code_and_reason_reach_last_error_and_the_iterators() -> None:
+_SET_BOOL = json.dumps(
+    {
+        "op": "advertiseServices",
+        "services": [
+            {
+                "id": 3,
+                "name": "/set_flag",
+                "type": "std_srvs/srv/SetBool",
+                "request": {
+                    "encoding": "cdr",
+                    "schemaName": "std_srvs/srv/SetBool_Request",
+                    "schemaEncoding": "ros2msg",
+                    "schema": "bool data",
+                },
+                "response": {
+                    "encoding": "cdr",
+                    "schemaName": "std_srvs/srv/SetBool_Response",
+                    "schemaEncoding": "ros2msg",
+                    "schema": "bool success\nstring message",
+                },
+            }
+        ],
+    }
+)
+
+
+async def test_the_servers_close_code_and_reason_reach_last_error_and_the_waiters() -> None:
     async def crash(peer: Peer) -> None:
         await peer.send_text(SERVER_INFO)
-        await anyio.sleep(0.3)
+        await peer.send_text(_SET_BOOL)
+        while not isinstance(await peer.recv(), bytes):  # the service call request
+            pass
         peer.proto.send_close(1011, "bridge crashed")
         await peer._flush()
         await peer.drain()  # a well-behaved server: it ends TCP after the reply
@@ -98,8 +127,11 @@ async def test_the_servers_close_code_and_reason_reach_last_error_and_the_iterat
     async with scripted_server(crash) as url:
         with anyio.fail_after(10):
             async with rmb.connect(url, options=options) as robot:
+                await wait_until(lambda: robot.services, what="the service")
                 async with robot.subscribe("/never") as sub:
-                    with pytest.raises(rmb.NotConnected) as caught:
+                    with pytest.raises(rmb.NotConnected) as call_error:
+                        await robot.call_service("/set_flag", {"data": True}, timeout=10)
+                    with pytest.raises(rmb.NotConnected) as iterator_error:
                         async for _ in sub:
                             pass
                 assert robot.status == "error"
@@ -107,7 +139,8 @@ async def test_the_servers_close_code_and_reason_reach_last_error_and_the_iterat
     assert isinstance(error, ConnectionLost)
     assert "connection closed by server: 1011 bridge crashed" in str(error), str(error)
     assert (error.code, error.reason) == (1011, "bridge crashed")
-    assert "1011 bridge crashed" in str(caught.value), str(caught.value)
+    assert "1011 bridge crashed" in str(call_error.value), str(call_error.value)
+    assert "1011 bridge crashed" in str(iterator_error.value), str(iterator_error.value)
 
 
 async def test_a_close_frame_with_the_socket_held_open_ends_the_connection() -> None:
