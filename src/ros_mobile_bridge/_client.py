@@ -51,6 +51,7 @@ from .flow import (
     ThrottleMode,
     Watchable,
     Watcher,
+    WireMessage,
     current_monitor,
     participate,
     resolve_presets,
@@ -97,6 +98,32 @@ def _check_timeout(timeout: object) -> float | None:
     return float(timeout)
 
 
+class _Receipt:
+    """The fate of one control publish: settled once its frame, or the newer
+    value for the same topic that replaced it in the outbox, is written to
+    the socket (``error`` None), or once it cannot be (``error`` says why)."""
+
+    __slots__ = ("covers", "done", "error")
+
+    def __init__(self) -> None:
+        self.done = anyio.Event()
+        self.error: ConnectError | None = None
+        self.covers: list[_Receipt] = []
+        """Older receipts for the same topic whose frames this one replaced."""
+
+    def absorb(self, older: _Receipt) -> None:
+        """This receipt's frame replaced ``older``'s: settle them together."""
+        self.covers.append(older)
+        self.covers.extend(older.covers)
+        older.covers = []
+
+    def settle(self, error: ConnectError | None) -> None:
+        for receipt in (self, *self.covers):
+            receipt.error = error
+            receipt.done.set()
+        self.covers = []
+
+
 class Client:
     """A connection to one robot. Obtain it from :func:`ros_mobile_bridge.connect`.
 
@@ -131,6 +158,7 @@ class Client:
         self._subs: dict[str, list[Subscription]] = {}
         self._hints: dict[Subscription, SubscribeHints] = {}
         self._outbox = Outbox()
+        self._receipts: dict[str, tuple[WireMessage, _Receipt]] = {}  # control frames queued
         self._velocity: dict[str, str] = {}
         self._task_scopes: dict[str, anyio.CancelScope] = {}
         self._closing = False
@@ -234,6 +262,9 @@ class Client:
         self._last_error = error
         self._backend.fail_pending(NotConnected(f"disconnected: {error}"))
         dropped = self._outbox.clear()
+        receipts, self._receipts = self._receipts, {}
+        for _message, receipt in receipts.values():
+            receipt.settle(error)
         if dropped:
             # a velocity command replayed seconds later could move the robot
             self._log.warning("dropped %d queued outgoing frames with the connection", dropped)
@@ -324,7 +355,7 @@ class Client:
             backend = self._backend
             self._writing = True  # a frame taken from the outbox is not lost
             try:
-                await backend.send(message)
+                await self._write_taken(backend, message)
             except ConnectError:
                 if not await self._next_connection(backend):
                     return
@@ -385,8 +416,7 @@ class Client:
         await self._drain_writer(self._options.teardown_timeout / 2)
         self._task_scopes["rmb-writer"].cancel()  # from here on the teardown writes
         try:
-            while (message := outbox.pop_control()) is not None:
-                await backend.send(message)
+            await self._send_control()
             dropped = outbox.drop_data()
             if dropped:
                 self._log.warning("teardown: %d queued data frames were not sent", dropped)
@@ -466,21 +496,64 @@ class Client:
 
     async def _send_control(self) -> None:
         """Write every queued control frame now (the writer task would only
-        get to them on its next turn)."""
+        get to them on its next turn). Raises ``ConnectError`` when a write
+        fails: the connection is lost (the reader handles that)."""
         outbox = self._outbox
-        send = self._backend.send
+        backend = self._backend
+        while (message := outbox.pop_control()) is not None:
+            await self._write_taken(backend, message)
+
+    def _queue_control(self, topic: str, message: WireMessage) -> _Receipt:
+        """Put a control frame in the outbox; its receipt settles when it (or
+        a newer value for ``topic``) is written, or cannot be."""
+        receipt = _Receipt()
+        queued = self._receipts.get(topic)
+        if queued is not None:  # still unsent: the outbox replaces it
+            receipt.absorb(queued[1])
+        self._outbox.put_control(topic, message)
+        self._receipts[topic] = (message, receipt)
+        return receipt
+
+    async def _write_taken(self, backend: Backend, message: WireMessage) -> None:
+        """Write ``message``, just taken from the outbox, and settle its
+        receipt if it is a control frame. Cancelled before the write began
+        (a write, once begun, is finished), a control frame goes back to the
+        outbox unless a newer value for its topic is queued already."""
+        taken: tuple[str, _Receipt] | None = None
+        if self._receipts:
+            for topic, (queued, receipt) in self._receipts.items():
+                if queued is message:
+                    del self._receipts[topic]
+                    taken = topic, receipt
+                    break
         try:
-            while (message := outbox.pop_control()) is not None:
-                await send(message)
-        except ConnectError:
-            pass  # the reader handles the loss and reports it
+            await backend.send(message)
+        except ConnectError as exc:
+            if taken is not None:
+                taken[1].settle(exc)
+            raise
+        except BaseException:
+            if taken is not None:
+                topic, receipt = taken
+                newer = self._receipts.get(topic)
+                if newer is not None:
+                    newer[1].absorb(receipt)
+                elif backend is self._backend and self._status.value == "connected":
+                    self._outbox.put_control(topic, message)
+                    self._receipts[topic] = (message, receipt)
+                else:
+                    receipt.settle(ConnectError("the connection closed before it was written"))
+            raise
+        if taken is not None:
+            taken[1].settle(None)
 
     async def before_inbound(self) -> None:
         """Backend callback, before each inbound message: send pending control
         frames first, and every 64 messages let the consumers run, so a burst
         read in one go does not overflow their queues before they wake."""
         if self._outbox.has_control:
-            await self._send_control()
+            with contextlib.suppress(ConnectError):  # the reader's next read reports it
+                await self._send_control()
         self._inbound += 1
         if self._inbound >= _READER_YIELD_EVERY:
             self._inbound = 0
@@ -725,8 +798,21 @@ class Client:
         if priority == "control":
             # Queued, then written at once: not behind the writer's or the
             # reader's next turn. Control frames queued meanwhile go first.
-            self._outbox.put_control(topic, message)
-            await self._send_control()
+            # Returns once this frame (or a newer value for the topic that
+            # replaced it) is written; another task may be writing it.
+            receipt = self._queue_control(topic, message)
+            error: ConnectError | None
+            try:
+                await self._send_control()
+            except ConnectError as exc:  # lost: before this frame's turn, or on it
+                error = receipt.error if receipt.done.is_set() else exc
+            else:
+                await receipt.done.wait()
+                error = receipt.error
+            if error is not None:
+                raise NotConnected(
+                    f"disconnected: {error} (the control frame for {topic} was not sent)"
+                ) from error
         else:
             await self._outbox.put_data(topic, message)
 

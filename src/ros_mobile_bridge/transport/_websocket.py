@@ -30,6 +30,15 @@ from .._errors import ConnectError
 __all__ = ["ConnectionLost", "HandshakeRejected", "WebSocket", "connect_websocket"]
 
 _READ_CHUNK: Final = 1 << 20
+_FEED_STEP: Final = 16 * 1024
+"""Bytes handed to the WebSocket parser at a time. The parser turns all it is
+given into frame objects at once (about 150 bytes of memory each): a 1 MiB
+read of 1-byte continuation frames would be 350,000 of them. Fed in steps,
+the frames of one step are handled and freed before the next is parsed."""
+_FEED_STEP_MAX: Final = 64 * 1024
+"""Inside a large frame (a step that completes nothing) the step doubles up
+to this: as fast as one step for a camera image, and at most ~22,000 frame
+objects (~3 MB) parsed at once whatever follows it."""
 
 
 class HandshakeRejected(ConnectError):
@@ -46,19 +55,23 @@ class HandshakeRejected(ConnectError):
 
 class ConnectionLost(ConnectError):
     """The WebSocket closed: by the peer, by a protocol error, by a frame above
-    the size limit, or by a missed keep-alive. ``code`` is the close code when
-    one was exchanged."""
+    the size limit, or by a missed keep-alive. ``code`` and ``reason`` are the
+    close code and reason when a close frame was exchanged (the server's when
+    it closed: ``connection closed by server: 1011 bridge crashed``), else
+    ``None``."""
 
-    def __init__(self, message: str, code: int | None = None) -> None:
+    def __init__(self, message: str, code: int | None = None, reason: str | None = None) -> None:
         self.code = code
+        self.reason = reason
         super().__init__(message)
 
 
 @dataclass(slots=True)
 class _Pending:
+    """A fragmented message being reassembled into one buffer."""
+
     opcode: Opcode
-    parts: list[bytes | bytearray]
-    size: int
+    data: bytearray
 
 
 class WebSocket:
@@ -76,8 +89,14 @@ class WebSocket:
         self._pongs: dict[bytes, anyio.Event] = {}
         self._closed_reason: ConnectionLost | None = None
         self.subprotocol: str | None = protocol.subprotocol
+        self._stream_closed = False
         self.send_timeout = 10.0
         """Seconds one send may take before the connection is declared lost."""
+        self.close_timeout = 1.0
+        """Seconds the peer gets to end the TCP connection once the close
+        handshake is done (or we failed the connection) before the client
+        closes it: a server that sends a close frame and keeps the socket
+        open cannot hold the reader."""
 
     # -- receiving ---------------------------------------------------------
     async def receive(self) -> str | bytes | bytearray:
@@ -85,7 +104,10 @@ class WebSocket:
         ``bytearray`` that nothing else holds for binary.
 
         Fragmented messages are reassembled. Raises :class:`ConnectionLost`
-        once the connection is closed (the close is answered first)."""
+        once the connection is closed: messages received before the peer's
+        close frame come first, the close is answered, and the peer gets
+        :attr:`close_timeout` seconds to end the TCP connection before the
+        client ends it."""
         text, data = await self.receive_raw()
         return data.decode() if text else data
 
@@ -96,6 +118,7 @@ class WebSocket:
         messages = self._messages
         while not messages:
             if self._closed_reason is not None:
+                await self._finish_closing()
                 raise self._closed_reason
             try:
                 data = await self._stream.receive(_READ_CHUNK)
@@ -111,11 +134,33 @@ class WebSocket:
                         f"connection lost: {exc!r}" if str(exc) else "connection closed by peer"
                     )
                 )
+                await self._finish_closing()
                 raise self._closed_reason from exc  # type: ignore[misc]
-            self._proto.receive_data(data)
-            self._take_events()
+            self._feed(data)
             await self._flush()  # pongs, close replies: usually nothing, and then no lock
         return messages.popleft()
+
+    def _feed(self, data: bytes) -> None:
+        """Parse ``data`` and handle its frames, :data:`_FEED_STEP` bytes at a
+        time, so the frames parsed and not yet handled stay few however small
+        they are. A large frame costs no extra copy: the parser accumulates
+        its bytes in its own buffer either way."""
+        proto = self._proto
+        if len(data) <= _FEED_STEP:
+            proto.receive_data(data)
+            self._take_events()
+            return
+        view = memoryview(data)
+        start, end, step = 0, len(data), _FEED_STEP
+        while start < end:
+            proto.receive_data(view[start : start + step])  # type: ignore[arg-type]
+            start += step
+            if proto.events:
+                self._take_events()
+                step = _FEED_STEP
+            elif step < _FEED_STEP_MAX:  # inside a large frame
+                step *= 2
+        self._take_events()
 
     def _take_events(self) -> None:
         for event in self._proto.events_received():
@@ -124,16 +169,28 @@ class WebSocket:
         proto = self._proto
         if self._closed_reason is not None:
             return
-        if proto.state is State.CLOSED:
-            rcvd = proto.close_rcvd
-            code = rcvd.code if rcvd is not None else None
-            self._lost(ConnectionLost(f"connection closed: {proto.close_exc}", code))
+        rcvd = proto.close_rcvd
+        if rcvd is not None:
+            # The server closed (websockets has queued our answer). The
+            # connection is over now: whether the server then ends TCP or not
+            # is bounded by close_timeout in _finish_closing.
+            if rcvd.code == 1005:  # an empty close frame
+                text = "connection closed by server (no close code)"
+            else:
+                text = f"connection closed by server: {rcvd.code} {rcvd.reason}".rstrip()
+            self._lost(ConnectionLost(text, rcvd.code, rcvd.reason))
+        elif proto.state is State.CLOSED:
+            self._lost(ConnectionLost(f"connection closed: {proto.close_exc}"))
         elif proto.state is State.CLOSING and proto.close_rcvd is None and proto.close_sent:
             # We failed the connection (a frame over the size limit, a
             # protocol error): it is over now, whether or not the peer ever
             # closes its side.
             sent = proto.close_sent
-            self._lost(ConnectionLost(f"connection failed: {sent.code} {sent.reason}", sent.code))
+            self._lost(
+                ConnectionLost(
+                    f"connection failed: {sent.code} {sent.reason}", sent.code, sent.reason
+                )
+            )
 
     def _on_frame(self, frame: Frame) -> None:
         op = frame.opcode
@@ -144,25 +201,58 @@ class WebSocket:
             if frame.fin:
                 self._messages.append((op is Opcode.TEXT, data))
             else:
-                self._fragment = _Pending(op, [data], len(data))
+                # one growing buffer: a list of parts would cost an object
+                # per fragment, however small (a 1-byte fragment: ~40 bytes)
+                self._fragment = _Pending(op, bytearray(data))
         elif op is Opcode.CONT:
             pending = self._fragment
             if pending is None:  # websockets rejects this already; be defensive
                 return
-            pending.parts.append(data)
-            pending.size += len(data)
-            if self._max_size is not None and pending.size > self._max_size:
+            buffer = pending.data
+            buffer += data
+            if self._max_size is not None and len(buffer) > self._max_size:
+                # websockets enforces max_size on the whole message already
                 self._fragment = None
                 self._proto.fail(1009, f"message over {self._max_size} bytes")
                 return
             if frame.fin:
                 self._fragment = None
-                whole = b"".join(pending.parts)
-                self._messages.append((pending.opcode is Opcode.TEXT, whole))
+                self._messages.append((pending.opcode is Opcode.TEXT, buffer))
         elif op is Opcode.PONG:
             event = self._pongs.pop(bytes(data), None)
             if event is not None:
                 event.set()
+
+    async def _finish_closing(self) -> None:
+        """The connection is over: let the peer end the TCP connection
+        (RFC 6455: the server closes first), reading and discarding, for at
+        most :attr:`close_timeout` seconds, then close the stream."""
+        if self._stream_closed:
+            return
+        proto = self._proto
+        with anyio.move_on_after(self.close_timeout):
+            try:
+                while proto.state is not State.CLOSED:
+                    data = await self._stream.receive(_READ_CHUNK)
+                    proto.receive_data(data)
+                    proto.events_received()
+                    await self._flush()  # the close reply, if not out yet
+            except (
+                anyio.EndOfStream,
+                anyio.ClosedResourceError,
+                anyio.BrokenResourceError,
+                OSError,
+                ConnectionLost,
+            ):
+                pass
+        await self._close_stream()
+
+    async def _close_stream(self) -> None:
+        """Close the socket (shielded, never raises). A send blocked on it
+        raises at once: closing is how a stuck write is aborted."""
+        self._stream_closed = True
+        with anyio.CancelScope(shield=True):
+            await self._stream.aclose()
 
     def _lost(self, reason: ConnectionLost) -> None:
         if self._closed_reason is None:
@@ -181,8 +271,10 @@ class WebSocket:
         """Send one message: text for ``str``, binary otherwise. Raises
         :class:`ConnectionLost` when the connection is gone."""
         async with self._send_lock:
+            if self._closed_reason is not None:
+                raise self._closed_reason
             if self._proto.state is not State.OPEN:
-                raise self._closed_reason or ConnectionLost("connection is not open")
+                raise ConnectionLost("connection is not open")
             if isinstance(message, str):
                 self._proto.send_text(message.encode())
             else:
@@ -225,8 +317,7 @@ class WebSocket:
                     raise self._closed_reason from exc  # type: ignore[misc]
         if scope.cancelled_caught:
             self._lost(ConnectionLost(f"send did not complete within {limit - now:.3g} s", 1011))
-            with anyio.CancelScope(shield=True):
-                await self._stream.aclose()
+            await self._close_stream()
             raise self._closed_reason  # type: ignore[misc]
 
     async def ping(self) -> anyio.Event:
@@ -235,12 +326,16 @@ class WebSocket:
         payload = os.urandom(4)
         event = anyio.Event()
         self._pongs[payload] = event
-        async with self._send_lock:
-            if self._proto.state is not State.OPEN:
-                event.set()
-                return event
-            self._proto.send_ping(payload)
-            await self._flush_locked()
+        try:
+            async with self._send_lock:
+                if self._closed_reason is not None or self._proto.state is not State.OPEN:
+                    event.set()
+                    return event
+                self._proto.send_ping(payload)
+                await self._flush_locked()
+        except BaseException:
+            self._pongs.pop(payload, None)
+            raise
         return event
 
     async def keepalive(
@@ -250,23 +345,37 @@ class WebSocket:
         on_rtt: Callable[[float], None] | None = None,
     ) -> None:
         """Ping every ``interval`` seconds; fail the connection when a pong has
-        not come back within ``timeout``. Each answered ping's round trip, in
-        milliseconds, goes to ``on_rtt`` (an idle latency probe with no side
-        effect on the server). Returns when the connection closes."""
+        not come back within ``timeout``. The timeout runs from when the ping
+        is due, so it also counts the wait for a write in progress (a peer
+        that stopped reading holds the writer): a dead peer is detected within
+        ``interval + timeout`` seconds even then, and failing the connection
+        closes the socket, which aborts the stuck write. Each answered ping's
+        round trip, in milliseconds, goes to ``on_rtt`` (an idle latency probe
+        with no side effect on the server). Returns when the connection
+        closes."""
         while not self.closed:
             await anyio.sleep(interval)
             if self._closed_reason is not None:
                 return
-            sent = anyio.current_time()
-            pong = await self.ping()
-            with anyio.move_on_after(timeout) as scope:
-                await pong.wait()
-            if on_rtt is not None and not scope.cancelled_caught and not self.closed:
-                on_rtt((anyio.current_time() - sent) * 1000.0)
+            sent: float | None = None
+            try:
+                with anyio.move_on_after(timeout) as scope:
+                    pong = await self.ping()
+                    sent = anyio.current_time()
+                    await pong.wait()
+            except ConnectionLost:
+                return  # the ping's own write failed the connection; the reader reports it
             if scope.cancelled_caught and not self.closed:
-                self._lost(ConnectionLost(f"keep-alive: no pong within {timeout:g} s", 1011))
-                await self._stream.aclose()
+                if sent is None:
+                    text = f"keep-alive: the ping could not be sent within {timeout:g} s"
+                    text += " (a write is stuck: the peer stopped reading)"
+                else:
+                    text = f"keep-alive: no pong within {timeout:g} s"
+                self._lost(ConnectionLost(text, 1011))
+                await self._close_stream()
                 return
+            if on_rtt is not None and sent is not None and not self.closed:
+                on_rtt((anyio.current_time() - sent) * 1000.0)
 
     async def aclose(self, code: int = 1000, reason: str = "", timeout: float = 1.0) -> None:
         """Close the connection cleanly: send a close frame, wait up to
@@ -274,7 +383,7 @@ class WebSocket:
         raises; runs shielded so a cancelled owner still closes the socket."""
         with anyio.CancelScope(shield=True), anyio.move_on_after(timeout):
             try:
-                if self._proto.state is State.OPEN:
+                if self._proto.state is State.OPEN and self._closed_reason is None:
                     async with self._send_lock:
                         self._proto.send_close(code, reason)
                         await self._flush_locked()
@@ -292,8 +401,7 @@ class WebSocket:
             ):
                 pass
         self._lost(ConnectionLost("connection closed by client", code))
-        with anyio.CancelScope(shield=True):
-            await self._stream.aclose()
+        await self._close_stream()
 
 
 async def connect_websocket(
