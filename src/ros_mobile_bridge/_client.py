@@ -400,6 +400,11 @@ class Client:
             if self._status.value == "connected":
                 self._status.set("closed")
             self._backend.fail_pending(NotConnected("the client is closed"))
+            # a control publish still waiting (its frame not written before
+            # the teardown's deadline) must raise, never wait forever
+            receipts, self._receipts = self._receipts, {}
+            for _message, receipt in receipts.values():
+                receipt.settle(ConnectError("the client closed before the frame was written"))
             for subs in self._subs.values():
                 for sub in subs:
                     sub.close()
@@ -772,9 +777,13 @@ class Client:
         in the control outbox: it leaves ahead of every queued data frame,
         and a newer control value for the same topic replaces an unsent one.
         ``"data"`` frames queue in order (this waits while 1024 are queued).
-        A data frame returns once queued; a control frame returns once
-        written to the socket. ``ValueError`` when ``data`` does not fit the
-        schema."""
+        A data frame returns once queued. A control frame returns once it
+        (or a newer value for the same topic that replaced it) is written to
+        the socket, and raises ``NotConnected`` with the reason when it was
+        not: the connection was lost first (a peer that stops reading is
+        detected within ``keepalive_interval + keepalive_timeout``), or the
+        client closed. It never returns for a frame that was not written.
+        ``ValueError`` when ``data`` does not fit the schema."""
         _check_name("topic", topic)
         _check_schema(schema)
         if priority not in ("data", "control"):
