@@ -734,7 +734,7 @@ class FoxgloveEngine:
 
     # -- server -> client: text ---------------------------------------------
 
-    def receive_text(self, text: str | bytes) -> list[Event]:
+    def receive_text(self, text: str | bytes | bytearray | memoryview) -> list[Event]:
         """Parse one text frame from the server.
 
         Returns the resulting events in order (:class:`ProtocolViolation` events
