@@ -44,6 +44,9 @@ class _Generation:
     encoders: dict[str, Encoder] = field(default_factory=dict)
 
 
+_PARSED = ("ros2msg", "ros2idl", "jsonschema")
+
+
 class SchemaTooLarge(SchemaError):
     """A schema over the registry's ``max_schema_size`` or
     ``max_schema_fields``: refused before its codecs are built."""
@@ -269,12 +272,11 @@ class CodecRegistry:
         key = canonical_name(name)
         encoding = schema_encoding.strip().lower() if isinstance(schema_encoding, str) else ""
         limit = self.max_schema_size
-        if limit is not None and encoding in ("ros2msg", "ros2idl", "jsonschema"):
-            if len(data) > limit:
-                raise SchemaTooLarge(
-                    f"the schema of {name!r} is {len(data)} characters long, over "
-                    f"max_schema_size={limit}"
-                )
+        if limit is not None and encoding in _PARSED and len(data) > limit:
+            raise SchemaTooLarge(
+                f"the schema of {name!r} is {len(data)} characters long, over "
+                f"max_schema_size={limit}"
+            )
         if encoding == "ros2msg":
             mains, defs = parse_ros2msg(name, data)
         elif encoding == "ros2idl":
