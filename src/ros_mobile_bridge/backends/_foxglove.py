@@ -142,6 +142,7 @@ class FoxgloveBackend:
         # topic -> its channels, oldest first; the sorted topic list follows it
         self._by_topic: dict[str, dict[int, fx.Channel]] = {}
         self._indexed: dict[int, fx.Channel] = {}
+        self._building: dict[int, tuple[fx.Channel, anyio.Event]] = {}
         self._topic_names: list[str] = []
         self._topic_infos: list[TopicInfo] = []
         self._wanted: dict[str, SubscribeHints] = {}
@@ -291,11 +292,12 @@ class FoxgloveBackend:
             what = f"channel {channel.id} ({channel.topic}, {channel.schema_name})"
             if isinstance(built, SchemaTooLarge) and self._events is not None:
                 self._events.on_rejected("schema_too_large", f"{what}: {built}")
-            self._log.warning(
-                "%s: no decoder, messages will be delivered raw: %s",
-                truncate_for_log(what),
-                truncate_for_log(str(built)),
-            )
+            else:
+                self._log.warning(
+                    "%s: no decoder, messages will be delivered raw: %s",
+                    truncate_for_log(what),
+                    truncate_for_log(str(built)),
+                )
         else:
             decode = built
         self._decoders[channel.id] = (channel, decode)
@@ -310,18 +312,31 @@ class FoxgloveBackend:
         if entry is not None and entry[0] is channel:
             return
         if channel.encoding.strip().lower() == "json":
-            built: Decoder | SchemaError = self._build_decoder(channel)
-        else:
+            self._store_decoder(channel, self._build_decoder(channel))
+            return
+        building = self._building.get(channel.id)
+        if building is not None and building[0] is channel:
+            await building[1].wait()  # the reader and a subscriber at once: build once
+            return
+        done = anyio.Event()
+        self._building[channel.id] = (channel, done)
+        try:
             built = await anyio.to_thread.run_sync(self._build_decoder, channel)
-        if self._engine.channels.get(channel.id) is channel:  # still current
-            self._store_decoder(channel, built)
+            if self._engine.channels.get(channel.id) is channel:  # still current
+                self._store_decoder(channel, built)
+        finally:
+            if self._building.get(channel.id, (None,))[0] is channel:
+                del self._building[channel.id]
+            done.set()
 
     async def _handle(self, event: fx.Event) -> None:
         events = self._events
         assert events is not None
         if isinstance(event, fx.Advertise):
             for ch in event.channels:
-                self._decoders.pop(ch.id, None)  # a re-used id gets a fresh decoder
+                entry = self._decoders.get(ch.id)
+                if entry is not None and entry[0] is not ch:
+                    del self._decoders[ch.id]  # a re-used id gets a fresh decoder
             self._index_channels(event.channels, ())
             for ch in event.channels:
                 if ch.topic in self._wanted and ch.topic not in self._active:
