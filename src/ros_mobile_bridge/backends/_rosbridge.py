@@ -189,6 +189,7 @@ class RosbridgeBackend:
         self._no_definition: set[str] = set()
         self._foreign: str | None = None  # why the server looks like Foxglove
         self._over_limit: set[str] = set()  # graph limits exceeded at the last poll
+        self._deferred: list[tuple[str, str]] = []  # rejections before run()
 
     # -- helpers ---------------------------------------------------------------
     def _next_id(self, kind: str) -> str:
@@ -269,6 +270,9 @@ class RosbridgeBackend:
     # -- the reader --------------------------------------------------------------
     async def run(self, events: BackendEvents) -> None:
         self._events = events
+        deferred, self._deferred = self._deferred, []
+        for reason, detail in deferred:
+            events.on_rejected(reason, detail)
         error: ConnectError | None = None
         async with anyio.create_task_group() as tg:
             tg.start_soon(self._poll_discovery)
@@ -374,14 +378,7 @@ class RosbridgeBackend:
             self._foreign = event.reason
             self._calls.fail_all(ProtocolMismatchError("rosbridge", event.detected, event.reason))
         elif isinstance(event, rb.ProtocolViolation):
-            if self._events is not None:
-                self._events.on_rejected(event.kind, event.reason)
-            else:  # the first discovery, before the client's reader runs
-                self._log.warning(
-                    "skipped input from the server (%s): %s",
-                    event.kind,
-                    truncate_for_log(event.reason),
-                )
+            self._reject(event.kind, event.reason)
 
     def _on_status(self, event: rb.Status) -> None:
         key = event.id or ""
@@ -481,11 +478,16 @@ class RosbridgeBackend:
                 f"/rosapi/{what}: {len(names) - limit} of {len(names)} {what} refused: the "
                 f"connection keeps at most {limit}"
             )
-            if self._events is not None:
-                self._events.on_rejected(reason, detail)
-            else:
-                self._log.warning("skipped input from the server (%s): %s", reason, detail)
+            self._reject(reason, detail)
         return names[:limit]
+
+    def _reject(self, reason: str, detail: str) -> None:
+        """Report a rejection to the client; during the first discovery
+        (before the client's reader runs) keep it until :meth:`run`."""
+        if self._events is not None:
+            self._events.on_rejected(reason, detail)
+        elif len(self._deferred) < _STRAY_LOGGED:
+            self._deferred.append((reason, detail))
 
     async def _lookup_service_types(self) -> bool:
         unknown = [n for n, t in self._services.items() if not t][:_TYPE_LOOKUPS_PER_POLL]
