@@ -453,7 +453,9 @@ class Client:
         """Backend callback: an inbound frame was skipped or refused. Counted
         per ``reason`` (see :attr:`rejections`) and logged once, truncated."""
         self._rejections[reason] = self._rejections.get(reason, 0) + 1
-        self._log.warning("skipped input from the server (%s): %s", reason, truncate_for_log(detail))
+        self._log.warning(
+            "skipped input from the server (%s): %s", reason, truncate_for_log(detail)
+        )
 
     @property
     def rejections(self) -> dict[str, int]:
