@@ -881,3 +881,57 @@ def test_server_schema_identical_to_builtin_reuses_codecs(reg: CodecRegistry) ->
     decoded = dec(memoryview(enc({"pose": {"position": {"x": 1.0}}})))
     assert decoded["pose"]["orientation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
     assert decoded["header"] == {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}
+
+
+# -- limits ---------------------------------------------------------------------
+
+
+def test_schema_over_max_schema_fields_is_refused_before_codegen() -> None:
+    from ros_mobile_bridge.codec import SchemaTooLarge
+
+    reg = CodecRegistry(max_schema_fields=10)
+    reg.add_schema("x/msg/Ok", "ros2msg", "".join(f"float64 f{i}\n" for i in range(10)))
+    assert reg.decoder("x/msg/Ok", "cdr") is not None
+    big = "".join(f"float64 f{i}\n" for i in range(6))
+    # fields are summed over every definition the schema holds
+    with pytest.raises(SchemaTooLarge, match="12 fields in 2 types"):
+        reg.add_schema("x/msg/Big", "ros2msg", big + "=" * 80 + "\nMSG: x/msg/Dep\n" + big)
+    assert not reg.has_schema("x/msg/Big") and not reg.has_schema("x/msg/Dep")
+
+
+def test_schema_over_max_schema_size_is_refused_unparsed() -> None:
+    from ros_mobile_bridge.codec import SchemaTooLarge
+
+    reg = CodecRegistry(max_schema_size=100)
+    with pytest.raises(SchemaTooLarge, match="max_schema_size=100"):
+        reg.add_schema("x/msg/Big", "ros2msg", "string data\n" + "#" * 100)
+    assert isinstance(SchemaTooLarge("x"), SchemaError)  # callers catching SchemaError see it
+
+
+@pytest.mark.parametrize(
+    ("schema", "body"),
+    [
+        ("std_msgs/msg/String", struct.pack("<I", 0xFFFF_FFF0)),
+        ("std_msgs/msg/Float64MultiArray", struct.pack("<III", 0, 0, 0x1FFF_FFFF)),
+        ("geometry_msgs/msg/Polygon", struct.pack("<I", 0x7FFF_FFFF) + bytes(12 * 100)),
+        ("visualization_msgs/msg/MarkerArray", struct.pack("<I", 0x7FFF_FFFF) + bytes(1000)),
+    ],
+)
+def test_cdr_sequence_length_beyond_the_payload_is_refused_before_allocating(
+    schema: str, body: bytes
+) -> None:
+    """A length prefix of billions in a payload of a few bytes is a
+    DecodeError at once: no allocation of its size (checked with
+    tracemalloc), no MemoryError."""
+    import tracemalloc
+
+    decode = CodecRegistry().decoder(schema, "cdr")
+    payload = memoryview(b"\x00\x01\x00\x00" + body)
+    tracemalloc.start()
+    try:
+        with pytest.raises(DecodeError, match="length"):
+            decode(payload)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000

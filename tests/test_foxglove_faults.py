@@ -493,3 +493,242 @@ async def test_connection_refused_is_a_connect_error(closed_port: int) -> None:
             async with rmb.connect(f"127.0.0.1:{closed_port}", options=options()):
                 pytest.fail("connected to a closed port")
     assert not isinstance(info.value, rmb.ProtocolMismatchError)
+
+
+# -- limits: skipped or refused, counted, never fatal ---------------------------------
+
+
+def rejected(caplog: pytest.LogCaptureFixture) -> list[str]:
+    return [t for t in logged(caplog) if t.startswith("skipped input from the server")]
+
+
+async def test_text_frame_with_invalid_utf8_is_skipped_and_counted(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.WARNING, logger=LOGGER)
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(SERVER_INFO)
+        await peer.send_text(ADVERTISE)
+        sub_id = await subscription_id(peer)
+        peer.proto.send_text(b'{"op":"status","level":0,"message":"\xff\xfe"}')  # not UTF-8
+        await peer._flush()
+        await peer.send_binary(message_data(sub_id, b'{"a":1}'))
+        await peer.drain()
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options()) as robot:
+                async with robot.subscribe("/t") as sub:
+                    msg = await sub.__anext__()
+                    assert robot.status == "connected" and robot.last_error is None
+                    assert robot.rejections == {"invalid_utf8": 1}
+    assert msg.data == {"a": 1}
+    assert len(rejected(caplog)) == 1 and "invalid_utf8" in rejected(caplog)[0]
+
+
+async def test_huge_status_text_is_logged_truncated(caplog: pytest.LogCaptureFixture) -> None:
+    caplog.set_level(logging.INFO, logger=LOGGER)
+    text = "x" * 2_000_000
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(SERVER_INFO)
+        await peer.send_text(ADVERTISE)
+        sub_id = await subscription_id(peer)
+        await peer.send_text(json.dumps({"op": "status", "level": 2, "message": text}))
+        await peer.send_binary(message_data(sub_id, b'{"a":1}'))
+        await peer.drain()
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options()) as robot:
+                async with robot.subscribe("/t") as sub:
+                    await sub.__anext__()
+    status = [t for t in logged(caplog, logging.INFO) if t.startswith("server status")]
+    assert len(status) == 1
+    assert len(status[0]) < 1000 and "2000000 characters" in status[0]
+
+
+def channels_advertise(first: int, count: int) -> str:
+    return json.dumps(
+        {
+            "op": "advertise",
+            "channels": [
+                {"id": i, "topic": f"/c{i:06d}", "encoding": "json", "schemaName": "x/Y"}
+                for i in range(first, first + count)
+            ],
+        }
+    )
+
+
+async def test_channels_beyond_max_channels_are_refused_once_per_advertise(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.WARNING, logger=LOGGER)
+    done = anyio.Event()
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(SERVER_INFO)
+        await peer.send_text(channels_advertise(0, 5))
+        await peer.send_text(channels_advertise(5, 5))
+        await peer.send_text(json.dumps({"op": "unadvertise", "channelIds": [0]}))
+        await peer.send_text(channels_advertise(10, 1))
+        await peer.send_text(json.dumps({"op": "status", "level": 0, "message": "done"}))
+        await done.wait()
+        await peer.drain()
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options(max_channels=3)) as robot:
+                await wait_until(lambda: "/c000010" in [t.name for t in robot.topics])
+                await wait_until(lambda: robot.rejections.get("channel_limit") == 2)
+                done.set()
+                assert [t.name for t in robot.topics] == ["/c000001", "/c000002", "/c000010"]
+                assert robot.rejections == {"channel_limit": 2}
+                assert robot.status == "connected"
+    assert len(rejected(caplog)) == 2  # one line per advertisement, not per channel
+
+
+async def test_topic_list_follows_incremental_advertisements() -> None:
+    """The topic list is kept per advertisement, not rebuilt: it must stay
+    exactly what a rebuild would give (sorted, one entry per topic, the
+    topic's remaining channel after an unadvertise, a re-advertised id
+    moving to its new topic)."""
+    done = anyio.Event()
+
+    def channel(cid: int, topic: str, schema: str) -> dict[str, Any]:
+        return {"id": cid, "topic": topic, "encoding": "json", "schemaName": schema}
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(SERVER_INFO)
+        await peer.send_text(
+            json.dumps(
+                {
+                    "op": "advertise",
+                    "channels": [channel(1, "/b", "x/B"), channel(2, "/a", "x/A")],
+                }
+            )
+        )
+        await peer.send_text(
+            json.dumps({"op": "advertise", "channels": [channel(3, "/b", "x/B2")]})
+        )
+        await peer.send_text(json.dumps({"op": "unadvertise", "channelIds": [1]}))
+        # id 2 re-advertised as another topic: /a is gone
+        await peer.send_text(json.dumps({"op": "advertise", "channels": [channel(2, "/c", "x/C")]}))
+        await done.wait()
+        await peer.drain()
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options()) as robot:
+                await wait_until(lambda: "/c" in [t.name for t in robot.topics])
+                done.set()
+                topics = [(t.name, t.schema_name) for t in robot.topics]
+    assert topics == [("/b", "x/B2"), ("/c", "x/C")]
+
+
+async def test_schema_over_max_schema_fields_is_refused_and_messages_arrive_raw() -> None:
+    sent = anyio.Event()
+    cdr_advertise = json.dumps(
+        {
+            "op": "advertise",
+            "channels": [
+                {
+                    "id": 1,
+                    "topic": "/t",
+                    "encoding": "cdr",
+                    "schemaName": "x/msg/Three",
+                    "schema": "float64 a\nfloat64 b\nfloat64 c\n",
+                    "schemaEncoding": "ros2msg",
+                }
+            ],
+        }
+    )
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(SERVER_INFO)
+        await peer.send_text(cdr_advertise)
+        sub_id = await subscription_id(peer)
+        await peer.send_binary(message_data(sub_id, b"\x00\x01\x00\x00" + bytes(24)))
+        sent.set()
+        await peer.drain()
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options(max_schema_fields=2)) as robot:
+                async with robot.subscribe("/t") as sub:
+                    msg = await sub.__anext__()
+                    assert robot.rejections == {"schema_too_large": 1}
+    assert isinstance(msg.data, memoryview) and msg.data.nbytes == 28
+
+
+async def test_decoder_is_built_off_the_event_loop_before_the_first_message() -> None:
+    """Building a CDR decoder (schema parse + code generation) runs in a
+    worker thread at subscribe time, not in the reader on the first message."""
+    import threading
+
+    from ros_mobile_bridge.codec import CodecRegistry
+
+    threads: list[int] = []
+    original = CodecRegistry.decoder
+
+    def spy(self: CodecRegistry, name: str, encoding: str) -> Any:
+        threads.append(threading.get_ident())
+        return original(self, name, encoding)
+
+    cdr_advertise = json.dumps(
+        {
+            "op": "advertise",
+            "channels": [
+                {
+                    "id": 1,
+                    "topic": "/t",
+                    "encoding": "cdr",
+                    "schemaName": "x/msg/Pair",
+                    "schema": "float64 a\nfloat64 b\n",
+                    "schemaEncoding": "ros2msg",
+                }
+            ],
+        }
+    )
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(SERVER_INFO)
+        await peer.send_text(cdr_advertise)
+        sub_id = await subscription_id(peer)
+        await peer.send_binary(
+            message_data(sub_id, b"\x00\x01\x00\x00" + struct.pack("<dd", 1.5, 2.5))
+        )
+        await peer.drain()
+
+    loop_thread = threading.get_ident()
+    mp = pytest.MonkeyPatch()
+    mp.setattr(CodecRegistry, "decoder", spy)
+    try:
+        async with scripted_server(script) as url:
+            with anyio.fail_after(10):
+                async with rmb.connect(url, options=options()) as robot:
+                    async with robot.subscribe("/t") as sub:
+                        msg = await sub.__anext__()
+    finally:
+        mp.undo()
+    assert msg.data == {"a": 1.5, "b": 2.5}
+    assert threads and loop_thread not in threads
+
+
+async def test_call_beyond_max_pending_requests_raises_at_once() -> None:
+    async def script(peer: Peer) -> None:
+        await peer.send_text(SERVER_INFO)
+        await peer.send_text(ADVERTISE_SERVICES)
+        await peer.drain()  # never answers
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options(max_pending_requests=1)) as robot:
+                async with anyio.create_task_group() as tg:
+                    tg.start_soon(robot.call_service, "/set_flag", {"data": True})
+                    await wait_until(lambda: len(robot._backend._calls) == 1)  # type: ignore[attr-defined]
+                    with anyio.fail_after(1):  # at once, not at the 10 s timeout
+                        with pytest.raises(rmb.ServiceError, match="max_pending_requests"):
+                            await robot.call_service("/set_flag", {"data": False})
+                    tg.cancel_scope.cancel()

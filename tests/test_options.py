@@ -26,7 +26,16 @@ FLOAT_FIELDS = {
     "fragment_timeout": False,
 }
 # field -> smallest valid value
-INT_FIELDS = {"max_frame_size": 1024, "subscription_buffer": 1}
+INT_FIELDS = {
+    "max_frame_size": 1024,
+    "subscription_buffer": 1,
+    "max_json_depth": 2,
+    "max_channels": 1,
+    "max_services": 1,
+    "max_schema_size": 64,
+    "max_schema_fields": 1,
+    "max_pending_requests": 1,
+}
 
 
 def test_defaults() -> None:
@@ -53,6 +62,17 @@ def test_defaults() -> None:
     assert opts.discovery_interval == 2.0
     assert opts.latency_probe_interval == 5.0
     assert opts.fragment_timeout == 10.0
+
+
+def test_limit_defaults() -> None:
+    """The inbound limits: safe, documented defaults (the docs' limits table)."""
+    opts = ClientOptions()
+    assert opts.max_json_depth == 100
+    assert opts.max_channels == 10_000
+    assert opts.max_services == 10_000
+    assert opts.max_schema_size == 256 * 1024
+    assert opts.max_schema_fields == 500
+    assert opts.max_pending_requests == 256
 
 
 def test_every_field_is_covered_here() -> None:

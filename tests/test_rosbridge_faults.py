@@ -392,3 +392,86 @@ def test_message_details_become_a_definition_the_codec_reads() -> None:
     assert list(decoded["values"]) == [1.5, 2.5] and list(decoded["corners"]) == [1, 2, 3, 4]
     with pytest.raises(ValueError, match="do not define"):
         _typedefs_to_msg("other/msg/Thing", answer)
+
+
+# -- limits: skipped or refused, counted, never fatal ---------------------------------
+
+
+async def test_cbor_bignum_status_is_logged_bounded_and_the_connection_stays(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    import cbor2
+
+    async def on_subscribe(peer: Peer, obj: dict[str, Any]) -> None:
+        await peer.send_binary(cbor2.dumps({"op": "status", "level": "error", "msg": 1 << 20000}))
+        await peer.send_binary(cbor2.dumps({"op": "status", "level": 1 << 20000, "msg": "m"}))
+        await peer.send_text(publish("/chatter", "after"))
+
+    caplog.set_level(logging.INFO, LOGGER)
+    async with scripted_server(FakeBridge(on_subscribe), subprotocols=()) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, protocol="rosbridge", options=options()) as robot:
+                async with robot.subscribe("/chatter") as sub:
+                    (msg,) = await first_messages(sub, 1)
+                    assert robot.status == "connected" and robot.last_error is None
+    assert msg.data == {"data": "after"}
+    status = [r.getMessage() for r in caplog.records if "server status" in r.getMessage()]
+    assert len(status) == 2 and all(len(t) < 1000 for t in status)
+    assert "20001 bits" in status[0]
+
+
+async def test_huge_status_text_is_logged_truncated(caplog: pytest.LogCaptureFixture) -> None:
+    async def on_subscribe(peer: Peer, obj: dict[str, Any]) -> None:
+        await peer.send_text(json.dumps({"op": "status", "level": "error", "msg": "y" * 1_000_000}))
+        await peer.send_text(publish("/chatter", "after"))
+
+    caplog.set_level(logging.INFO, LOGGER)
+    async with scripted_server(FakeBridge(on_subscribe), subprotocols=()) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, protocol="rosbridge", options=options()) as robot:
+                async with robot.subscribe("/chatter") as sub:
+                    await first_messages(sub, 1)
+    status = [r.getMessage() for r in caplog.records if "server status" in r.getMessage()]
+    assert len(status) == 1 and len(status[0]) < 1000 and "1000000 characters" in status[0]
+
+
+async def test_fragment_bounds_breaches_are_counted() -> None:
+    async def on_subscribe(peer: Peer, obj: dict[str, Any]) -> None:
+        # 17 messages in reassembly: the oldest is dropped
+        for i in range(17):
+            await peer.send_text(fragments(publish("/chatter", "x" * 40), 20, f"m{i}")[0])
+        await peer.send_text(publish("/chatter", "after"))
+
+    async with scripted_server(FakeBridge(on_subscribe), subprotocols=()) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, protocol="rosbridge", options=options()) as robot:
+                async with robot.subscribe("/chatter") as sub:
+                    await first_messages(sub, 1)
+                    assert robot.rejections == {"fragment_limit": 1}
+
+
+async def test_discovered_topics_beyond_max_channels_are_refused_and_counted_once() -> None:
+    async with scripted_server(FakeBridge(), subprotocols=()) as url:
+        with anyio.fail_after(10):
+            opts = options(max_channels=1, discovery_interval=0.05)
+            async with rmb.connect(url, protocol="rosbridge", options=opts) as robot:
+                assert [t.name for t in robot.topics] == ["/chatter"]
+                await anyio.sleep(0.3)  # several polls, still over the bound
+                await wait_until(lambda: robot.rejections.get("channel_limit") == 1)
+                await anyio.sleep(0.2)
+                assert robot.rejections == {"channel_limit": 1}
+
+
+async def test_call_beyond_max_pending_requests_raises_at_once() -> None:
+    async with scripted_server(FakeBridge(), subprotocols=()) as url:
+        with anyio.fail_after(10):
+            opts = options(max_pending_requests=1)
+            async with rmb.connect(url, protocol="rosbridge", options=opts) as robot:
+                async with anyio.create_task_group() as tg:
+                    # a non-rosapi service the fake bridge never answers
+                    tg.start_soon(robot.call_service, "/set_flag", {"data": True})
+                    await wait_until(lambda: len(robot._backend._calls) == 1)  # type: ignore[attr-defined]
+                    with anyio.fail_after(1):
+                        with pytest.raises(rmb.ServiceError, match="max_pending_requests"):
+                            await robot.call_service("/set_flag", {"data": False})
+                    tg.cancel_scope.cancel()

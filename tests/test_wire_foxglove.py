@@ -1045,7 +1045,7 @@ def test_bad_utf8_in_binary_strings() -> None:
         ('{"op": 5}', "no string 'op' field"),
         ('{"op": "bogus"}', "unknown op 'bogus'"),
         ('{"op": "subscribe"}', "unknown op 'subscribe'"),
-        ("[" * 100_000 + "]" * 100_000, "not valid JSON"),
+        ("[" * 100_000 + "]" * 100_000, "nests deeper than 100"),
         ("1" * 5000, "not valid JSON"),
     ],
 )
@@ -1474,3 +1474,120 @@ def test_message_data_parse_property(sub_offset: int, log_time: int, payload: by
     assert "unknown subscription" in only_violation(e.receive_binary(bad))
     for cut in range(13):
         assert "truncated message data" in only_violation(e.receive_binary(frame[:cut] or b"\x01"))
+
+
+# --------------------------------------------------------------------------
+# Limits: refused input is a classified violation, never an exception
+
+
+def kinds(events: list[Event]) -> list[str]:
+    return [e.kind for e in events if isinstance(e, ProtocolViolation)]
+
+
+def test_invalid_utf8_is_its_own_kind() -> None:
+    events = engine().receive_text(b'{"op":"status","level":0,"message":"\xff"}')
+    assert kinds(events) == ["invalid_utf8"]
+
+
+def test_json_nested_beyond_the_limit_is_refused_unparsed() -> None:
+    def status(depth: int) -> str:
+        # the frame object itself is one level
+        return (
+            '{"op":"status","level":0,"message":"m","x":'
+            + "[" * (depth - 1)
+            + "]" * (depth - 1)
+            + "}"
+        )
+
+    e = FoxgloveEngine("foxglove.sdk.v1.1", max_json_depth=10)
+    assert isinstance(one(e.receive_text(status(10))), fg.Status)
+    assert kinds(e.receive_text(status(11))) == ["json_depth"]
+    # brackets inside strings do not count
+    text = json.dumps({"op": "status", "level": 0, "message": "[" * 50 + "{" * 50})
+    assert isinstance(one(e.receive_text(text)), fg.Status)
+    # far past the interpreter's recursion limit: refused, not a RecursionError
+    assert kinds(engine().receive_text("[" * 100_000)) == ["json_depth"]
+
+
+def advertise_channels(ids: range, **extra: Any) -> dict[str, Any]:
+    return {
+        "op": "advertise",
+        "channels": [
+            {"id": i, "topic": f"/t{i}", "encoding": "cdr", "schemaName": "std_msgs/msg/String"}
+            | extra
+            for i in ids
+        ],
+    }
+
+
+def test_channels_beyond_max_channels_are_refused_once_per_advertise() -> None:
+    e = FoxgloveEngine("foxglove.sdk.v1.1", max_channels=3)
+    events = send(e, advertise_channels(range(5)))
+    advertised = [ev for ev in events if isinstance(ev, fg.Advertise)]
+    assert [c.id for c in advertised[0].channels] == [0, 1, 2]
+    assert kinds(events) == ["channel_limit"]  # one report for two refused channels
+    assert "2 channels" in violations(events)[0]
+    assert sorted(e.channels) == [0, 1, 2]
+    # re-advertising a kept channel is fine; a new one is still refused
+    events = send(e, advertise_channels(range(2, 4)))
+    assert [c.id for c in one([ev for ev in events if isinstance(ev, fg.Advertise)]).channels] == [
+        2
+    ]  # type: ignore[attr-defined]
+    assert kinds(events) == ["channel_limit"]
+    # room again after an unadvertise
+    send(e, {"op": "unadvertise", "channelIds": [0]})
+    assert kinds(send(e, advertise_channels(range(3, 4)))) == []
+    assert sorted(e.channels) == [1, 2, 3]
+
+
+def test_services_beyond_max_services_are_refused_once_per_advertise() -> None:
+    e = FoxgloveEngine("foxglove.sdk.v1.1", max_services=2)
+    services = [{"id": i, "name": f"/s{i}", "type": "std_srvs/srv/Empty"} for i in range(4)]
+    events = send(e, {"op": "advertiseServices", "services": services})
+    assert kinds(events) == ["service_limit"]
+    assert sorted(e.services) == [0, 1]
+
+
+def test_schema_over_max_schema_size_is_dropped_and_the_channel_kept() -> None:
+    e = FoxgloveEngine("foxglove.sdk.v1.1", max_schema_size=100)
+    events = send(
+        e,
+        advertise_channels(range(1), schema="string data\n" + "#" * 200, schemaEncoding="ros2msg"),
+    )
+    assert kinds(events) == ["schema_too_large"]
+    assert "/t0" in violations(events)[0]  # names the channel
+    assert e.channels[0].schema == "" and e.channels[0].schema_name == "std_msgs/msg/String"
+    # the same through the schema table (foxglove.sdk.v1.1): reported per channel using it
+    events = send(
+        e,
+        {
+            "op": "advertise",
+            "schemas": [{"id": 7, "name": "x/msg/Big", "encoding": "ros2msg", "data": "#" * 101}],
+            "channels": [
+                {"id": 1, "topic": "/a", "encoding": "cdr", "schemaId": 7},
+                {"id": 2, "topic": "/b", "encoding": "cdr", "schemaId": 7},
+            ],
+        },
+    )
+    assert kinds(events) == ["schema_too_large", "schema_too_large"]
+    assert e.channels[1].schema == "" and e.channels[1].schema_name == "x/msg/Big"
+    # a schema that fits is kept
+    events = send(
+        e, advertise_channels(range(3, 4), schema="string data", schemaEncoding="ros2msg")
+    )
+    assert kinds(events) == [] and e.channels[3].schema == "string data"
+
+
+def test_service_schema_over_max_schema_size_is_dropped() -> None:
+    e = FoxgloveEngine("foxglove.sdk.v1.1", max_schema_size=100)
+    side = {"encoding": "cdr", "schemaName": "x/srv/S_Request", "schema": "#" * 101}
+    service = {"id": 1, "name": "/s", "type": "x/srv/S", "request": side, "response": side}
+    events = send(e, {"op": "advertiseServices", "services": [service]})
+    assert kinds(events) == ["schema_too_large", "schema_too_large"]
+    svc = e.services[1]
+    assert svc.request is not None and svc.request.schema == ""
+
+
+def test_limits_are_validated() -> None:
+    with pytest.raises(ValueError, match="max_channels"):
+        FoxgloveEngine("foxglove.sdk.v1.1", max_channels=0)

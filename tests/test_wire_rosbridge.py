@@ -798,8 +798,11 @@ def test_foxglove_binary_message_data_is_a_violation() -> None:
         (b'{"op":"subscribe","topic":"/t"}', "unknown op 'subscribe'"),
         (b'{"op":""}', "unknown op ''"),
         (b'{"op":"png","data":"iVBORw0KGgo="}', "png"),
-        (b"[" * 100_000 + b"]" * 100_000, "not JSON"),
-        (b'{"op":"status","msg":' + b"[" * 100_000 + b"]" * 100_000 + b"}", "not JSON"),
+        (b"[" * 100_000 + b"]" * 100_000, "nests deeper than 100"),
+        (
+            b'{"op":"status","msg":' + b"[" * 100_000 + b"]" * 100_000 + b"}",
+            "nests deeper than 100",
+        ),
     ],
 )
 def test_bad_text_frames(frame: bytes, words: str) -> None:
@@ -1027,10 +1030,14 @@ def test_fragments_time_out() -> None:
     assert one_publish(e.receive_text(PUBLISH)).topic == "/chatter"
     assert e.fragments_pending == 1  # not yet
     clock.now += 1.0  # 10.5 s since the parts stopped
-    assert one_publish(e.receive_binary(PUBLISH_CBOR)).topic == "/chatter"
+    dropped, publish = e.receive_binary(PUBLISH_CBOR)
+    assert isinstance(dropped, ProtocolViolation) and dropped.kind == "fragment_limit"
+    assert isinstance(publish, Publish) and publish.topic == "/chatter"
     assert e.fragments_pending == 0
     for text in FRAGMENTS[2:]:  # the late rest of it never makes a message
-        assert not any(isinstance(ev, Publish) for ev in e.receive_text(text))
+        late = e.receive_text(text)
+        assert not any(isinstance(ev, Publish) for ev in late)
+        assert [ev.kind for ev in late if isinstance(ev, ProtocolViolation)] == ["fragment_limit"]
 
 
 def test_fragment_timeout_only_drops_the_stale_message() -> None:
@@ -1041,7 +1048,10 @@ def test_fragment_timeout_only_drops_the_stale_message() -> None:
     whole = '{"op":"status","msg":"fresh"}'
     assert e.receive_text(frag("new", whole[:5], 0, 2)) == []
     clock.now += 4  # "old" is 12 s old, "new" 4 s
-    assert one(e.receive_text(frag("new", whole[5:], 1, 2))) == Status("", "fresh", None)
+    expired, status = e.receive_text(frag("new", whole[5:], 1, 2))
+    assert isinstance(expired, ProtocolViolation) and expired.kind == "fragment_limit"
+    assert "'old'" in expired.reason and "1 of 2 parts" in expired.reason
+    assert status == Status("", "fresh", None)
     assert e.fragments_pending == 0
 
 
@@ -1051,7 +1061,13 @@ def test_at_most_16_messages_in_reassembly_oldest_dropped() -> None:
     wholes = [f'{{"op":"publish","topic":"/t{i}","msg":{{"i":{i}}}}}' for i in range(17)]
     for i, whole in enumerate(wholes):
         clock.now += 0.01
-        assert e.receive_text(frag(f"m{i}", whole[:10], 0, 2)) == []
+        events = e.receive_text(frag(f"m{i}", whole[:10], 0, 2))
+        if i < 16:
+            assert events == []
+        else:  # the 17th evicts the oldest, and says so
+            event = one(events)
+            assert isinstance(event, ProtocolViolation) and event.kind == "fragment_limit"
+            assert "'m0'" in event.reason
         assert e.fragments_pending == min(i + 1, 16)
     # m0 was dropped; m1..m16 complete.
     for i in range(1, 17):
@@ -1543,3 +1559,61 @@ def test_known_op_with_random_fields_never_raises(op: str, fields: dict[str, Any
     _never_raises(e.receive_text(json.dumps({**fields, "op": op})))
     _never_raises(e.receive_text(json.dumps({"op": op, **fields, "op2": 1})))
     _never_raises(e.receive_binary(cbor2.dumps({**fields, "op": op})))
+
+
+# --------------------------------------------------------------------------
+# Limits and hostile values: classified violations, never an exception
+
+
+@pytest.mark.parametrize("field", ["msg", "level", "id"])
+def test_cbor_integer_too_long_for_str_never_raises(field: str) -> None:
+    obj: dict[str, Any] = {"op": "status", "level": "error", "msg": "m", field: 1 << 20000}
+    event = one(RosbridgeEngine().receive_binary(cbor2.dumps(obj)))
+    assert isinstance(event, Status)
+    text = {"msg": event.msg, "level": event.level, "id": event.id}[field]
+    assert text is not None and "20001 bits" in text and len(text) < 100
+
+
+def test_cbor_bignum_in_other_fields_never_raises() -> None:
+    e = RosbridgeEngine()
+    for obj in (
+        {"op": "service_response", "id": 1 << 20000, "service": "/s", "result": True},
+        {"op": "action_result", "id": "g", "action": "/a", "status": 1 << 20000},
+        {"op": "fragment", "id": "k", "data": "x", "num": 1 << 20000, "total": 1 << 20001},
+        {"op": 1 << 20000},
+    ):
+        events = e.receive_binary(cbor2.dumps(obj))
+        assert isinstance(events, list) and len(events) <= 1
+
+
+def test_json_number_too_long_for_int_is_a_violation() -> None:
+    event = one(RosbridgeEngine().receive_text(b'{"op":"status","msg":' + b"1" * 5000 + b"}"))
+    assert isinstance(event, ProtocolViolation) and event.kind == "malformed"
+
+
+def test_json_depth_limit_is_a_classified_violation() -> None:
+    e = RosbridgeEngine(max_json_depth=5)
+    ok = b'{"op":"status","msg":"m","x":[[[[]]]]}'  # depth 5
+    assert isinstance(one(e.receive_text(ok)), Status)
+    deep = b'{"op":"status","msg":"m","x":[[[[[]]]]]}'
+    event = one(e.receive_text(deep))
+    assert isinstance(event, ProtocolViolation) and event.kind == "json_depth"
+    # strings full of brackets are not nesting
+    text = json.dumps({"op": "status", "msg": "[" * 100}).encode()
+    assert isinstance(one(e.receive_text(text)), Status)
+    # a reassembled message is held to it too
+    parts = split(deep.decode(), 2)
+    assert e.receive_text(frag("k", parts[0], 0, 2)) == []
+    event = one(e.receive_text(frag("k", parts[1], 1, 2)))
+    assert isinstance(event, ProtocolViolation) and event.kind == "json_depth"
+
+
+def test_invalid_utf8_text_frame_is_its_own_kind() -> None:
+    event = one(RosbridgeEngine().receive_text(b'{"op":"status","msg":"\xff"}'))
+    assert isinstance(event, ProtocolViolation) and event.kind == "invalid_utf8"
+
+
+def test_fragment_over_the_size_bound_is_a_fragment_limit() -> None:
+    e = RosbridgeEngine(max_message_size=10)
+    event = one(e.receive_text(frag("k", "x" * 11, 0, 2)))
+    assert isinstance(event, ProtocolViolation) and event.kind == "fragment_limit"

@@ -29,6 +29,7 @@ from ._errors import (
     SchemaError,
     ServiceTimeout,
 )
+from ._limits import truncate_for_log
 from ._options import ClientOptions
 from ._types import (
     Compression,
@@ -169,6 +170,7 @@ class Client:
         self._user_types_in: Backend | None = None  # the backend that holds them
         self._publish_checked: set[tuple[str, str, bool]] = set()
         self._publish_checked_for: tuple[Backend, list[TopicInfo]] | None = None
+        self._rejections: dict[str, int] = {}
 
     # -- lifecycle ----------------------------------------------------------
     @property
@@ -492,6 +494,23 @@ class Client:
         """Backend callback: the server now carries ``topic`` to us, or not."""
         for sub in self._subs.get(topic, ()):
             sub._set_state("active" if active else "pending")
+
+    def on_rejected(self, reason: str, detail: str) -> None:
+        """Backend callback: an inbound frame was skipped or refused. Counted
+        per ``reason`` (see :attr:`rejections`) and logged once, truncated."""
+        self._rejections[reason] = self._rejections.get(reason, 0) + 1
+        self._log.warning(
+            "skipped input from the server (%s): %s", reason, truncate_for_log(detail)
+        )
+
+    @property
+    def rejections(self) -> dict[str, int]:
+        """How many inbound frames were skipped or refused, per reason (a
+        snapshot, counted over the client's life, across reconnects). Keys:
+        ``"invalid_utf8"``, ``"malformed"``, ``"json_depth"``,
+        ``"schema_too_large"``, ``"channel_limit"``, ``"service_limit"``,
+        ``"fragment_limit"``; see the limits in :class:`ClientOptions`."""
+        return dict(self._rejections)
 
     def on_parameters(self, values: Mapping[str, Any]) -> None:
         """Backend callback: unsolicited parameter values arrived."""

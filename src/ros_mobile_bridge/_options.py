@@ -21,6 +21,13 @@ def _positive(name: str, value: object, *, allow_zero: bool = False) -> None:
         raise ValueError(f"{name} must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")
 
 
+def _count(name: str, value: object, minimum: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError(f"{name} must be an int, not {type(value).__name__}")
+    if value < minimum:
+        raise ValueError(f"{name} must be at least {minimum}, got {value!r}")
+
+
 @dataclass(frozen=True, slots=True)
 class ReconnectPolicy:
     """How a client re-establishes a connection it lost.
@@ -164,7 +171,32 @@ class ClientOptions:
     disables; the first failure turns the probe off)."""
     fragment_timeout: float = 10.0
     """rosbridge: seconds a fragmented message may take to arrive whole
-    before its parts are dropped."""
+    before its parts are dropped (a ``"fragment_limit"`` rejection)."""
+    max_json_depth: int = 100
+    """Deepest nesting of arrays and objects in one inbound JSON frame
+    (Foxglove control messages, rosbridge operations). A deeper frame is
+    skipped unparsed: a ``"json_depth"`` rejection."""
+    max_channels: int = 10_000
+    """Foxglove: server channels kept per connection (rosbridge: topics kept
+    from one discovery poll). Channels beyond it are refused, counted once
+    per advertisement as a ``"channel_limit"`` rejection."""
+    max_services: int = 10_000
+    """Services kept per connection; beyond it a ``"service_limit"``
+    rejection, once per advertisement (or discovery poll)."""
+    max_schema_size: int = 256 * 1024
+    """Foxglove: bytes of one channel schema text. A longer schema is
+    dropped (the channel stays, its messages decode with a bundled
+    definition of that type if there is one, else arrive raw): a
+    ``"schema_too_large"`` rejection naming the channel."""
+    max_schema_fields: int = 500
+    """Fields of one schema, summed over every definition it holds. Building
+    a decoder costs about 0.2 ms per field (rosbags generates and compiles
+    code per type, much of it holding the GIL); past this the schema is
+    refused like one over ``max_schema_size``."""
+    max_pending_requests: int = 256
+    """Service calls, parameter requests and action goals waiting for an
+    answer on one connection. One more raises at once (``ServiceError`` for
+    a call or parameter request, ``ActionGoalError`` for a goal)."""
 
     def report_latency(self, ms: float) -> None:
         """Hand one round-trip time to :attr:`on_latency`; a failing callback
@@ -191,12 +223,13 @@ class ClientOptions:
             raise TypeError("max_frame_size must be an int")
         if self.max_frame_size < 1024:
             raise ValueError("max_frame_size must be at least 1024 bytes")
-        if isinstance(self.subscription_buffer, bool) or not isinstance(
-            self.subscription_buffer, int
-        ):
-            raise TypeError("subscription_buffer must be an int")
-        if self.subscription_buffer < 1:
-            raise ValueError("subscription_buffer must be at least 1")
+        _count("subscription_buffer", self.subscription_buffer, 1)
+        _count("max_json_depth", self.max_json_depth, 2)
+        _count("max_channels", self.max_channels, 1)
+        _count("max_services", self.max_services, 1)
+        _count("max_schema_size", self.max_schema_size, 64)
+        _count("max_schema_fields", self.max_schema_fields, 1)
+        _count("max_pending_requests", self.max_pending_requests, 1)
         if isinstance(self.stop_topics, str):
             raise TypeError("stop_topics must be a sequence of topic names, not a str")
         object.__setattr__(self, "stop_topics", tuple(self.stop_topics))

@@ -83,6 +83,13 @@ class BackendEvents(Protocol):
     def on_parameters(self, values: Mapping[str, Any]) -> None:
         """Unsolicited parameter values (a parameter subscription update)."""
 
+    def on_rejected(self, reason: str, detail: str) -> None:
+        """An inbound frame (or part of one) was skipped or refused.
+        ``reason`` is a key of ``Client.rejections`` (``"invalid_utf8"``,
+        ``"malformed"``, ``"json_depth"``, ``"schema_too_large"``,
+        ``"channel_limit"``, ``"service_limit"``, ``"fragment_limit"``, ...);
+        ``detail`` says what, untruncated (the client truncates it to log)."""
+
     async def before_inbound(self) -> None:
         """Called before each inbound message is handled: drain control frames."""
 

@@ -4,6 +4,7 @@ registry."""
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import logging
 import time
@@ -12,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 import anyio
+import anyio.to_thread
 
 from .._errors import (
     DecodeError,
@@ -21,9 +23,10 @@ from .._errors import (
     SchemaError,
     ServiceError,
 )
+from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
-from ..codec import CodecRegistry
+from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket, connect_websocket
 from ..wire import foxglove as fx
@@ -70,15 +73,18 @@ async def start_foxglove(ws: WebSocket, options: ClientOptions, deadline: float)
             raise ProtocolMismatchError(
                 "foxglove-ws", "rosbridge", "the server accepted none of the Foxglove subprotocols"
             )
-        engine = fx.FoxgloveEngine(ws.subprotocol)
+        engine = fx.FoxgloveEngine(
+            ws.subprotocol,
+            max_channels=options.max_channels,
+            max_services=options.max_services,
+            max_schema_size=options.max_schema_size,
+            max_json_depth=options.max_json_depth,
+        )
         early: list[fx.Event] = []
         with anyio.move_on_after(max(deadline - anyio.current_time(), 0.0)):
             while not _greeted(engine):
-                message = await ws.receive()
-                if isinstance(message, str):
-                    events = engine.receive_text(message)
-                else:
-                    events = engine.receive_binary(message)
+                text, data = await ws.receive_raw()
+                events = engine.receive_text(data) if text else engine.receive_binary(data)
                 # the greeting itself is not replayed to the reader
                 early.extend(e for e in events if not isinstance(e, fx.ServerInfo))
         if not _greeted(engine):
@@ -96,11 +102,8 @@ async def start_foxglove(ws: WebSocket, options: ClientOptions, deadline: float)
         grace = min(options.discovery_grace, max(deadline - anyio.current_time(), 0.0))
         with anyio.move_on_after(grace):
             while not (seen_channels and (seen_services or not want_services)):
-                message = await ws.receive()
-                if isinstance(message, str):
-                    events = engine.receive_text(message)
-                else:
-                    events = engine.receive_binary(message)
+                text, data = await ws.receive_raw()
+                events = engine.receive_text(data) if text else engine.receive_binary(data)
                 early.extend(events)
                 seen_channels |= any(isinstance(e, fx.Advertise) for e in events)
                 seen_services |= any(isinstance(e, fx.AdvertiseServices) for e in events)
@@ -131,8 +134,17 @@ class FoxgloveBackend:
         self._engine = engine
         self._options = options
         self._log: logging.Logger = options.logger
-        self.codecs = CodecRegistry()
-        self._decoders: dict[int, Decoder | None] = {}
+        self.codecs = CodecRegistry(
+            max_schema_size=options.max_schema_size, max_schema_fields=options.max_schema_fields
+        )
+        # channel id -> (the channel it was built for, its decoder)
+        self._decoders: dict[int, tuple[fx.Channel, Decoder | None]] = {}
+        # topic -> its channels, oldest first; the sorted topic list follows it
+        self._by_topic: dict[str, dict[int, fx.Channel]] = {}
+        self._indexed: dict[int, fx.Channel] = {}
+        self._building: dict[int, tuple[fx.Channel, anyio.Event]] = {}
+        self._topic_names: list[str] = []
+        self._topic_infos: list[TopicInfo] = []
         self._wanted: dict[str, SubscribeHints] = {}
         self._active: dict[str, int] = {}  # topic -> subscription id
         self._client_channels: dict[str, _ClientChannel] = {}
@@ -145,6 +157,7 @@ class FoxgloveBackend:
         info = engine.server_info
         assert info is not None
         self.server_info = self._server_info(info)
+        self._index_channels(tuple(engine.channels.values()), ())
 
     def _server_info(self, info: fx.ServerInfo) -> ServerInfo:
         return ServerInfo(
@@ -160,11 +173,9 @@ class FoxgloveBackend:
     # -- discovery ----------------------------------------------------------
     @property
     def topics(self) -> list[TopicInfo]:
-        seen: dict[str, TopicInfo] = {}
-        for ch in self._engine.channels.values():
-            if ch.topic not in seen:
-                seen[ch.topic] = TopicInfo(ch.topic, ch.schema_name, ch.encoding)
-        return sorted(seen.values(), key=lambda t: t.name)
+        """Sorted by name; kept up to date per advertisement (the cost of one
+        is that of the channels it names, plus one list copy here)."""
+        return list(self._topic_infos)
 
     @property
     def services(self) -> list[ServiceInfo]:
@@ -176,10 +187,43 @@ class FoxgloveBackend:
     def topic_active(self, topic: str) -> bool:
         return topic in self._active
 
+    def _index_channels(self, added: Sequence[fx.Channel], removed: Sequence[fx.Channel]) -> None:
+        """Follow an advertisement in the topic index and the sorted topic
+        list: work for the channels named, not for all of them."""
+        touched: set[str] = set()
+        indexed = self._indexed
+        for ch in (*removed, *added):
+            old = indexed.pop(ch.id, None)  # gone, or re-advertised (maybe as another topic)
+            if old is not None:
+                self._by_topic.get(old.topic, {}).pop(ch.id, None)
+                touched.add(old.topic)
+        for ch in added:
+            indexed[ch.id] = ch
+            self._by_topic.setdefault(ch.topic, {})[ch.id] = ch
+            touched.add(ch.topic)
+        names, infos = self._topic_names, self._topic_infos
+        for topic in touched:
+            channels = self._by_topic.get(topic)
+            i = bisect.bisect_left(names, topic)
+            present = i < len(names) and names[i] == topic
+            if not channels:
+                self._by_topic.pop(topic, None)
+                if present:
+                    del names[i]
+                    del infos[i]
+                continue
+            first = next(iter(channels.values()))
+            info = TopicInfo(topic, first.schema_name, first.encoding)
+            if present:
+                infos[i] = info
+            else:
+                names.insert(i, topic)
+                infos.insert(i, info)
+
     def _channel_for(self, topic: str) -> fx.Channel | None:
         best: fx.Channel | None = None
-        for ch in self._engine.channels.values():
-            if ch.topic == topic and (best is None or ch.encoding == "cdr"):
+        for ch in self._by_topic.get(topic, {}).values():
+            if best is None or ch.encoding == "cdr":
                 best = ch
         return best
 
@@ -198,9 +242,9 @@ class FoxgloveBackend:
         ws = self._ws
         engine = self._engine
         while True:
-            message = await ws.receive()
+            text, message = await ws.receive_raw()
             await events.before_inbound()
-            if isinstance(message, str):
+            if text:  # UTF-8 bytes: the engine reports invalid ones
                 for event in engine.receive_text(message):
                     await self._handle(event)
                 continue
@@ -215,10 +259,11 @@ class FoxgloveBackend:
         self, event: fx.MessageData, received_ns: int, events: BackendEvents
     ) -> None:
         channel = event.channel
-        try:
-            decode = self._decoders[channel.id]
-        except KeyError:
-            decode = self._make_decoder(channel)
+        entry = self._decoders.get(channel.id)
+        if entry is not None and entry[0] is channel:
+            decode = entry[1]
+        else:  # not built ahead (a channel re-advertised meanwhile): build it here
+            decode = self._store_decoder(channel, self._build_decoder(channel))
         events.on_frame(
             RawFrame(
                 channel.topic,
@@ -231,34 +276,74 @@ class FoxgloveBackend:
             )
         )
 
-    def _make_decoder(self, channel: fx.Channel) -> Decoder | None:
-        decode: Decoder | None = None
+    def _build_decoder(self, channel: fx.Channel) -> Decoder | SchemaError:
+        """Parse the channel's schema and build its decoder (thread-safe: the
+        registry locks). The error instead when there is none."""
         try:
             if channel.schema and channel.schema_encoding:
                 self.codecs.add_schema(channel.schema_name, channel.schema_encoding, channel.schema)
-            decode = self.codecs.decoder(channel.schema_name, channel.encoding)
+            return self.codecs.decoder(channel.schema_name, channel.encoding)
         except SchemaError as exc:
-            self._log.warning(
-                "channel %d (%s, %s): no decoder, messages will be delivered raw: %s",
-                channel.id,
-                channel.topic,
-                channel.schema_name,
-                exc,
-            )
-        self._decoders[channel.id] = decode
+            return exc
+
+    def _store_decoder(self, channel: fx.Channel, built: Decoder | SchemaError) -> Decoder | None:
+        decode: Decoder | None = None
+        if isinstance(built, SchemaError):
+            what = f"channel {channel.id} ({channel.topic}, {channel.schema_name})"
+            if isinstance(built, SchemaTooLarge) and self._events is not None:
+                self._events.on_rejected("schema_too_large", f"{what}: {built}")
+            else:
+                self._log.warning(
+                    "%s: no decoder, messages will be delivered raw: %s",
+                    truncate_for_log(what),
+                    truncate_for_log(str(built)),
+                )
+        else:
+            decode = built
+        self._decoders[channel.id] = (channel, decode)
         return decode
+
+    async def _prepare_decoder(self, channel: fx.Channel) -> None:
+        """Build the channel's decoder ahead of its first message, in a
+        worker thread: parsing a schema and generating its code can take tens
+        of milliseconds that would otherwise stall the event loop (and read
+        as lag to the adaptive throttle). JSON needs nothing built."""
+        entry = self._decoders.get(channel.id)
+        if entry is not None and entry[0] is channel:
+            return
+        if channel.encoding.strip().lower() == "json":
+            self._store_decoder(channel, self._build_decoder(channel))
+            return
+        building = self._building.get(channel.id)
+        if building is not None and building[0] is channel:
+            await building[1].wait()  # the reader and a subscriber at once: build once
+            return
+        done = anyio.Event()
+        self._building[channel.id] = (channel, done)
+        try:
+            built = await anyio.to_thread.run_sync(self._build_decoder, channel)
+            if self._engine.channels.get(channel.id) is channel:  # still current
+                self._store_decoder(channel, built)
+        finally:
+            if self._building.get(channel.id, (None,))[0] is channel:
+                del self._building[channel.id]
+            done.set()
 
     async def _handle(self, event: fx.Event) -> None:
         events = self._events
         assert events is not None
         if isinstance(event, fx.Advertise):
             for ch in event.channels:
-                self._decoders.pop(ch.id, None)  # a re-used id gets a fresh decoder
+                entry = self._decoders.get(ch.id)
+                if entry is not None and entry[0] is not ch:
+                    del self._decoders[ch.id]  # a re-used id gets a fresh decoder
+            self._index_channels(event.channels, ())
             for ch in event.channels:
                 if ch.topic in self._wanted and ch.topic not in self._active:
                     await self._subscribe_channel(ch)
             events.on_graph()
         elif isinstance(event, fx.Unadvertise):
+            self._index_channels((), event.channels)
             for ch in event.channels:
                 sub_id = self._active.get(ch.topic)
                 if sub_id is not None and self._engine.subscription_channel(sub_id) == ch:
@@ -278,7 +363,9 @@ class FoxgloveBackend:
             name = svc.name if svc is not None else f"#{event.service_id}"
             if not self._calls.fail(event.call_id, ServiceError(name, event.message)):
                 self._log.warning(
-                    "serviceCallFailure for unknown call %d: %s", event.call_id, event.message
+                    "serviceCallFailure for unknown call %d: %s",
+                    event.call_id,
+                    truncate_for_log(event.message),
                 )
         elif isinstance(event, fx.ParameterValues):
             values = {p.name: p.value for p in event.parameters}
@@ -286,7 +373,7 @@ class FoxgloveBackend:
                 events.on_parameters(values)
         elif isinstance(event, fx.Status):
             level = {0: logging.INFO, 1: logging.WARNING}.get(event.level, logging.ERROR)
-            self._log.log(level, "server status: %s", event.message)
+            self._log.log(level, "server status: %s", truncate_for_log(event.message))
         elif isinstance(event, fx.ServerInfo):
             # A later serverInfo resets the server's tables; the engine has
             # already reported the old channels and services as unadvertised.
@@ -294,11 +381,16 @@ class FoxgloveBackend:
             self._decoders.clear()
             events.on_graph()
         elif isinstance(event, fx.ProtocolViolation):
-            self._log.warning("skipped a malformed message from the server: %s", event.reason)
+            events.on_rejected(event.kind, event.reason)
         elif isinstance(event, fx.MessageData):
             self._on_message_data(event, time.time_ns(), events)
 
     async def _subscribe_channel(self, channel: fx.Channel) -> None:
+        await self._prepare_decoder(channel)
+        if self._engine.channels.get(channel.id) is not channel or channel.topic in self._active:
+            # re-advertised, withdrawn or subscribed while the decoder was
+            # built: the newer event handles it
+            return
         sub_id, message = self._engine.subscribe(channel.id)
         self._active[channel.topic] = sub_id
         await self._ws.send(message)
@@ -428,6 +520,7 @@ class FoxgloveBackend:
             payload: bytes = _EMPTY_CDR
         else:
             payload = encode(request if request is not None else {})
+        self._check_pending(name)
         call_id = next(self._call_ids)
         request_frame = self._engine.service_call_request(svc.id, call_id, encoding, payload)
         response: fx.ServiceCallResponse = await self._calls.request(
@@ -455,7 +548,17 @@ class FoxgloveBackend:
         if capability not in self.server_info.capabilities:
             raise NotSupportedError(f"the server does not offer {capability!r}")
 
+    def _check_pending(self, what: str) -> None:
+        """``ServiceError`` at once when ``max_pending_requests`` requests
+        already wait for an answer on this connection."""
+        limit = self._options.max_pending_requests
+        if len(self._calls) + len(self._params) >= limit:
+            raise ServiceError(
+                what, f"{limit} requests already wait for an answer (max_pending_requests)"
+            )
+
     async def _parameter_request(self, build: Any) -> dict[str, Any]:
+        self._check_pending("parameters")
         request_id = f"rmb-{next(self._param_ids)}"
         return await self._params.request(request_id, lambda: self._ws.send(build(request_id)))
 

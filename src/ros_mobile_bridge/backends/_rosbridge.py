@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Final
 
 import anyio
+import anyio.to_thread
 
 from .._errors import (
     ActionGoalError,
@@ -29,9 +30,10 @@ from .._errors import (
     ServiceError,
     ServiceTimeout,
 )
+from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
-from ..codec import CodecRegistry, same_type_name
+from ..codec import CodecRegistry, SchemaTooLarge, same_type_name
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket, connect_websocket
 from ..wire import foxglove as fx
@@ -50,6 +52,8 @@ _TYPE_LOOKUPS_PER_POLL: Final = 4
 """Service types looked up per discovery poll: a burst of rosapi calls makes
 rosbridge_server_rs drop messages of busy topics (measured at 5 kHz)."""
 COMPRESSIONS: Final = ("cbor", "cbor-raw")
+_STRAY_LOGGED: Final = 256
+"""Topics never subscribed whose messages are each logged once."""
 _IDL_TO_MSG: Final[Mapping[str, str]] = {
     "boolean": "bool",
     "octet": "byte",
@@ -158,9 +162,13 @@ class RosbridgeBackend:
         self._options = options
         self._log: logging.Logger = options.logger
         self._engine = rb.RosbridgeEngine(
-            max_message_size=options.max_frame_size, fragment_timeout=options.fragment_timeout
+            max_message_size=options.max_frame_size,
+            fragment_timeout=options.fragment_timeout,
+            max_json_depth=options.max_json_depth,
         )
-        self.codecs = CodecRegistry()
+        self.codecs = CodecRegistry(
+            max_schema_size=options.max_schema_size, max_schema_fields=options.max_schema_fields
+        )
         self.server_info = ServerInfo(name="rosbridge", protocol=self.protocol)
         self._ids = itertools.count(1)
         self._topics: dict[str, str] = {}  # name -> type, from /rosapi/topics
@@ -180,6 +188,8 @@ class RosbridgeBackend:
         self._discovery_ok = False
         self._no_definition: set[str] = set()
         self._foreign: str | None = None  # why the server looks like Foxglove
+        self._over_limit: set[str] = set()  # graph limits exceeded at the last poll
+        self._deferred: list[tuple[str, str]] = []  # rejections before run()
 
     # -- helpers ---------------------------------------------------------------
     def _next_id(self, kind: str) -> str:
@@ -189,6 +199,7 @@ class RosbridgeBackend:
         """One ``call_service`` round trip; the response's ``values``.
         Raises ``ServiceError`` (``ServiceTimeout`` for the server's
         timeout) when it fails. No local deadline here."""
+        self._check_pending(name, ServiceError)
         call_id = self._next_id("call")
         frame = self._engine.call_service(name, args, id=call_id, timeout=timeout)
         self._call_names[call_id] = name
@@ -197,16 +208,24 @@ class RosbridgeBackend:
         finally:
             self._call_names.pop(call_id, None)
         if not response.result:
-            text = (
+            text = truncate_for_log(
                 response.values
                 if isinstance(response.values, str)
-                else json.dumps(response.values, default=str)
+                else rb._as_text(response.values),
+                2000,
             )
             if timeout is not None and "timeout" in text.lower():
                 # "Timeout exceeded while waiting for service response"
                 raise ServiceTimeout(name, timeout, f"the bridge: {text}")
             raise ServiceError(name, text)
         return response.values
+
+    def _check_pending(self, what: str, error: type[ServiceError] | type[ActionGoalError]) -> None:
+        """Raise ``error`` at once when ``max_pending_requests`` calls and
+        goals already wait for an answer on this connection."""
+        limit = self._options.max_pending_requests
+        if len(self._calls) + len(self._goals) >= limit:
+            raise error(what, f"{limit} requests already wait for an answer (max_pending_requests)")
 
     async def _rosapi(self, name: str, args: Any = None) -> Any:
         """A ``/rosapi/*`` call under the backend's own deadline."""
@@ -251,6 +270,9 @@ class RosbridgeBackend:
     # -- the reader --------------------------------------------------------------
     async def run(self, events: BackendEvents) -> None:
         self._events = events
+        deferred, self._deferred = self._deferred, []
+        for reason, detail in deferred:
+            events.on_rejected(reason, detail)
         error: ConnectError | None = None
         async with anyio.create_task_group() as tg:
             tg.start_soon(self._poll_discovery)
@@ -282,10 +304,11 @@ class RosbridgeBackend:
         topic = event.topic
         wire = self._subs.get(topic)
         if wire is None:
-            if topic not in self._stray:
-                self._stray.add(topic)
+            if topic not in self._stray and len(self._stray) < _STRAY_LOGGED:
+                self._stray.add(topic)  # logged once per topic, for a bounded set
                 self._log.warning(
-                    "skipped a message on %s, which this client never subscribed", topic
+                    "skipped a message on %s, which this client never subscribed",
+                    truncate_for_log(topic, 200),
                 )
             return
         kind = event.kind
@@ -328,8 +351,12 @@ class RosbridgeBackend:
                 decode = self.codecs.decoder(schema, "cdr")
             except SchemaError as exc:
                 self._log.warning(
-                    "%s: no CDR decoder, cbor-raw messages will be delivered raw: %s", topic, exc
+                    "%s: no CDR decoder, cbor-raw messages will be delivered raw: %s",
+                    topic,
+                    truncate_for_log(str(exc)),
                 )
+                if isinstance(exc, SchemaTooLarge) and self._events is not None:
+                    self._events.on_rejected("schema_too_large", f"{topic}: {exc}")
         self._decoders[(topic, kind)] = decode
         return decode
 
@@ -351,7 +378,7 @@ class RosbridgeBackend:
             self._foreign = event.reason
             self._calls.fail_all(ProtocolMismatchError("rosbridge", event.detected, event.reason))
         elif isinstance(event, rb.ProtocolViolation):
-            self._log.warning("skipped a malformed message from the server: %s", event.reason)
+            self._reject(event.kind, event.reason)
 
     def _on_status(self, event: rb.Status) -> None:
         key = event.id or ""
@@ -373,12 +400,16 @@ class RosbridgeBackend:
             if wire is not None and wire.type is None:
                 # no type yet and the graph lacks the topic: discovery will
                 # learn the type and subscribe again
-                self._log.info("%s is not in the graph yet: %s", topic, event.msg)
+                self._log.info("%s is not in the graph yet: %s", topic, truncate_for_log(event.msg))
             else:
-                self._log.warning("the bridge refused the subscription to %s: %s", topic, event.msg)
+                self._log.warning(
+                    "the bridge refused the subscription to %s: %s",
+                    topic,
+                    truncate_for_log(event.msg),
+                )
             return
         level = {"error": logging.ERROR, "warning": logging.WARNING}.get(event.level, logging.INFO)
-        self._log.log(level, "server status: %s", event.msg)
+        self._log.log(level, "server status: %s", truncate_for_log(event.msg))
 
     # -- discovery ---------------------------------------------------------------
     @property
@@ -420,16 +451,43 @@ class RosbridgeBackend:
             self._discovery_ok = False
             return False
         self._discovery_ok = True
-        names = _names(answer, "topics")
+        names = self._bounded(_names(answer, "topics"), "channel_limit", "topics")
         types = _names(answer, "types")
         topics = {n: (types[i] if i < len(types) else "") for i, n in enumerate(names)}
-        service_names = _names(services, "services")
+        service_names = self._bounded(_names(services, "services"), "service_limit", "services")
         old_services = self._services
         new_services = {n: old_services.get(n, "") for n in service_names}
         changed = topics != self._topics or new_services != self._services
         self._topics = topics
         self._services = new_services
         return changed
+
+    def _bounded(self, names: list[str], reason: str, what: str) -> list[str]:
+        """The first ``max_channels`` / ``max_services`` names; more are a
+        rejection, reported when the graph first exceeds the bound (not on
+        every poll while it stays over)."""
+        limit = (
+            self._options.max_channels if reason == "channel_limit" else self._options.max_services
+        )
+        if len(names) <= limit:
+            self._over_limit.discard(reason)
+            return names
+        if reason not in self._over_limit:
+            self._over_limit.add(reason)
+            detail = (
+                f"/rosapi/{what}: {len(names) - limit} of {len(names)} {what} refused: the "
+                f"connection keeps at most {limit}"
+            )
+            self._reject(reason, detail)
+        return names[:limit]
+
+    def _reject(self, reason: str, detail: str) -> None:
+        """Report a rejection to the client; during the first discovery
+        (before the client's reader runs) keep it until :meth:`run`."""
+        if self._events is not None:
+            self._events.on_rejected(reason, detail)
+        elif len(self._deferred) < _STRAY_LOGGED:
+            self._deferred.append((reason, detail))
 
     async def _lookup_service_types(self) -> bool:
         unknown = [n for n, t in self._services.items() if not t][:_TYPE_LOOKUPS_PER_POLL]
@@ -518,6 +576,8 @@ class RosbridgeBackend:
         self._subs[topic] = want
         self._sub_topics[want.id] = topic
         self._decoders.pop((topic, "cbor-raw"), None)
+        if want.compression == "cbor-raw" and want.type:
+            await self._prepare_decoder(topic, want.type)
         await self._ws.send(
             self._engine.subscribe(
                 topic,
@@ -531,6 +591,25 @@ class RosbridgeBackend:
         if topic in self._topics and topic not in self._live:
             self._set_live(topic, True)
 
+    async def _prepare_decoder(self, topic: str, schema: str) -> None:
+        """Build the CDR decoder of a cbor-raw subscription ahead of its first
+        message, in a worker thread (tens of milliseconds of code generation
+        that would otherwise stall the event loop)."""
+
+        def build() -> Decoder | SchemaError:
+            try:
+                return self.codecs.decoder(schema, "cdr")
+            except SchemaError as exc:
+                return exc
+
+        built = await anyio.to_thread.run_sync(build)
+        wire = self._subs.get(topic)
+        if wire is None or wire.type != schema or wire.compression != "cbor-raw":
+            return  # changed meanwhile: the first message builds it
+        if isinstance(built, SchemaError):
+            return  # the first message logs it, as before
+        self._decoders[(topic, "cbor-raw")] = built
+
     async def _fetch_definition(self, schema: str) -> None:
         """Register ``schema`` from ``/rosapi/message_details`` (for cbor-raw
         of a type the bundled definitions lack)."""
@@ -539,7 +618,11 @@ class RosbridgeBackend:
             self.codecs.add_schema(schema, "ros2msg", _typedefs_to_msg(schema, answer))
         except (ServiceError, TimeoutError, SchemaError, ValueError) as exc:
             self._no_definition.add(schema)  # asked once per connection
-            self._log.warning("no definition of %s from /rosapi/message_details: %s", schema, exc)
+            self._log.warning(
+                "no definition of %s from /rosapi/message_details: %s",
+                schema,
+                truncate_for_log(str(exc)),
+            )
 
     async def fetch_definition(self, schema: str) -> bool:
         """Whether a definition of ``schema`` is known, asking the bridge
@@ -637,6 +720,7 @@ class RosbridgeBackend:
         else:
             if action not in servers:
                 raise ActionGoalError(action, "no action server offers it")
+        self._check_pending(action, ActionGoalError)
         goal_id = self._next_id(f"goal:{action}")
         frame = self._engine.send_action_goal(action, action_type, goal, id=goal_id)
         self._goals[goal_id] = (action, events)

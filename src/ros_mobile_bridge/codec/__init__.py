@@ -14,5 +14,12 @@ from ._model import FieldDef as FieldDef
 from ._names import normalize_type_name as normalize_type_name
 from ._names import same_type_name as same_type_name
 from ._registry import CodecRegistry as CodecRegistry
+from ._registry import SchemaTooLarge as SchemaTooLarge
 
-__all__ = ["CodecRegistry", "FieldDef", "normalize_type_name", "same_type_name"]
+__all__ = [
+    "CodecRegistry",
+    "FieldDef",
+    "SchemaTooLarge",
+    "normalize_type_name",
+    "same_type_name",
+]

@@ -25,7 +25,7 @@ from ._parse import parse_jsonschema, parse_ros2idl, parse_ros2msg
 from ._templates import json_definition, json_template, ros_template
 from ._wellknown import builtin_definitions, wellknown_definitions
 
-__all__ = ["CodecRegistry"]
+__all__ = ["CodecRegistry", "SchemaTooLarge"]
 
 Decoder = Callable[[memoryview], Any]
 Encoder = Callable[[Mapping[str, Any]], bytes]
@@ -48,6 +48,14 @@ class _Generation:
     builders: dict[str, Builder] = field(default_factory=dict)
     decoders: dict[str, Decoder] = field(default_factory=dict)
     encoders: dict[str, Encoder] = field(default_factory=dict)
+
+
+_PARSED = ("ros2msg", "ros2idl", "jsonschema")
+
+
+class SchemaTooLarge(SchemaError):
+    """A schema over the registry's ``max_schema_size`` or
+    ``max_schema_fields``: refused before its codecs are built."""
 
 
 def _encoding(message_encoding: str) -> str:
@@ -234,7 +242,13 @@ class CodecRegistry:
     plain functions that may be called from any thread.
     """
 
-    def __init__(self) -> None:
+    def __init__(
+        self, *, max_schema_size: int | None = None, max_schema_fields: int | None = None
+    ) -> None:
+        self.max_schema_size = max_schema_size
+        """Characters of one schema text :meth:`add_schema` accepts (None: any)."""
+        self.max_schema_fields = max_schema_fields
+        """Fields one schema may define, over all its definitions (None: any)."""
         self._lock = threading.RLock()
         self._own: dict[str, MsgDef | _JsonSchema] = {}
         self._deps: dict[str, MsgDef] = {}
@@ -263,6 +277,12 @@ class CodecRegistry:
         """
         key = canonical_name(name)
         encoding = schema_encoding.strip().lower() if isinstance(schema_encoding, str) else ""
+        limit = self.max_schema_size
+        if limit is not None and encoding in _PARSED and len(data) > limit:
+            raise SchemaTooLarge(
+                f"the schema of {name!r} is {len(data)} characters long, over "
+                f"max_schema_size={limit}"
+            )
         if encoding == "ros2msg":
             mains, defs = parse_ros2msg(name, data)
         elif encoding == "ros2idl":
@@ -276,6 +296,12 @@ class CodecRegistry:
             with self._lock:
                 self._no_schema.add(key)
             return
+        fields = sum(len(d.fields) for d in defs.values())
+        if self.max_schema_fields is not None and fields > self.max_schema_fields:
+            raise SchemaTooLarge(
+                f"the schema of {name!r} defines {fields} fields in {len(defs)} types, over "
+                f"max_schema_fields={self.max_schema_fields}"
+            )
         with self._lock:
             for type_name, msgdef in defs.items():
                 if type_name in mains:

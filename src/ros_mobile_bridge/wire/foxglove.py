@@ -14,7 +14,10 @@ No sockets, no event loop, no threads: the caller owns the WebSocket and
 Server input never makes the engine raise. Malformed JSON, an unknown ``op``,
 wrong field types, a binary frame shorter than its header, data for a
 subscription the client never made: each becomes a :class:`ProtocolViolation`
-event and the engine carries on with the next frame. Bad *caller* arguments,
+event and the engine carries on with the next frame. Input beyond the
+engine's bounds (JSON nesting, channels and services kept, the size of one
+schema text) is refused the same way, with a :attr:`ProtocolViolation.kind`
+naming the bound. Bad *caller* arguments,
 on the other hand, raise ``TypeError`` / ``ValueError`` at once.
 
 The engine understands the three subprotocols in :data:`SUBPROTOCOLS`. The
@@ -34,6 +37,8 @@ from dataclasses import dataclass
 from struct import Struct
 from types import MappingProxyType
 from typing import Any, Final
+
+from .._limits import json_too_deep
 
 __all__ = [
     "DEFAULT_SCHEMA_ENCODINGS",
@@ -338,9 +343,15 @@ class PlaybackState(Event):
 @dataclass(frozen=True, slots=True)
 class ProtocolViolation(Event):
     """The server sent something the engine could not use; ``reason`` says what.
-    The engine ignored (that part of) the frame and carries on."""
+    The engine ignored (that part of) the frame and carries on.
+
+    ``kind`` classifies it: ``"invalid_utf8"``, ``"json_depth"``,
+    ``"schema_too_large"`` (the schema text was dropped, the channel or
+    service kept), ``"channel_limit"``, ``"service_limit"`` (one event per
+    message, however many were refused), else ``"malformed"``."""
 
     reason: str
+    kind: str = "malformed"
 
 
 # --------------------------------------------------------------------------
@@ -621,16 +632,29 @@ class FoxgloveEngine:
         "_client_channels",
         "_next_client_channel_id",
         "_next_sub_id",
+        "_oversize",
         "_schemas",
         "_services",
         "_sub_by_channel",
         "_subs",
         "_text_handlers",
+        "max_channels",
+        "max_json_depth",
+        "max_schema_size",
+        "max_services",
         "server_info",
         "subprotocol",
     )
 
-    def __init__(self, subprotocol: str) -> None:
+    def __init__(
+        self,
+        subprotocol: str,
+        *,
+        max_channels: int = 10_000,
+        max_services: int = 10_000,
+        max_schema_size: int = 256 * 1024,
+        max_json_depth: int = 100,
+    ) -> None:
         if not isinstance(subprotocol, str):
             raise TypeError(f"subprotocol must be a str, got {type(subprotocol).__name__}")
         if subprotocol not in SUBPROTOCOLS:
@@ -639,6 +663,24 @@ class FoxgloveEngine:
             )
         self.subprotocol: str = subprotocol
         """The negotiated subprotocol."""
+        for name, value in (
+            ("max_channels", max_channels),
+            ("max_services", max_services),
+            ("max_schema_size", max_schema_size),
+            ("max_json_depth", max_json_depth),
+        ):
+            if type(value) is not int or value < 1:
+                raise ValueError(f"{name} must be a positive int, got {value!r}")
+        self.max_channels = max_channels
+        """Server channels kept at once; more are refused (``"channel_limit"``)."""
+        self.max_services = max_services
+        """Server services kept at once; more are refused (``"service_limit"``)."""
+        self.max_schema_size = max_schema_size
+        """Bytes of one schema text; a longer one is dropped (``"schema_too_large"``)."""
+        self.max_json_depth = max_json_depth
+        """Deepest JSON nesting read; a deeper text frame is skipped (``"json_depth"``)."""
+        # schema id -> size of a schema text dropped for its size
+        self._oversize: dict[int, int] = {}
         self.server_info: ServerInfo | None = None
         """The last ``serverInfo`` the server sent, or ``None`` before the first."""
         self._schemas: dict[int, tuple[str, str, str]] = {}  # id -> (name, encoding, data)
@@ -692,7 +734,7 @@ class FoxgloveEngine:
 
     # -- server -> client: text ---------------------------------------------
 
-    def receive_text(self, text: str | bytes) -> list[Event]:
+    def receive_text(self, text: str | bytes | bytearray | memoryview) -> list[Event]:
         """Parse one text frame from the server.
 
         Returns the resulting events in order (:class:`ProtocolViolation` events
@@ -703,12 +745,16 @@ class FoxgloveEngine:
             try:
                 text = bytes(text).decode("utf-8")
             except UnicodeDecodeError as exc:
-                return [ProtocolViolation(f"text frame is not valid UTF-8: {exc}")]
+                return [ProtocolViolation(f"text frame is not valid UTF-8: {exc}", "invalid_utf8")]
         elif not isinstance(text, str):
             raise TypeError(f"text must be str or bytes, got {type(text).__name__}")
+        if json_too_deep(text, self.max_json_depth):
+            return [self._too_deep(len(text))]
         try:
             msg = json.loads(text)
-        except (ValueError, RecursionError) as exc:
+        except RecursionError:
+            return [self._too_deep(len(text))]
+        except ValueError as exc:
             return [ProtocolViolation(f"text frame is not valid JSON: {exc}")]
         if type(msg) is not dict:
             return [ProtocolViolation(f"text frame is a JSON {_kind(msg)}, not an object")]
@@ -726,6 +772,19 @@ class FoxgloveEngine:
         except Exception as exc:  # the contract: server input never raises
             out.append(ProtocolViolation(f"{op}: internal error: {exc!r}"))
         return out
+
+    def _too_deep(self, size: int) -> ProtocolViolation:
+        return ProtocolViolation(
+            f"a text frame of {size} characters nests deeper than {self.max_json_depth}; skipped",
+            "json_depth",
+        )
+
+    def _schema_fits(self, data: str) -> bool:
+        limit = self.max_schema_size
+        size = len(data)
+        return size <= limit and (
+            size * 4 <= limit or len(data.encode("utf-8", "replace")) <= limit
+        )
 
     def _on_server_info(self, msg: dict[str, Any], out: list[Event]) -> None:
         name = _opt_str(msg, "name") or ""
@@ -752,6 +811,7 @@ class FoxgloveEngine:
             out.append(UnadvertiseServices(tuple(self._services.values())))
             self._services.clear()
         self._schemas.clear()
+        self._oversize.clear()
         self._sub_by_channel.clear()
         info = ServerInfo(name, capabilities, encodings, metadata, session_id)
         self.server_info = info
@@ -773,6 +833,7 @@ class FoxgloveEngine:
     def _on_advertise(self, msg: dict[str, Any], out: list[Event]) -> None:
         schemas = _opt_list(msg, "schemas")
         channels = _opt_list(msg, "channels") if schemas else _req_list(msg, "channels")
+        refused = 0
         for raw in schemas:
             try:
                 obj = _as_object(raw, "a schema")
@@ -781,6 +842,14 @@ class FoxgloveEngine:
             except _Malformed as exc:
                 out.append(ProtocolViolation(f"advertise: schema skipped: {exc}"))
                 continue
+            if sid not in self._schemas and len(self._schemas) >= self.max_channels:
+                refused += 1  # the table is bounded like the channels using it
+                continue
+            if self._schema_fits(entry[2]):
+                self._oversize.pop(sid, None)
+            else:  # kept without its text; the channel using it is reported
+                self._oversize[sid] = len(entry[2])
+                entry = (entry[0], entry[1], "")
             self._schemas[sid] = entry
         advertised: list[Channel] = []
         for raw in channels:
@@ -790,6 +859,9 @@ class FoxgloveEngine:
                 out.append(ProtocolViolation(f"advertise: channel skipped: {exc}"))
                 continue
             old = self._channels.get(channel.id)
+            if old is None and len(self._channels) >= self.max_channels:
+                refused += 1
+                continue
             self._channels[channel.id] = channel
             if old is not None:
                 # Re-advertised while live: subscriptions follow the new definition.
@@ -797,6 +869,14 @@ class FoxgloveEngine:
                     if bound is old:
                         self._subs[sub_id] = channel
             advertised.append(channel)
+        if refused:
+            out.append(
+                ProtocolViolation(
+                    f"advertise: {refused} channels or schemas refused: the connection keeps "
+                    f"at most {self.max_channels}",
+                    "channel_limit",
+                )
+            )
         if advertised:
             out.append(Advertise(tuple(advertised)))
 
@@ -812,6 +892,9 @@ class FoxgloveEngine:
             if entry is not None:
                 name, schema_encoding, data = entry
                 schema_encoding = schema_encoding or DEFAULT_SCHEMA_ENCODINGS.get(encoding, "")
+                size = self._oversize.get(schema_id)
+                if size is not None:
+                    out.append(self._schema_dropped(f"channel {cid} ({topic!r:.200})", name, size))
                 return Channel(cid, topic, encoding, name, schema_encoding, data)
             out.append(
                 ProtocolViolation(
@@ -823,6 +906,11 @@ class FoxgloveEngine:
         schema_encoding_opt = _opt_str(obj, "schemaEncoding")
         if schema_name is None and schema is None and schema_encoding_opt is None:
             return Channel(cid, topic, encoding, "", "", "")
+        if schema is not None and not self._schema_fits(schema):
+            out.append(
+                self._schema_dropped(f"channel {cid} ({topic!r:.200})", schema_name, len(schema))
+            )
+            schema = ""
         return Channel(
             cid,
             topic,
@@ -830,6 +918,14 @@ class FoxgloveEngine:
             schema_name or "",
             schema_encoding_opt or DEFAULT_SCHEMA_ENCODINGS.get(encoding, ""),
             schema or "",
+        )
+
+    def _schema_dropped(self, what: str, schema_name: str | None, size: int) -> ProtocolViolation:
+        return ProtocolViolation(
+            f"advertise: {what}: the schema {schema_name or ''!r:.200} of {size} characters is over "
+            f"{self.max_schema_size} bytes; dropped (messages decode with a bundled definition "
+            "of the type, if any, else arrive raw)",
+            "schema_too_large",
         )
 
     def _on_unadvertise(self, msg: dict[str, Any], out: list[Event]) -> None:
@@ -851,18 +947,30 @@ class FoxgloveEngine:
 
     def _on_advertise_services(self, msg: dict[str, Any], out: list[Event]) -> None:
         advertised: list[ServiceDef] = []
+        refused = 0
         for raw in _req_list(msg, "services"):
             try:
-                service = self._parse_service(raw)
+                service = self._parse_service(raw, out)
             except _Malformed as exc:
                 out.append(ProtocolViolation(f"advertiseServices: service skipped: {exc}"))
                 continue
+            if service.id not in self._services and len(self._services) >= self.max_services:
+                refused += 1
+                continue
             self._services[service.id] = service
             advertised.append(service)
+        if refused:
+            out.append(
+                ProtocolViolation(
+                    f"advertiseServices: {refused} services refused: the connection keeps at "
+                    f"most {self.max_services}",
+                    "service_limit",
+                )
+            )
         if advertised:
             out.append(AdvertiseServices(tuple(advertised)))
 
-    def _parse_service(self, raw: object) -> ServiceDef:
+    def _parse_service(self, raw: object, out: list[Event]) -> ServiceDef:
         obj = _as_object(raw, "a service")
         sid = _req_id(obj, "id")
         name = _req_str(obj, "name")
@@ -882,7 +990,17 @@ class FoxgloveEngine:
             response = _flat_side(
                 obj.get("responseSchema"), f"{stype}_Response", schema_encoding, "responseSchema"
             )
-        return ServiceDef(sid, name, stype, request, response)
+        sides = []
+        for side in (request, response):
+            if side is not None and not self._schema_fits(side.schema):
+                out.append(
+                    self._schema_dropped(
+                        f"service {sid} ({name!r:.200})", side.schema_name, len(side.schema)
+                    )
+                )
+                side = MessageSchema(side.encoding, side.schema_name, side.schema_encoding, "")
+            sides.append(side)
+        return ServiceDef(sid, name, stype, sides[0], sides[1])
 
     def _on_unadvertise_services(self, msg: dict[str, Any], out: list[Event]) -> None:
         removed: list[ServiceDef] = []

@@ -40,6 +40,8 @@ from typing import Any, Final, Literal
 import cbor2
 import numpy as np
 
+from .._limits import json_too_deep, truncate_for_log
+
 __all__ = [
     "ActionFeedback",
     "ActionResult",
@@ -169,9 +171,13 @@ class ForeignProtocol:
 
 @dataclass(frozen=True, slots=True)
 class ProtocolViolation:
-    """A frame that could not be understood; it was skipped."""
+    """A frame that could not be understood, or that the engine's bounds
+    refuse; it was skipped. ``kind``: ``"invalid_utf8"``, ``"json_depth"``,
+    ``"fragment_limit"`` (a fragmented message dropped by the reassembly
+    bounds), else ``"malformed"``."""
 
     reason: str
+    kind: str = "malformed"
 
 
 Event = (
@@ -393,11 +399,12 @@ def _json(value: Any) -> str:
 
 def _as_text(value: Any) -> str:
     """A server value as text for an id or a message: JSON when it is JSON,
-    else its ``repr`` (CBOR can carry bytes, tags, huge integers)."""
+    else a bounded description (CBOR can carry bytes, tags, integers too
+    long for ``str``). Never raises."""
     try:
         return _json(value)
-    except (TypeError, ValueError, RecursionError):
-        return repr(value)[:1000]
+    except Exception:
+        return truncate_for_log(value, 1000)
 
 
 def _check_str(name: str, value: object) -> str:
@@ -412,7 +419,10 @@ class RosbridgeEngine:
     ``max_message_size`` bounds a reassembled ``fragment`` message (and the
     total held in reassembly), in characters of its JSON text;
     ``fragment_timeout`` drops a fragmented message when no part of it came
-    for that long, and ignores its late parts. ``clock`` (monotonic seconds)
+    for that long, and ignores its late parts (each drop is a
+    ``"fragment_limit"`` violation, reported with the next frame).
+    ``max_json_depth`` bounds the nesting of a JSON operation that is parsed
+    whole (a deeper one is a ``"json_depth"`` violation). ``clock`` (monotonic seconds)
     is injectable for tests. The engine remembers which topics were
     subscribed with ``cbor-raw`` (see :meth:`subscribe`), to tell their
     frames from a CBOR message with a ``bytes`` field."""
@@ -422,12 +432,16 @@ class RosbridgeEngine:
         *,
         max_message_size: int = 64 * 1024 * 1024,
         fragment_timeout: float = 10.0,
+        max_json_depth: int = 100,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if max_message_size <= 0:
             raise ValueError("max_message_size must be positive")
         if not fragment_timeout > 0:
             raise ValueError("fragment_timeout must be positive")
+        if type(max_json_depth) is not int or max_json_depth < 1:
+            raise ValueError("max_json_depth must be a positive int")
+        self.max_json_depth = max_json_depth
         self.max_message_size = max_message_size
         self.fragment_timeout = fragment_timeout
         self._clock = clock
@@ -440,12 +454,14 @@ class RosbridgeEngine:
     def receive_text(self, data: bytes | bytearray | memoryview | str) -> list[Event]:
         """Handle one text frame: JSON, one operation."""
         if self._partials or self._dropped:
-            self._expire()
+            expired = self._expire()
+            if expired:
+                return [*expired, *self.receive_text(data)]
         if isinstance(data, str):
             try:
                 raw: bytes | bytearray = data.encode()
             except UnicodeEncodeError:
-                return [ProtocolViolation("a text frame that is not valid Unicode")]
+                return [ProtocolViolation("a text frame that is not valid Unicode", "invalid_utf8")]
         else:
             raw = data if isinstance(data, bytes | bytearray) else bytes(data)
         match = _PEEK_OP_FIRST.match(raw) or _PEEK_TOPIC_FIRST.match(raw)
@@ -457,18 +473,43 @@ class RosbridgeEngine:
                 try:
                     topic = topic_bytes.decode()
                 except UnicodeDecodeError:
-                    return [ProtocolViolation("a publish frame with a topic that is not UTF-8")]
+                    return [
+                        ProtocolViolation(
+                            "a publish frame with a topic that is not UTF-8", "invalid_utf8"
+                        )
+                    ]
                 return [Publish(topic, "json", memoryview(raw))]
+        return self._parse_json(raw, "a text frame")
+
+    def _parse_json(self, raw: bytes | bytearray, what: str, *, inner: bool = False) -> list[Event]:
+        """Parse a whole JSON operation (``what`` names it for a violation;
+        ``inner``: a reassembled message, which must not be a fragment)."""
+        if json_too_deep(raw, self.max_json_depth):
+            return [self._too_deep(what, len(raw))]
         try:
             obj = json.loads(raw)
-        except (ValueError, RecursionError) as exc:
-            return [ProtocolViolation(f"not JSON: {exc}")]
+        except RecursionError:
+            return [self._too_deep(what, len(raw))]
+        except UnicodeDecodeError as exc:
+            return [ProtocolViolation(f"{what} is not valid UTF-8: {exc}", "invalid_utf8")]
+        except ValueError as exc:
+            return [ProtocolViolation(f"{what} is not JSON: {truncate_for_log(str(exc))}")]
+        if inner and isinstance(obj, dict) and obj.get("op") == "fragment":
+            return [ProtocolViolation(f"{what}: a fragment inside a fragment")]
         return self._handle(obj, raw)
+
+    def _too_deep(self, what: str, size: int) -> ProtocolViolation:
+        return ProtocolViolation(
+            f"{what} of {size} bytes nests deeper than {self.max_json_depth}; skipped",
+            "json_depth",
+        )
 
     def receive_binary(self, data: bytes | bytearray | memoryview) -> list[Event]:
         """Handle one binary frame: CBOR, one operation."""
         if self._partials or self._dropped:
-            self._expire()
+            expired = self._expire()
+            if expired:
+                return [*expired, *self.receive_binary(data)]
         if isinstance(data, memoryview):
             data = bytes(data)
         try:
@@ -481,7 +522,12 @@ class RosbridgeEngine:
             obj = cbor_loads(data)
         except ValueError as exc:
             return [ProtocolViolation(str(exc))]
-        return self._handle(obj, data)
+        except RecursionError:
+            return [ProtocolViolation("CBOR nested too deeply", "json_depth")]
+        try:
+            return self._handle(obj, data)
+        except Exception as exc:  # the contract: server input never raises
+            return [ProtocolViolation(f"internal error: {truncate_for_log(repr(exc))}")]
 
     def _handle(self, obj: Any, raw: bytes | bytearray) -> list[Event]:
         if not isinstance(obj, dict):
@@ -546,13 +592,23 @@ class RosbridgeEngine:
         )
 
     # -- fragments -------------------------------------------------------------
-    def _expire(self) -> None:
+    def _expire(self) -> list[Event]:
         now = self._clock()
         timeout = self.fragment_timeout
+        out: list[Event] = []
         for key in [k for k, p in self._partials.items() if now - p.last > timeout]:
+            partial = self._partials[key]
+            out.append(
+                ProtocolViolation(
+                    f"fragment {truncate_for_log(key, 100)!r}: {len(partial.parts)} of "
+                    f"{partial.total} parts after {timeout:g} s; message dropped",
+                    "fragment_limit",
+                )
+            )
             self._drop(key)
         for key in [k for k, t in self._dropped.items() if now - t > timeout]:
             del self._dropped[key]
+        return out
 
     def _drop(self, key: str) -> None:
         partial = self._partials.pop(key, None)
@@ -575,13 +631,26 @@ class RosbridgeEngine:
         ):
             return [ProtocolViolation(f"fragment {key!r}: bad 'num'/'total'")]
         if key in self._dropped:
-            return [ProtocolViolation(f"fragment {key!r}: part of a dropped message; ignored")]
+            return [
+                ProtocolViolation(
+                    f"fragment {truncate_for_log(key, 100)!r}: part of a dropped message; ignored",
+                    "fragment_limit",
+                )
+            ]
         partial = self._partials.get(key)
         now = self._clock()
+        evicted: list[Event] = []
         if partial is None:
             if len(self._partials) >= _MAX_FRAGMENTED:
                 oldest = min(self._partials, key=lambda k: self._partials[k].last)
                 self._drop(oldest)
+                evicted.append(
+                    ProtocolViolation(
+                        f"fragment {truncate_for_log(oldest, 100)!r}: more than "
+                        f"{_MAX_FRAGMENTED} messages in reassembly; the oldest dropped",
+                        "fragment_limit",
+                    )
+                )
             partial = self._partials[key] = _Partial(total, now)
         elif partial.total != total:
             self._drop(key)
@@ -592,28 +661,30 @@ class RosbridgeEngine:
         if partial.size + size > self.max_message_size or self._held + size > self.max_message_size:
             self._drop(key)
             return [
+                *evicted,
                 ProtocolViolation(
-                    f"fragment {key!r}: over {self.max_message_size} characters; message dropped"
-                )
+                    f"fragment {truncate_for_log(key, 100)!r}: over {self.max_message_size} "
+                    "characters; message dropped",
+                    "fragment_limit",
+                ),
             ]
         partial.parts[num] = data
         partial.last = now
         partial.size += size
         self._held += size
         if len(partial.parts) < total:
-            return []
+            return evicted
         self._partials.pop(key)  # complete, not dropped
         self._held -= partial.size
-        whole = "".join(partial.parts[i] for i in range(total))
-        try:
-            inner = json.loads(whole)
-        except (ValueError, RecursionError) as exc:
-            return [
-                ProtocolViolation(f"fragment {key!r}: the reassembled message is not JSON: {exc}")
-            ]
-        if isinstance(inner, dict) and inner.get("op") == "fragment":
-            return [ProtocolViolation(f"fragment {key!r}: a fragment inside a fragment")]
-        return self._handle(inner, whole.encode())
+        whole = "".join(partial.parts[i] for i in range(total)).encode("utf-8", "surrogatepass")
+        return [
+            *evicted,
+            *self._parse_json(
+                whole,
+                f"fragment {truncate_for_log(key, 100)!r}: the reassembled message",
+                inner=True,
+            ),
+        ]
 
     @property
     def fragments_pending(self) -> int:
