@@ -865,9 +865,7 @@ class Client:
         )
         if not resolved and not (check_velocity and velocity_topic):
             # (a velocity topic refuses an unresolved type anyway: no round trip)
-            fetch = getattr(backend, "fetch_definition", None)
-            if fetch is not None:
-                resolved = bool(await fetch(schema))
+            resolved = await backend.fetch_definition(schema)
         if not resolved:
             raise SchemaError(
                 f"unknown type {schema!r} for {topic}: no definition is bundled, the server "

@@ -170,6 +170,13 @@ class Backend(Protocol):
 
     async def unsubscribe_parameters(self, names: Sequence[str]) -> None: ...
 
+    async def fetch_definition(self, schema: str) -> bool:
+        """Whether a definition of message type ``schema`` is known now,
+        after asking the server for one if its protocol can (rosbridge:
+        ``/rosapi/message_details``; Foxglove sends definitions only with its
+        channels, so there it only checks what is known)."""
+        ...
+
     async def confirm_delivery(self) -> None:
         """Return once everything sent so far has reached the server (a
         round trip), so closing now loses nothing."""

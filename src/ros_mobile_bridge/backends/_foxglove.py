@@ -584,6 +584,9 @@ class FoxgloveBackend:
     async def send(self, message: WireMessage) -> None:
         await self._ws.send(message)
 
+    async def fetch_definition(self, schema: str) -> bool:
+        return self.codecs.resolves(schema)  # definitions come only with channels
+
     async def confirm_delivery(self) -> None:
         pong = await self._ws.ping()
         await pong.wait()
