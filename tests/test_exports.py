@@ -78,6 +78,7 @@ def test_lag_module_exports_its_readers() -> None:
         "clear",
         "history_csv",
         "max_lag_ms",
+        "recurring_lag_ms",
         "stats",
         "sustained_lag_ms",
     }

@@ -128,18 +128,29 @@ async def test_schema_with_40000_fields_is_refused_and_other_channels_deliver() 
 async def test_100000_channels_in_one_advertise_are_bounded_and_a_later_advertise_shows_up() -> (
     None
 ):
+    limit = rmb.ClientOptions().max_channels
     with HostileServer.start("many_channels", channels=100_000, delay=1) as server:
         with anyio.fail_after(30):
             async with rmb.connect(server.url, protocol="foxglove-ws", options=options()) as robot:
-                # the server advertises /late 1 s after the 100k channels
+                # the server advertises /early 1 s after the 100k channels: the
+                # client is at its limit, so it is refused and counted
+                await wait_until(lambda: server.events("sent_early"), timeout=8, what="/early")
+                await wait_until(
+                    lambda: robot.rejections.get("channel_limit", 0) >= 2,
+                    timeout=8,
+                    what="/early refused",
+                )
+                assert len(robot.topics) <= limit
+                assert not any(t.name == "/early" for t in robot.topics)
+                # then the flood is unadvertised and /late advertised: it shows
+                # up at once (each advertisement costs what it changes)
                 await wait_until(
                     lambda: any(t.name == "/late" for t in robot.topics),
                     timeout=8,
                     what="/late in client.topics",
                 )
                 assert robot.status == "connected"
-                assert robot.rejections.get("channel_limit", 0) >= 1
-                assert len(robot.topics) <= rmb.ClientOptions().max_channels
+                assert not any(t.name.startswith("/c/") for t in robot.topics)
                 async with robot.subscribe("/chatter") as sub:
                     await until_data(sub, "1")
 
