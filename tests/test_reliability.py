@@ -15,12 +15,11 @@ from collections.abc import Iterator
 from typing import Any
 
 import anyio
-import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
-from peers.foxglove_sdk import TYPESTORE, SdkServer, cdr, decode, string_msg
+from peers.foxglove_sdk import SdkServer, decode, image_msg, string_msg
 from ros_mobile_bridge.flow import current_monitor
 
 QUICK_BREAKER = rmb.BreakerPolicy(
@@ -162,19 +161,7 @@ async def test_control_frame_leaves_ahead_of_queued_data_under_an_image_flood(
     server: SdkServer,
 ) -> None:
     cam = server.channel("/camera", "sensor_msgs/msg/Image")
-    t = TYPESTORE.types
-    image = cdr(
-        "sensor_msgs/msg/Image",
-        header=t["std_msgs/msg/Header"](
-            stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""
-        ),
-        height=480,
-        width=640,
-        encoding="rgb8",
-        is_bigendian=0,
-        step=1920,
-        data=np.zeros(640 * 480 * 3, dtype=np.uint8),
-    )
+    image = image_msg()
     stop = threading.Event()
 
     def flood() -> None:

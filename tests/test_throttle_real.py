@@ -23,32 +23,14 @@ from collections.abc import Iterator
 from typing import Any
 
 import anyio
-import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
-from peers.foxglove_sdk import TYPESTORE, SdkServer, cdr
+from peers.foxglove_sdk import SdkServer, image_msg
 from ros_mobile_bridge.flow import current_monitor
 
 RATE_HZ = 30.0
-
-
-def image_template() -> bytearray:
-    t = TYPESTORE.types
-    payload = cdr(
-        "sensor_msgs/msg/Image",
-        header=t["std_msgs/msg/Header"](
-            stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""
-        ),
-        height=480,
-        width=640,
-        encoding="rgb8",
-        is_bigendian=0,
-        step=1920,
-        data=np.zeros(640 * 480 * 3, dtype=np.uint8),
-    )
-    return bytearray(payload)
 
 
 class Camera:
@@ -58,7 +40,7 @@ class Camera:
 
     def __init__(self, server: SdkServer, topic: str = "/camera") -> None:
         self.channel = server.channel(topic, "sensor_msgs/msg/Image")
-        self.template = image_template()
+        self.template = bytearray(image_msg())
         self.sent = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None

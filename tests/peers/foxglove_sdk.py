@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import foxglove
+import numpy as np
 from foxglove import Channel, MessageSchema, Parameter, Schema, Service, ServiceSchema
 from foxglove.websocket import Capability
 from rosbags.typesys import Stores, get_typestore
@@ -44,6 +45,23 @@ def cdr(typename: str, **fields: Any) -> bytes:
 
 def string_msg(text: str) -> bytes:
     return cdr("std_msgs/msg/String", data=text)
+
+
+def image_msg(width: int = 640, height: int = 480) -> bytes:
+    """A zero-filled ``sensor_msgs/msg/Image`` (rgb8), stamp 0, as CDR."""
+    t = TYPESTORE.types
+    return cdr(
+        "sensor_msgs/msg/Image",
+        header=t["std_msgs/msg/Header"](
+            stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""
+        ),
+        height=height,
+        width=width,
+        encoding="rgb8",
+        is_bigendian=0,
+        step=width * 3,
+        data=np.zeros(width * height * 3, dtype=np.uint8),
+    )
 
 
 def decode(typename: str, payload: bytes) -> Any:

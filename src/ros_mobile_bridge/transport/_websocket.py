@@ -229,23 +229,29 @@ class WebSocket:
         most :attr:`close_timeout` seconds, then close the stream."""
         if self._stream_closed:
             return
-        proto = self._proto
         with anyio.move_on_after(self.close_timeout):
-            try:
-                while proto.state is not State.CLOSED:
-                    data = await self._stream.receive(_READ_CHUNK)
-                    proto.receive_data(data)
-                    proto.events_received()
-                    await self._flush()  # the close reply, if not out yet
-            except (
-                anyio.EndOfStream,
-                anyio.ClosedResourceError,
-                anyio.BrokenResourceError,
-                OSError,
-                ConnectionLost,
-            ):
-                pass
+            await self._discard_until_closed(lambda: False)
         await self._close_stream()
+
+    async def _discard_until_closed(self, stop: Callable[[], bool]) -> None:
+        """Read and discard until the closing handshake completes (or
+        ``stop()``), sending what the protocol answers (the close reply);
+        the end of the stream or any transport error ends it quietly."""
+        proto = self._proto
+        try:
+            while proto.state is not State.CLOSED and not stop():
+                data = await self._stream.receive(_READ_CHUNK)
+                proto.receive_data(data)
+                proto.events_received()
+                await self._flush()
+        except (
+            anyio.EndOfStream,
+            anyio.ClosedResourceError,
+            anyio.BrokenResourceError,
+            OSError,
+            ConnectionLost,
+        ):
+            pass
 
     async def _close_stream(self) -> None:
         """Close the socket (shielded, never raises). A send blocked on it
@@ -387,19 +393,15 @@ class WebSocket:
                     async with self._send_lock:
                         self._proto.send_close(code, reason)
                         await self._flush_locked()
-                while self._proto.state is not State.CLOSED and self._closed_reason is None:
-                    data = await self._stream.receive(_READ_CHUNK)
-                    self._proto.receive_data(data)
-                    self._proto.events_received()
-                    await self._flush()
             except (
-                anyio.EndOfStream,
                 anyio.ClosedResourceError,
                 anyio.BrokenResourceError,
                 OSError,
                 ConnectionLost,
             ):
                 pass
+            else:
+                await self._discard_until_closed(lambda: self._closed_reason is not None)
         self._lost(ConnectionLost("connection closed by client", code))
         await self._close_stream()
 
