@@ -25,7 +25,7 @@ def _load_harness() -> ModuleType:
 def test_fuzz_harness_short_run() -> None:
     harness = _load_harness()
     harness.STATS.clear()
-    harness.run(max_examples=150, seed=0)
+    harness.run(max_examples=400, seed=0)
     # The run reached the interesting paths, not just the violation branch:
     # every publish kind, every event type, and whole fragmented messages.
     for name in (
