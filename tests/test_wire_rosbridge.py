@@ -460,6 +460,24 @@ def test_publish_cbor_raw_stamps(msg: dict[str, Any], stamp: int | None) -> None
     assert event.log_time_ns == stamp
 
 
+@pytest.mark.parametrize(
+    "frame",
+    [
+        # found by fuzz/fuzz_cbor_walker.py: the walker read these differently
+        # from a full CBOR parse (a negative nsecs was ignored; a second
+        # 'bytes' that is an integer was ignored where cbor2 keeps the last)
+        "a3626f70677075626c69736865746f706963682f63686174746572636d7367"
+        "a365627974657340647365637300656e7365637320",
+        "a3626f70677075626c69736865746f706963682f63686174746572636d7367"
+        "a26562797465734065627974657300",
+    ],
+)
+def test_cbor_raw_messages_a_full_parse_reads_differently_are_refused(frame: str) -> None:
+    event = one(raw_engine("/chatter").receive_binary(bytes.fromhex(frame)))
+    assert isinstance(event, ProtocolViolation), event
+    assert event.kind == "malformed"
+
+
 def test_publish_cbor_raw_large_payload() -> None:
     blob = bytes(range(256)) * 400  # a 4-byte length head
     frame = cbor2.dumps({"op": "publish", "topic": "/big", "msg": {"bytes": blob, "secs": 1}})

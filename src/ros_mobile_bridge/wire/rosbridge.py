@@ -308,20 +308,32 @@ def _map_entries(buf: bytes | bytearray, pos: int) -> tuple[int, int]:
 
 
 def _raw_message(buf: bytes | bytearray, pos: int) -> tuple[int, int, int | None]:
-    """The (start, end) of a cbor-raw ``msg``'s ``bytes`` and its stamp."""
+    """The (start, end) of a cbor-raw ``msg``'s ``bytes`` and its stamp.
+    ``bytes`` must be a byte string and ``secs``/``nsecs`` unsigned integers,
+    each given once: anything else is malformed (a full parse would read it
+    differently, and a real bridge never sends it)."""
     count, pos = _map_entries(buf, pos)
     start = end = -1
     secs: int | None = None
     nsecs = 0
+    seen: set[str] = set()
     for _ in range(count):
         key, pos = _text(buf, pos)
         major, arg, after = _head(buf, pos)
-        if key == "bytes" and major == 2:
+        if key in ("bytes", "secs", "nsecs"):
+            if key in seen:
+                raise _Malformed(f"a cbor-raw message with '{key}' twice")
+            seen.add(key)
+        if key == "bytes":
+            if major != 2:
+                raise _Malformed("a cbor-raw message whose 'bytes' is not a byte string")
             start, end = after, after + arg
             if end > len(buf):
                 raise _Malformed("truncated CBOR")
             pos = end
-        elif key in ("secs", "nsecs") and major == 0:
+        elif key in ("secs", "nsecs"):
+            if major != 0:
+                raise _Malformed(f"a cbor-raw stamp whose '{key}' is not an unsigned integer")
             if key == "secs":
                 secs = arg
             else:
