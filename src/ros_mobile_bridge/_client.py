@@ -898,21 +898,35 @@ class Client:
 
         ``definition`` is ``.msg`` text (``encoding="ros2msg"``; nested types
         it uses must be bundled, registered before, or appended in the
-        concatenated ``=====`` / ``MSG: pkg/msg/Type`` form) or IDL text
-        (``"ros2idl"``). It is checked at once: ``SchemaError`` when it does
-        not parse or uses an unknown type, ``ValueError`` / ``TypeError`` for
-        bad arguments. A server's own definition of the same name wins for
-        the messages it sends."""
+        concatenated ``=====`` / ``MSG: pkg/msg/Type`` form), IDL text
+        (``"ros2idl"``), a ``.srv`` text for ``pkg/srv/X`` (``"ros2msg"``:
+        registers ``X_Request`` and ``X_Response``), or an ``.action`` text
+        for ``pkg/action/X`` (``"ros2action"``: registers the goal, result,
+        feedback and the send-goal / get-result types ROS derives from it;
+        Zenoh needs them to send goals). It is checked at once:
+        ``SchemaError`` when it does not parse or uses an unknown type,
+        ``ValueError`` / ``TypeError`` for bad arguments. A server's own
+        definition of the same name wins for the messages it sends."""
         _check_schema(name)
         if not isinstance(definition, str | bytes):
             raise TypeError(f"definition must be str or bytes, not {type(definition).__name__}")
-        if encoding not in ("ros2msg", "ros2idl"):
-            raise ValueError(f"encoding must be 'ros2msg' or 'ros2idl', got {encoding!r}")
+        if encoding not in ("ros2msg", "ros2idl", "ros2action"):
+            raise ValueError(
+                f"encoding must be 'ros2msg', 'ros2idl' or 'ros2action', got {encoding!r}"
+            )
         scratch = CodecRegistry()
         for known, (known_encoding, text) in self._user_types.items():
             scratch.add_schema(known, known_encoding, text)
         scratch.add_schema(name, encoding, definition)
-        scratch.encoder(name, "cdr")  # every type it uses resolves
+        if encoding == "ros2action":
+            checked = [f"{name}_SendGoal_Request", f"{name}_GetResult_Response"]
+            checked.append(f"{name}_FeedbackMessage")
+        elif "/srv/" in name:
+            checked = list(CodecRegistry.service_type_names(name))
+        else:
+            checked = [name]
+        for each in checked:
+            scratch.encoder(each, "cdr")  # every type it uses resolves
         self._user_types[name] = (encoding, definition)
         self._user_types_in = None
         self._publish_checked = set()

@@ -12,7 +12,6 @@ from typing import Final, Literal
 import anyio
 
 from ._client import Client
-from ._errors import NotSupportedError
 from ._options import ClientOptions
 from ._types import DEFAULT_PORTS
 from .backends import Backend, open_foxglove, open_rosbridge, start_foxglove, start_rosbridge
@@ -43,6 +42,12 @@ class Endpoint:
         """The WebSocket URL (``ws://`` or ``wss://``), IPv6 hosts bracketed."""
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"{'wss' if self.secure else 'ws'}://{host}:{self.port}{self.path}"
+
+    @property
+    def zenoh_locator(self) -> str:
+        """The zenoh locator (``tcp/host:port``), IPv6 hosts bracketed."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"tcp/{host}:{self.port}"
 
 
 def _parse_port(text: str, target: str) -> int:
@@ -143,6 +148,11 @@ def parse_target(
     host = _check_host(host_text, target)
     if zenoh and protocol not in ("auto", "zenoh"):
         raise ValueError(f"a tcp/ endpoint is a zenoh target, but protocol={protocol!r}")
+    if protocol == "zenoh" and scheme_secure is not None:
+        raise ValueError(f"a zenoh target is tcp/host:port or a host, not a URL: {target!r}")
+    if protocol == "zenoh" and secure:
+        raise ValueError("secure=True is not supported over zenoh (tls/ endpoints are not yet)")
+    zenoh = zenoh or protocol == "zenoh"
     effective = "zenoh" if zenoh else protocol
     default = DEFAULT_PORTS.get(effective, DEFAULT_PORTS["foxglove-ws"])
     chosen = (
@@ -154,7 +164,9 @@ def parse_target(
 
 async def _open_backend(endpoint: Endpoint, protocol: str, options: ClientOptions) -> Backend:
     if endpoint.zenoh or protocol == "zenoh":
-        raise NotSupportedError("the zenoh transport is not implemented yet (see ROADMAP.md)")
+        from .backends._zenoh import open_zenoh  # eclipse-zenoh is an optional extra
+
+        return await open_zenoh(endpoint.zenoh_locator, options)
     if protocol == "rosbridge":
         return await open_rosbridge(endpoint.url, options)
     if protocol == "foxglove-ws":

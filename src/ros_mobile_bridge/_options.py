@@ -197,6 +197,19 @@ class ClientOptions:
     """Service calls, parameter requests and action goals waiting for an
     answer on one connection. One more raises at once (``ServiceError`` for
     a call or parameter request, ``ActionGoalError`` for a goal)."""
+    domain_id: int | None = None
+    """Zenoh: the ROS domain (0-232) whose graph and data this client sees.
+    None: ``$ROS_DOMAIN_ID`` when set to a valid id, else 0."""
+    zenoh_shared_memory: bool = False
+    """Zenoh: let the session use shared memory with peers on the same host
+    (off by default, as rmw_zenoh configures its sessions)."""
+    zenoh_backlog: int = 8192
+    """Zenoh: samples that may wait between zenoh's threads and the reader
+    task. Past it (or past :attr:`zenoh_backlog_bytes`) a sample is dropped
+    before any subscription sees it: a ``"backlog_overflow"`` rejection."""
+    zenoh_backlog_bytes: int = 64 * 1024 * 1024
+    """Zenoh: payload bytes that may wait between zenoh's threads and the
+    reader task (one sample larger than this still passes alone)."""
 
     def report_latency(self, ms: float) -> None:
         """Hand one round-trip time to :attr:`on_latency`; a failing callback
@@ -230,6 +243,14 @@ class ClientOptions:
         _count("max_schema_size", self.max_schema_size, 64)
         _count("max_schema_fields", self.max_schema_fields, 1)
         _count("max_pending_requests", self.max_pending_requests, 1)
+        if self.domain_id is not None:
+            _count("domain_id", self.domain_id, 0)
+            if self.domain_id > 232:
+                raise ValueError(f"domain_id must be 0-232, got {self.domain_id!r}")
+        if not isinstance(self.zenoh_shared_memory, bool):
+            raise TypeError("zenoh_shared_memory must be a bool")
+        _count("zenoh_backlog", self.zenoh_backlog, 1)
+        _count("zenoh_backlog_bytes", self.zenoh_backlog_bytes, 1024)
         if isinstance(self.stop_topics, str):
             raise TypeError("stop_topics must be a sequence of topic names, not a str")
         object.__setattr__(self, "stop_topics", tuple(self.stop_topics))

@@ -13,9 +13,25 @@ import anyio
 
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, same_type_name
-from ..flow import RawFrame, WireMessage
+from ..flow import RawFrame, TopicMessage, WireMessage
 
-__all__ = ["Advertisement", "Backend", "BackendEvents", "GoalEvents", "SubscribeHints"]
+__all__ = [
+    "Advertisement",
+    "Backend",
+    "BackendEvents",
+    "GoalEvents",
+    "SubscribeHints",
+    "socket_frame",
+]
+
+
+def socket_frame(message: WireMessage) -> str | bytes:
+    """``message`` as a WebSocket frame (text or binary). A
+    :class:`~ros_mobile_bridge.flow.TopicMessage` is for per-topic
+    transports only: ``TypeError`` here."""
+    if isinstance(message, TopicMessage):
+        raise TypeError("a TopicMessage cannot be sent on a WebSocket")
+    return message
 
 
 @dataclass(frozen=True, slots=True)

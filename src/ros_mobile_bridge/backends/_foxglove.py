@@ -30,7 +30,7 @@ from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket, connect_websocket
 from ..wire import foxglove as fx
-from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints
+from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints, socket_frame
 
 __all__ = ["FoxgloveBackend", "open_foxglove", "start_foxglove"]
 
@@ -582,7 +582,7 @@ class FoxgloveBackend:
 
     # -- lifecycle ----------------------------------------------------------
     async def send(self, message: WireMessage) -> None:
-        await self._ws.send(message)
+        await self._ws.send(socket_frame(message))
 
     async def fetch_definition(self, schema: str) -> bool:
         return self.codecs.resolves(schema)  # definitions come only with channels

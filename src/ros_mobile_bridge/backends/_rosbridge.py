@@ -38,7 +38,7 @@ from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket, connect_websocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
-from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints
+from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints, socket_frame
 
 __all__ = ["RosbridgeBackend", "open_rosbridge", "start_rosbridge"]
 
@@ -774,7 +774,7 @@ class RosbridgeBackend:
 
     # -- lifecycle -------------------------------------------------------------------
     async def send(self, message: WireMessage) -> None:
-        await self._ws.send(message)
+        await self._ws.send(socket_frame(message))
 
     async def _round_trip(self) -> None:
         """Return once the bridge has answered a request sent now, so every

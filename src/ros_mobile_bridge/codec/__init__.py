@@ -5,7 +5,8 @@ decoders (CDR or JSON payload -> ``dict``) and encoders (``dict`` -> payload)
 for them, falling back to the ROS 2 Jazzy message definitions bundled with
 rosbags and a few standard service definitions. :func:`normalize_type_name`
 and :func:`same_type_name` deal with the several spellings of a ROS type
-name.
+name; :func:`type_hash` computes a type's ROS 2 (REP-2011, ``RIHS01_``) type
+hash from a registry's definitions.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from ._names import normalize_type_name as normalize_type_name
 from ._names import same_type_name as same_type_name
 from ._registry import CodecRegistry as CodecRegistry
 from ._registry import SchemaTooLarge as SchemaTooLarge
+from ._typehash import type_hash as type_hash
 
 __all__ = [
     "CodecRegistry",
@@ -22,4 +24,5 @@ __all__ = [
     "SchemaTooLarge",
     "normalize_type_name",
     "same_type_name",
+    "type_hash",
 ]

@@ -181,6 +181,36 @@ def parse_srv(name: str, text: str) -> dict[str, MsgDef]:
     return parse_ros2msg(name, text if _SPLIT_LINE.search(text) else text + "\n---\n")[1]
 
 
+def action_texts(name: str, data: str | bytes) -> dict[str, str]:
+    """The ``.msg`` texts of every type ROS 2 derives from the ``.action``
+    text of action ``name`` (``pkg/action/X``): ``X_Goal``, ``X_Result``,
+    ``X_Feedback``, the ``X_SendGoal`` and ``X_GetResult`` service requests
+    and responses, and ``X_FeedbackMessage``, by canonical name. Raises
+    :class:`SchemaError` when the text is not three sections split by
+    ``---``."""
+    canon = _checked_name(name)
+    pkg, _, short = canon.split("/")
+    base = f"{pkg}/action/{short}"
+    sections = _SPLIT_LINE.split(_as_text(data))
+    if len(sections) != 3:
+        raise SchemaError(
+            f"an .action text has three sections split by '---' (goal, result, feedback); "
+            f"{name!r} has {len(sections)}"
+        )
+    goal, result, feedback = sections
+    uuid = "unique_identifier_msgs/msg/UUID goal_id\n"
+    return {
+        f"{base}_Goal": goal,
+        f"{base}_Result": result,
+        f"{base}_Feedback": feedback,
+        f"{base}_SendGoal_Request": f"{uuid}{base}_Goal goal\n",
+        f"{base}_SendGoal_Response": "bool accepted\nbuiltin_interfaces/msg/Time stamp\n",
+        f"{base}_GetResult_Request": uuid,
+        f"{base}_GetResult_Response": f"int8 status\n{base}_Result result\n",
+        f"{base}_FeedbackMessage": f"{uuid}{base}_Feedback feedback\n",
+    }
+
+
 def _strip_preprocessor(text: str) -> str:
     return "\n".join("" if line.lstrip().startswith("#") else line for line in text.split("\n"))
 

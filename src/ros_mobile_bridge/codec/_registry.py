@@ -21,7 +21,7 @@ from ._names import (
     same_type_name,
     service_type_names,
 )
-from ._parse import parse_jsonschema, parse_ros2idl, parse_ros2msg
+from ._parse import action_texts, parse_jsonschema, parse_ros2idl, parse_ros2msg
 from ._templates import json_definition, json_template, ros_template
 from ._wellknown import builtin_definitions, wellknown_definitions
 
@@ -50,7 +50,7 @@ class _Generation:
     encoders: dict[str, Encoder] = field(default_factory=dict)
 
 
-_PARSED = ("ros2msg", "ros2idl", "jsonschema")
+_PARSED = ("ros2msg", "ros2idl", "ros2action", "jsonschema")
 
 
 class SchemaTooLarge(SchemaError):
@@ -265,7 +265,9 @@ class CodecRegistry:
         pkg/Type`` form; a service's ``X_Request``/``X_Response`` arrive as
         ``.msg`` texts under ``pkg/srv/X_Request`` names), ``"ros2idl"`` (IDL
         text, optionally several blocks each introduced by the ``=====`` line
-        and ``IDL: pkg/msg/Type``) or ``"jsonschema"``. ``""`` or any other
+        and ``IDL: pkg/msg/Type``), ``"ros2action"`` (an ``.action`` text
+        for ``pkg/action/X``: registers the types ROS derives from it, see
+        :func:`action_texts`) or ``"jsonschema"``. ``""`` or any other
         encoding records the name as having no schema, which changes nothing
         else (built-in and earlier definitions stay usable).
 
@@ -283,6 +285,10 @@ class CodecRegistry:
                 f"the schema of {name!r} is {len(data)} characters long, over "
                 f"max_schema_size={limit}"
             )
+        if encoding == "ros2action":
+            for derived, text in action_texts(name, data).items():
+                self.add_schema(derived, "ros2msg", text)
+            return
         if encoding == "ros2msg":
             mains, defs = parse_ros2msg(name, data)
         elif encoding == "ros2idl":

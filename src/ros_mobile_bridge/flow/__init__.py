@@ -10,6 +10,7 @@ from ._lag import LagStats as LagStats
 from ._lag import current_monitor as current_monitor
 from ._lag import participate as participate
 from ._outbox import Outbox as Outbox
+from ._outbox import TopicMessage as TopicMessage
 from ._outbox import WireMessage as WireMessage
 from ._pending import PendingRequests as PendingRequests
 from ._subscription import FrameQueue as FrameQueue

@@ -13,14 +13,25 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Hashable
-from typing import Final
+from typing import Final, NamedTuple
 
 import anyio
 
-__all__ = ["Outbox", "WireMessage"]
+__all__ = ["Outbox", "TopicMessage", "WireMessage"]
 
-WireMessage = str | bytes
-"""An encoded message ready for the socket: text (JSON ops) or binary."""
+
+class TopicMessage(NamedTuple):
+    """An encoded message for a transport with no shared stream but one
+    writer per topic (Zenoh): the backend hands ``payload`` to ``topic``'s
+    publisher when it sends it."""
+
+    topic: str
+    payload: bytes
+
+
+WireMessage = str | bytes | TopicMessage
+"""An encoded message ready for the transport: a WebSocket text (JSON ops)
+or binary frame, or a :class:`TopicMessage`."""
 
 _DEFAULT_DATA_LIMIT: Final = 1024
 

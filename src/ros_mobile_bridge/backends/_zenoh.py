@@ -1,0 +1,1002 @@
+"""The Zenoh backend: ROS 2 over Zenoh with rmw_zenoh's conventions (key
+expressions, liveliness tokens, attachments, CDR payloads), through one
+zenoh *client* session to a router (``rmw_zenohd`` or any zenoh router).
+
+What it maps:
+
+* the graph: liveliness tokens under ``@ros2_lv/<domain>/``, read once at
+  start (a liveliness get) and followed by a liveliness subscriber; keyed by
+  the whole token (node and entity ids restart at 0 in every process);
+* subscriptions: one zenoh subscriber per topic on
+  ``<domain>/<name>/*/*`` (any type and hash), so a publisher whose token
+  has not been seen yet still delivers; each sample's key names its type,
+  which picks the decoder; a sample without a valid 33-byte attachment is
+  skipped and counted, as ``rmw_zenoh_cpp`` subscribers do;
+* publishing: one zenoh publisher per advertised topic on the exact key
+  (the type's RIHS01 hash included), with the attachment and increasing
+  sequence numbers, and a publisher token so ROS tools see it;
+* services: a zenoh ``get`` on the service key with the attachment and a
+  deadline; the first reply is the response;
+* actions: the action's ``_action/send_goal``, ``get_result`` and
+  ``cancel_goal`` services and its ``_action/feedback`` topic;
+* parameters: the nodes' standard ``rcl_interfaces`` parameter services,
+  names written ``/node:param`` as over rosbridge.
+
+Our own node token (``rmb_<zid>``) and one token per publisher,
+subscription and service client make this client visible to ROS tools.
+
+Everything the zenoh threads deliver reaches the reader task through the
+session's :class:`~ros_mobile_bridge.transport.Inbox`, in batches."""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import logging
+import os
+import time
+import uuid
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+import anyio
+
+from .._errors import (
+    ActionGoalError,
+    ConnectError,
+    DecodeError,
+    NotSupportedError,
+    RosBridgeError,
+    SchemaError,
+    ServiceError,
+)
+from .._limits import truncate_for_log
+from .._options import ClientOptions
+from .._types import ServerInfo, ServiceInfo, TopicInfo
+from ..codec import CodecRegistry, type_hash
+from ..flow import Decoder, PendingRequests, RawFrame, TopicMessage, WireMessage
+from ..transport._zenoh import (
+    DATA,
+    LIVELINESS,
+    LOST,
+    QUERY_DONE,
+    REPLY,
+    Item,
+    ZenohSession,
+)
+from ..wire import rmw_zenoh as rz
+from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints
+
+__all__ = ["ZenohBackend", "open_zenoh"]
+
+_GRAPH_TAG: Final = 0
+_ATTACHMENT_SIZE: Final = rz.ATTACHMENT_SIZE
+_MAX_KEYS_PER_TOPIC: Final = 16
+"""Distinct (type, hash) keys remembered per subscribed topic; a sample on a
+further key is decoded without the cache (a hostile peer cannot grow it)."""
+_RESULT_TIMEOUT: Final = 24 * 3600.0
+"""How long a goal's ``get_result`` query may wait (the goal's own life)."""
+_GOAL_SUCCEEDED: Final = 4
+
+
+def default_domain() -> int:
+    """``$ROS_DOMAIN_ID`` when it is a valid domain id, else 0."""
+    raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if raw.isdigit() and 0 <= int(raw) <= 232:
+        return int(raw)
+    return 0
+
+
+@dataclass(slots=True)
+class _Publisher(Advertisement):
+    topic: str
+    key: str
+    gid: bytes
+    encode: Any
+    publisher: Any
+    token: int
+    seq: int = 0
+
+
+@dataclass(slots=True)
+class _Subscription:
+    topic: str
+    tag: int
+    handle: int
+    token: int | None = None
+    feedback_of: str | None = None  # the action whose feedback topic this is
+    # sample key -> (type name, decoder); bounded by _MAX_KEYS_PER_TOPIC
+    keys: dict[str, tuple[str, Decoder | None]] = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class _Query:
+    name: str
+    replies: list[tuple[bool, bytes, bytes | None]] = field(default_factory=list)
+    on_done: Callable[[list[tuple[bool, bytes, bytes | None]]], None] | None = None
+
+
+@dataclass(slots=True)
+class _Goal:
+    action: str
+    action_type: str
+    uuid: bytes
+    events: GoalEvents
+    feedback_decode: Decoder | None
+
+
+async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohBackend:
+    """Open a zenoh client session to the router at ``endpoint`` and read
+    the domain's graph, within ``options.connect_timeout``. ``ConnectError``
+    when the router is refused or unreachable."""
+    deadline = anyio.current_time() + options.connect_timeout
+    session = await ZenohSession.open(
+        endpoint,
+        connect_timeout=options.connect_timeout,
+        shared_memory=options.zenoh_shared_memory,
+        max_items=options.zenoh_backlog,
+        max_bytes=options.zenoh_backlog_bytes,
+    )
+    try:
+        backend = ZenohBackend(session, options, endpoint)
+        await backend._bootstrap(deadline)
+    except BaseException:
+        await session.aclose()
+        raise
+    return backend
+
+
+class ZenohBackend:
+    """One zenoh session to one router (see :class:`~.Backend`)."""
+
+    protocol = "zenoh"
+    wire_timeout_slack = 0.0  # the client's deadline is the query's timeout
+
+    def __init__(self, session: ZenohSession, options: ClientOptions, endpoint: str) -> None:
+        self._session = session
+        self._options = options
+        self._log: logging.Logger = options.logger
+        domain = options.domain_id
+        self.domain = default_domain() if domain is None else domain
+        self.codecs = CodecRegistry(
+            max_schema_size=options.max_schema_size, max_schema_fields=options.max_schema_fields
+        )
+        self.server_info = ServerInfo(
+            name=f"zenoh router at {endpoint}",
+            protocol=self.protocol,
+            subprotocol="rmw_zenoh",
+            capabilities=("clientPublish", "services", "actions", "parameters"),
+            supported_encodings=("cdr",),
+            metadata={"domain_id": str(self.domain), "zid": session.zid},
+            session_id=session.zid,
+        )
+        self._events: BackendEvents | None = None
+        self._ids = itertools.count(0)  # node and entity ids, as rmw_zenoh counts them
+        self._tags = itertools.count(1)  # inbox tags (0 is the graph)
+        self._node_id = next(self._ids)
+        self._node_name = f"rmb_{session.zid[:12]}"
+        self._graph: dict[str, rz.Token] = {}
+        self._topic_infos: list[TopicInfo] = []
+        self._service_infos: list[ServiceInfo] = []
+        self._publishers_of: dict[str, int] = {}  # topic -> publisher tokens seen
+        self._wanted: dict[str, SubscribeHints] = {}
+        self._subs: dict[str, _Subscription] = {}
+        self._by_tag: dict[int, _Subscription] = {}
+        self._pubs: dict[str, _Publisher] = {}
+        self._client_gids: dict[str, tuple[bytes, int]] = {}  # service -> (gid, token)
+        self._call_seq = itertools.count(1)
+        self._queries: dict[int, _Query] = {}
+        self._calls: PendingRequests[list[tuple[bool, bytes, bytes | None]]] = PendingRequests()
+        self._goals: dict[bytes, _Goal] = {}
+        self._feedback_subs: dict[str, _Subscription] = {}
+        self._lost: str | None = None
+        self._bootstrapped = False
+        self._node_key = self._token_key(rz.EntityKind.NODE, self._node_id)
+        self._node_token = session.declare_token(self._node_key)
+
+    # -- identity ---------------------------------------------------------------------
+    def _token(
+        self,
+        kind: rz.EntityKind,
+        entity_id: int,
+        name: str | None = None,
+        type_name: str | None = None,
+        hash_: str | None = None,
+        qos: rz.Qos | None = None,
+    ) -> rz.Token:
+        return rz.Token(
+            domain=self.domain,
+            zid=self._session.zid,
+            node_id=self._node_id,
+            entity_id=entity_id,
+            kind=kind,
+            enclave="",
+            namespace="/",
+            node_name=self._node_name,
+            name=name,
+            type_name=type_name,
+            type_hash=hash_,
+            qos=qos,
+        )
+
+    def _token_key(self, kind: rz.EntityKind, entity_id: int, **kw: Any) -> str:
+        return rz.format_token(self._token(kind, entity_id, **kw))
+
+    def _type_hash(self, type_name: str) -> str:
+        """The RIHS01 hash of ``type_name``; ``SchemaError`` when a nested
+        definition is missing (a wrong hash would reach nobody, silently)."""
+        return type_hash(self.codecs, type_name)
+
+    def _key(self, name: str, type_name: str) -> str:
+        return rz.format_key(rz.TopicKey(self.domain, name, type_name, self._type_hash(type_name)))
+
+    # -- the graph ----------------------------------------------------------------------
+    async def _bootstrap(self, deadline: float) -> None:
+        """Read the graph as it is now (a liveliness get), then follow it."""
+        session = self._session
+        selector = rz.liveliness_selector(self.domain)
+        query_id = session.query_liveliness(
+            selector, timeout=max(deadline - anyio.current_time(), 0.001)
+        )
+        done = False
+        with anyio.move_on_after(max(deadline - anyio.current_time(), 0.0)):
+            while not done:
+                for item in await session.inbox.get_batch():
+                    if item[0] == QUERY_DONE and item[1] == query_id:
+                        done = True
+                    else:
+                        self._handle_early(item)
+        if not done:
+            raise ConnectError("zenoh: the router did not answer the graph query in time")
+        session.subscribe_liveliness(selector, _GRAPH_TAG)
+        self._rebuild_graph()
+        self._bootstrapped = True
+
+    def _handle_early(self, item: Item) -> None:
+        kind = item[0]
+        if kind == REPLY:
+            ok, _attachment = item[4]
+            if ok and item[2] is not None:
+                self._on_token(item[2], True)
+        elif kind == LIVELINESS:
+            self._on_token(item[2], item[3])
+
+    def _on_token(self, key: str, alive: bool) -> bool:
+        """Follow one liveliness change; True when the graph changed."""
+        if not alive:
+            return self._graph.pop(key, None) is not None
+        if key in self._graph:
+            return False
+        try:
+            token = rz.parse_token(key)
+        except rz.MalformedKey as exc:
+            self._reject("malformed_token", f"{key}: {exc}")
+            return False
+        if token.domain != self.domain:
+            return False
+        if len(self._graph) >= self._options.max_channels:
+            self._reject("channel_limit", f"more than {self._options.max_channels} graph tokens")
+            return False
+        self._graph[key] = token
+        return True
+
+    def _reject(self, reason: str, detail: str) -> None:
+        if self._events is not None:
+            self._events.on_rejected(reason, detail)
+        else:
+            self._log.warning("skipped input (%s): %s", reason, truncate_for_log(detail))
+
+    def _rebuild_graph(self) -> None:
+        topics: dict[str, str] = {}
+        publishers: dict[str, int] = {}
+        services: dict[str, str] = {}
+        for token in self._graph.values():
+            if token.name is None or token.type_name is None:
+                continue
+            if token.kind in (rz.EntityKind.PUBLISHER, rz.EntityKind.SUBSCRIPTION):
+                if token.kind is rz.EntityKind.PUBLISHER or token.name not in topics:
+                    topics[token.name] = token.type_name
+                if token.kind is rz.EntityKind.PUBLISHER:
+                    publishers[token.name] = publishers.get(token.name, 0) + 1
+            elif token.kind is rz.EntityKind.SERVICE:
+                services[token.name] = token.type_name
+        self._topic_infos = [TopicInfo(n, t, "cdr") for n, t in sorted(topics.items())]
+        self._service_infos = [ServiceInfo(n, t) for n, t in sorted(services.items())]
+        before = self._publishers_of
+        self._publishers_of = publishers
+        events = self._events
+        if events is not None:
+            for topic in self._wanted:
+                was, now = topic in before, topic in publishers
+                if was != now:
+                    events.on_topic_state(topic, now)
+        for topic, sub in self._subs.items():
+            if sub.token is None and topic in topics:
+                self._declare_subscription_token(sub, topics[topic])
+
+    @property
+    def topics(self) -> list[TopicInfo]:
+        return list(self._topic_infos)
+
+    @property
+    def services(self) -> list[ServiceInfo]:
+        return list(self._service_infos)
+
+    def topic_active(self, topic: str) -> bool:
+        return topic in self._publishers_of
+
+    def _topic_type(self, topic: str) -> str | None:
+        for info in self._topic_infos:
+            if info.name == topic:
+                return info.schema_name
+        return None
+
+    def _service_type(self, name: str) -> str | None:
+        for info in self._service_infos:
+            if info.name == name:
+                return info.type
+        return None
+
+    # -- the reader -----------------------------------------------------------------------
+    async def run(self, events: BackendEvents) -> None:
+        self._events = events
+        inbox = self._session.inbox
+        by_tag = self._by_tag
+        while True:
+            if self._lost is not None:
+                raise ConnectError(f"zenoh: {self._lost}")
+            batch = await inbox.get_batch()
+            await events.before_inbound()
+            graph_changed = False
+            for item in batch:
+                kind = item[0]
+                if kind == DATA:
+                    sub = by_tag.get(item[1])
+                    if sub is None:
+                        pass
+                    elif sub.feedback_of is not None:
+                        self._on_feedback(sub, item[3], item[4], events)
+                    else:
+                        self._on_sample(sub, item[2], item[3], item[4], events)
+                        await events.before_inbound()
+                elif kind == LIVELINESS:
+                    graph_changed |= self._on_token(item[2], item[3])
+                elif kind == REPLY:
+                    query = self._queries.get(item[1])
+                    if query is not None:
+                        ok, attachment = item[4]
+                        query.replies.append((ok, item[3], attachment))
+                elif kind == QUERY_DONE:
+                    self._on_query_done(item[1])
+                elif kind == LOST:
+                    self._lost = str(item[3])
+            overflowed = inbox.overflowed
+            if overflowed:
+                inbox.overflowed = 0
+                by = dict(inbox.overflowed_by_tag)
+                inbox.overflowed_by_tag.clear()
+                for tag, count in by.items():
+                    sub = by_tag.get(tag)
+                    what = sub.topic if sub is not None else f"tag {tag}"
+                    for _ in range(count):
+                        events.on_rejected(
+                            "backlog_overflow",
+                            f"{what}: the reader fell behind by more than the zenoh backlog",
+                        )
+            if graph_changed:
+                self._rebuild_graph()
+                events.on_graph()
+
+    def _on_feedback(
+        self,
+        sub: _Subscription,
+        payload: bytes,
+        attachment: bytes | None,
+        events: BackendEvents,
+    ) -> None:
+        """One ``_action/feedback`` sample: to the goal its uuid names (the
+        topic carries every client's goals; others' are ignored)."""
+        if not _valid_attachment(attachment):
+            events.on_rejected("attachment", f"{sub.topic}: a sample without a valid attachment")
+            return
+        goals = [g for g in self._goals.values() if g.action == sub.feedback_of]
+        if not goals:
+            return
+        decode = goals[0].feedback_decode
+        if decode is None:
+            return
+        try:
+            message = decode(memoryview(payload))
+        except DecodeError as exc:
+            events.on_rejected("decode", f"{sub.topic}: {exc}")
+            return
+        raw = _field(_field(message, "goal_id"), "uuid")
+        try:
+            goal_uuid = bytes(raw) if raw is not None else b""
+        except (TypeError, ValueError):
+            goal_uuid = b""
+        goal = self._goals.get(goal_uuid)
+        if goal is not None:
+            goal.events.on_feedback(_field(message, "feedback"))
+
+    def _on_sample(
+        self,
+        sub: _Subscription,
+        key: str,
+        payload: bytes,
+        attachment: bytes | None,
+        events: BackendEvents,
+    ) -> None:
+        if attachment is None or not _valid_attachment(attachment):
+            events.on_rejected(
+                "attachment",
+                f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
+                f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
+            )
+            return
+        entry = sub.keys.get(key)
+        if entry is None:
+            built = self._key_entry(sub.topic, key, events)
+            if built is None:
+                return
+            entry = built
+            if len(sub.keys) < _MAX_KEYS_PER_TOPIC:
+                sub.keys[key] = entry
+        schema, decode = entry
+        stamp = int.from_bytes(attachment[8:16], "little", signed=True)
+        events.on_frame(
+            RawFrame(
+                sub.topic,
+                schema,
+                "cdr",
+                memoryview(payload),
+                stamp if stamp > 0 else None,
+                time.time_ns(),
+                decode,
+            )
+        )
+
+    def _key_entry(
+        self, topic: str, key: str, events: BackendEvents
+    ) -> tuple[str, Decoder | None] | None:
+        """The type and decoder for samples on ``key``; None (counted) for a
+        key that is not a well-formed rmw_zenoh data key of ``topic``."""
+        try:
+            parsed = rz.parse_key(key)
+        except rz.MalformedKey as exc:
+            events.on_rejected("malformed", f"{topic}: data key {key!r}: {exc}")
+            return None
+        if parsed.name != topic or parsed.domain != self.domain:
+            events.on_rejected("malformed", f"{topic}: data key {key!r} names another topic")
+            return None
+        return parsed.type_name, self._decoder_for(parsed)
+
+    def _decoder_for(self, parsed: rz.TopicKey) -> Decoder | None:
+        """A decoder when we know a definition whose hash is the key's; None
+        (messages delivered raw, with a warning) otherwise: decoding with
+        another definition of the same name would deliver garbage."""
+        try:
+            ours = self._type_hash(parsed.type_name)
+            if ours != parsed.type_hash:
+                self._log.warning(
+                    "%s: the publisher's %s has hash %s, ours %s (another definition);"
+                    " messages are delivered raw",
+                    parsed.name,
+                    parsed.type_name,
+                    parsed.type_hash,
+                    ours,
+                )
+                return None
+            return self.codecs.decoder(parsed.type_name, "cdr")
+        except SchemaError as exc:
+            self._log.warning(
+                "%s: no decoder for %s, messages will be delivered raw: %s",
+                parsed.name,
+                parsed.type_name,
+                truncate_for_log(str(exc)),
+            )
+            return None
+
+    def _on_query_done(self, query_id: int) -> None:
+        query = self._queries.pop(query_id, None)
+        if query is None:
+            return
+        if query.on_done is not None:
+            query.on_done(query.replies)
+        else:
+            self._calls.resolve(query_id, query.replies)
+
+    # -- subscriptions --------------------------------------------------------------------
+    async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
+        self._wanted[topic] = hints
+        if topic in self._subs:
+            return
+        type_name = hints.schema or self._topic_type(topic)
+        if type_name is not None:
+            await self._prepare_decoder(topic, type_name)
+        tag = next(self._tags)
+        selector = f"{self.domain}/{topic.lstrip('/')}/*/*"
+        handle = self._session.subscribe(selector, tag)
+        sub = _Subscription(topic, tag, handle)
+        self._subs[topic] = sub
+        self._by_tag[tag] = sub
+        if type_name is not None:
+            self._declare_subscription_token(sub, type_name)
+        if self._events is not None and topic in self._publishers_of:
+            self._events.on_topic_state(topic, True)
+
+    async def _prepare_decoder(self, topic: str, type_name: str) -> None:
+        """Build the type's decoder (and hash) in a worker thread ahead of
+        the first sample: generating it can take tens of milliseconds that
+        would otherwise stall the reader."""
+
+        def build() -> None:
+            try:
+                self._type_hash(type_name)
+                self.codecs.decoder(type_name, "cdr")
+            except SchemaError:
+                pass  # reported when a sample arrives
+
+        await anyio.to_thread.run_sync(build)
+
+    def _declare_subscription_token(self, sub: _Subscription, type_name: str) -> None:
+        try:
+            hash_ = self._type_hash(type_name)
+        except SchemaError:
+            return
+        sub.token = self._session.declare_token(
+            self._token_key(
+                rz.EntityKind.SUBSCRIPTION,
+                next(self._ids),
+                name=sub.topic,
+                type_name=type_name,
+                hash_=hash_,
+                qos=rz.Qos(),
+            )
+        )
+
+    async def unsubscribe(self, topic: str) -> None:
+        self._wanted.pop(topic, None)
+        sub = self._subs.pop(topic, None)
+        if sub is None:
+            return
+        self._by_tag.pop(sub.tag, None)
+        self._session.undeclare(sub.handle)
+        if sub.token is not None:
+            self._session.undeclare(sub.token)
+
+    # -- publishing ---------------------------------------------------------------------
+    def publishing(self) -> Mapping[str, str]:
+        return {topic: pub.schema for topic, pub in self._pubs.items()}
+
+    def advertised(self, topic: str) -> str | None:
+        return Advertisement.ready_schema(self._pubs.get(topic))
+
+    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
+        existing = self._pubs.get(topic)
+        if existing is not None:
+            await existing.reuse(topic, schema)
+            return
+        if latch:
+            raise NotSupportedError(
+                "latched (transient-local) publishing is not implemented over zenoh yet"
+            )
+        encode = self.codecs.encoder(schema, "cdr")
+        key = self._key(topic, schema)
+        qos = rz.Qos()
+        entity_id = next(self._ids)
+        token_key = self._token_key(
+            rz.EntityKind.PUBLISHER,
+            entity_id,
+            name=topic,
+            type_name=schema,
+            hash_=rz.parse_key(key).type_hash,
+            qos=qos,
+        )
+        publisher = self._session.declare_publisher(key, reliable=qos.reliable, express=False)
+        token = self._session.declare_token(token_key)
+        ready = anyio.Event()
+        ready.set()
+        self._pubs[topic] = _Publisher(
+            schema, ready, topic, key, rz.entity_gid(token_key), encode, publisher, token
+        )
+
+    async def unadvertise(self, topic: str) -> None:
+        pub = self._pubs.pop(topic, None)
+        if pub is not None:
+            self._session.undeclare(pub.token)
+            with contextlib.suppress(Exception):
+                pub.publisher.undeclare()
+
+    def encode_publish(self, topic: str, data: Any) -> WireMessage:
+        pub = self._pubs[topic]
+        return TopicMessage(topic, pub.encode(data))
+
+    async def send(self, message: WireMessage) -> None:
+        if not isinstance(message, TopicMessage):
+            raise TypeError("the zenoh backend sends only TopicMessage")
+        if self._lost is not None or self._session.closed:
+            raise ConnectError(f"zenoh: {self._lost or 'the session is closed'}")
+        pub = self._pubs.get(message.topic)
+        if pub is None:
+            raise ConnectError(f"{message.topic} is no longer advertised on this session")
+        pub.seq += 1
+        attachment = rz.encode_attachment(pub.seq, time.time_ns(), pub.gid)
+        try:
+            pub.publisher.put(message.payload, attachment=attachment)
+        except Exception as exc:  # a closed session
+            raise ConnectError(f"zenoh: put failed: {exc}") from exc
+
+    # -- services ---------------------------------------------------------------------------
+    def _client_identity(self, service: str, srv_type: str, hash_: str) -> bytes:
+        known = self._client_gids.get(service)
+        if known is not None:
+            return known[0]
+        key = self._token_key(
+            rz.EntityKind.CLIENT,
+            next(self._ids),
+            name=service,
+            type_name=srv_type,
+            hash_=hash_,
+            qos=rz.Qos(),
+        )
+        gid = rz.entity_gid(key)
+        self._client_gids[service] = (gid, self._session.declare_token(key))
+        return gid
+
+    def _check_pending(self, what: str, *, goal: bool = False) -> None:
+        limit = self._options.max_pending_requests
+        if len(self._calls) + len(self._goals) >= limit:
+            reason = f"{limit} requests already wait for an answer (max_pending_requests)"
+            raise ActionGoalError(what, reason) if goal else ServiceError(what, reason)
+
+    def _start_query(
+        self,
+        service: str,
+        srv_type: str,
+        payload: bytes,
+        timeout: float,
+        on_done: Callable[[list[tuple[bool, bytes, bytes | None]]], None] | None = None,
+    ) -> int:
+        try:
+            hash_ = self._type_hash(srv_type)
+        except SchemaError as exc:
+            raise ServiceError(service, f"cannot compute the type hash: {exc}") from exc
+        key = rz.format_key(rz.TopicKey(self.domain, service, srv_type, hash_))
+        gid = self._client_identity(service, srv_type, hash_)
+        attachment = rz.encode_attachment(next(self._call_seq), time.time_ns(), gid)
+        query_id = self._session.query(key, payload=payload, attachment=attachment, timeout=timeout)
+        self._queries[query_id] = _Query(service, on_done=on_done)
+        return query_id
+
+    async def _request(self, service: str, srv_type: str, request: Any, timeout: float) -> Any:
+        """Call ``service`` (of type ``srv_type``) and return the decoded
+        response; ``ServiceError`` with the reason otherwise."""
+        req_name, res_name = CodecRegistry.service_type_names(srv_type)
+        try:
+            payload = self.codecs.encoder(req_name, "cdr")(request if request is not None else {})
+            decode = self.codecs.decoder(res_name, "cdr")
+        except SchemaError as exc:
+            raise ServiceError(service, f"no definition of {srv_type}: {exc}") from exc
+        self._check_pending(service)
+        query_id = self._start_query(service, srv_type, payload, timeout)
+        replies = await self._calls.request(query_id, _noop)
+        for ok, body, _attachment in replies:
+            if not ok:
+                text = body.decode("utf-8", "replace")
+                raise ServiceError(service, f"the server replied with an error: {text}")
+            try:
+                return decode(memoryview(body))
+            except DecodeError as exc:
+                raise ServiceError(service, f"the response does not decode: {exc}") from exc
+        raise ServiceError(service, f"no reply within {timeout:g} s")
+
+    async def call_service(self, name: str, request: Any, timeout: float) -> Any:
+        srv_type = self._service_type(name)
+        if srv_type is None:
+            raise ServiceError(name, "no server offers this service on this domain")
+        return await self._request(name, srv_type, request, timeout)
+
+    # -- actions ----------------------------------------------------------------------------
+    async def send_action_goal(
+        self, action: str, action_type: str, goal: Any, events: GoalEvents
+    ) -> str:
+        pkg, _, name = _split_type(action_type, "action")
+        base = f"{pkg}/action/{name}"
+        send_goal = f"{action}/_action/send_goal"
+        if self._service_type(send_goal) is None:
+            raise ActionGoalError(action, "no action server offers it")
+        self._check_pending(action, goal=True)
+        try:
+            feedback_decode: Decoder | None = self.codecs.decoder(f"{base}_FeedbackMessage", "cdr")
+        except SchemaError as exc:
+            raise ActionGoalError(action, f"no definition of {action_type}: {exc}") from exc
+        goal_uuid = uuid.uuid4().bytes
+        uuid_msg = {"uuid": list(goal_uuid)}
+        await self._ensure_feedback(action, base)
+        handle = _Goal(action, base, goal_uuid, events, feedback_decode)
+        self._goals[goal_uuid] = handle
+        try:
+            answer = await self._request(
+                send_goal,
+                f"{base}_SendGoal",
+                {"goal_id": uuid_msg, "goal": goal},
+                self._options.service_timeout,
+            )
+        except ServiceError as exc:
+            self._goals.pop(goal_uuid, None)
+            raise ActionGoalError(action, exc.reason) from exc
+        except BaseException:
+            self._goals.pop(goal_uuid, None)
+            raise
+        if not _field(answer, "accepted"):
+            self._goals.pop(goal_uuid, None)
+            raise ActionGoalError(action, "the action server rejected the goal")
+        self._ask_result(handle)
+        return goal_uuid.hex()
+
+    def _ask_result(self, goal: _Goal) -> None:
+        srv_type = f"{goal.action_type}_GetResult"
+        _req, res_name = CodecRegistry.service_type_names(srv_type)
+        try:
+            payload = self.codecs.encoder(_req, "cdr")({"goal_id": {"uuid": list(goal.uuid)}})
+            decode = self.codecs.decoder(res_name, "cdr")
+        except SchemaError as exc:
+            self._goals.pop(goal.uuid, None)
+            goal.events.on_failed(f"no definition of {srv_type}: {exc}")
+            return
+
+        def done(replies: list[tuple[bool, bytes, bytes | None]]) -> None:
+            if self._goals.pop(goal.uuid, None) is None:
+                return
+            for ok, body, _attachment in replies:
+                if not ok:
+                    goal.events.on_failed(body.decode("utf-8", "replace"))
+                    return
+                try:
+                    answer = decode(memoryview(body))
+                except DecodeError as exc:
+                    goal.events.on_failed(f"the result does not decode: {exc}")
+                    return
+                status = _field(answer, "status")
+                code = status if isinstance(status, int) else None
+                goal.events.on_result(code, _field(answer, "result"), code == _GOAL_SUCCEEDED)
+                return
+            goal.events.on_failed("the action server sent no result")
+
+        self._start_query(
+            f"{goal.action}/_action/get_result", srv_type, payload, _RESULT_TIMEOUT, done
+        )
+
+    async def _ensure_feedback(self, action: str, base: str) -> None:
+        if action in self._feedback_subs:
+            return
+        topic = f"{action}/_action/feedback"
+        tag = next(self._tags)
+        handle = self._session.subscribe(f"{self.domain}/{topic.lstrip('/')}/*/*", tag)
+        sub = _Subscription(topic, tag, handle, feedback_of=action)
+        self._feedback_subs[action] = sub
+        self._by_tag[tag] = sub
+
+    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
+        request = {"goal_info": {"goal_id": {"uuid": list(bytes.fromhex(goal_id))}}}
+        await self._request(
+            f"{action}/_action/cancel_goal",
+            "action_msgs/srv/CancelGoal",
+            request,
+            self._options.service_timeout,
+        )
+
+    # -- parameters --------------------------------------------------------------------------
+    # Each ROS node serves its own parameters (rcl_interfaces services under
+    # its name); names are written "/node:param" as over rosbridge.
+    async def _node_call(self, node: str, service: str, request: Any) -> Any:
+        name = f"{node}/{service}"
+        srv_type = self._service_type(name)
+        if srv_type is None:
+            raise ServiceError(name, f"node {node} offers no {service} service")
+        return await self._request(name, srv_type, request, self._options.service_timeout)
+
+    def _parameter_nodes(self) -> list[str]:
+        suffix = "/list_parameters"
+        return sorted(
+            info.name[: -len(suffix)]
+            for info in self._service_infos
+            if info.name.endswith(suffix) and info.type.endswith("/ListParameters")
+        )
+
+    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
+        if not names:
+            listed: list[str] = []
+            for node in self._parameter_nodes():
+                answer = await self._node_call(node, "list_parameters", {})
+                found = _field(_field(answer, "result"), "names") or []
+                listed.extend(f"{node}:{param}" for param in found)
+            names = listed
+        values: dict[str, Any] = {}
+        for node, params in _by_node(names).items():
+            if self._service_type(f"{node}/get_parameters") is None:
+                continue  # no such node: its parameters are absent from the result
+            answer = await self._node_call(node, "get_parameters", {"names": params})
+            for param, value in zip(params, _field(answer, "values") or (), strict=False):
+                known, plain = parameter_from_ros(value)
+                if known:
+                    values[f"{node}:{param}"] = plain
+        return values
+
+    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        for node, params in _by_node(list(values)).items():
+            request = {
+                "parameters": [
+                    {"name": param, "value": parameter_to_ros(values[f"{node}:{param}"])}
+                    for param in params
+                ]
+            }
+            answer = await self._node_call(node, "set_parameters", request)
+            for param, result in zip(params, _field(answer, "results") or (), strict=False):
+                if not _field(result, "successful"):
+                    reason = _field(result, "reason") or "refused"
+                    raise ServiceError(f"{node}/set_parameters", f"{param}: {reason}")
+        return await self.get_parameters(list(values))
+
+    async def subscribe_parameters(self, names: Sequence[str]) -> None:
+        raise NotSupportedError("parameter updates over zenoh are not implemented yet")
+
+    async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
+        return None
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    async def fetch_definition(self, schema: str) -> bool:
+        return self.codecs.resolves(schema)  # zenoh carries no definitions
+
+    async def _round_trip(self, timeout: float) -> bool:
+        """A liveliness query for our own node token, answered by the router:
+        everything put before it has left this session (zenoh keeps one
+        session's order). True when the answer came within ``timeout``."""
+        self._check_alive()
+        query_id = self._session.query_liveliness(self._node_key, timeout=timeout)
+        finished = anyio.Event()
+        self._queries[query_id] = _Query("round trip", on_done=lambda _r: finished.set())
+        with anyio.move_on_after(timeout):
+            await finished.wait()
+        return finished.is_set()
+
+    def _check_alive(self) -> None:
+        if self._lost is not None or self._session.closed:
+            raise ConnectError(f"zenoh: {self._lost or 'the session is closed'}")
+
+    async def confirm_delivery(self) -> None:
+        await self._round_trip(self._options.teardown_timeout)
+
+    def fail_pending(self, error: Exception) -> None:
+        assert isinstance(error, RosBridgeError)
+        self._calls.fail_all(error)
+        goals, self._goals = self._goals, {}
+        for goal in goals.values():
+            goal.events.on_failed("disconnected")
+
+    async def keepalive(self) -> None:
+        """Watch the router: zenoh's client session reconnects by itself, but
+        while it has no router nothing flows, so a router missing for
+        ``keepalive_timeout`` counts as a lost connection (the client's
+        reconnect policy then opens a new session). Each check is timed
+        as the connection's latency."""
+        interval = self._options.keepalive_interval
+        if interval <= 0:
+            await anyio.sleep_forever()
+        missing_since: float | None = None
+        while not self._session.closed and self._lost is None:
+            await anyio.sleep(min(interval, 1.0))
+            routers = await anyio.to_thread.run_sync(self._session.routers)
+            if routers:
+                missing_since = None
+                start = time.perf_counter()
+                if await self._round_trip(self._options.keepalive_timeout):
+                    self._options.report_latency((time.perf_counter() - start) * 1000.0)
+                continue
+            now = anyio.current_time()
+            if missing_since is None:
+                missing_since = now
+            elif now - missing_since >= self._options.keepalive_timeout:
+                self._session.inbox.push((LOST, 0, None, "the router is gone", None))
+                return
+
+    @property
+    def closed(self) -> bool:
+        return self._session.closed
+
+    async def aclose(self) -> None:
+        await self._session.aclose()
+
+
+async def _noop() -> None:
+    return None
+
+
+def _valid_attachment(attachment: bytes | None) -> bool:
+    """rmw_zenoh's 33-byte layout (see ``wire.rmw_zenoh``): checked by size
+    and the gid length byte only, on the hot path."""
+    return attachment is not None and len(attachment) == _ATTACHMENT_SIZE and attachment[16] == 0x10
+
+
+def _field(value: Any, name: str) -> Any:
+    if isinstance(value, Mapping):
+        return value.get(name)
+    return getattr(value, name, None)
+
+
+def _by_node(names: Sequence[str]) -> dict[str, list[str]]:
+    """``["/a:x", "/a:y", "/b:z"]`` -> ``{"/a": ["x", "y"], "/b": ["z"]}``;
+    ``ValueError`` for a name that is not ``/node:param``."""
+    out: dict[str, list[str]] = {}
+    for name in names:
+        node, sep, param = name.partition(":")
+        if not sep or not node.startswith("/") or not param:
+            raise ValueError(f"a parameter name is /node:param, got {name!r}")
+        out.setdefault(node, []).append(param)
+    return out
+
+
+# rcl_interfaces/msg/ParameterType codes and the ParameterValue field of each
+_PARAM_FIELDS: Final = {
+    1: "bool_value",
+    2: "integer_value",
+    3: "double_value",
+    4: "string_value",
+    5: "byte_array_value",
+    6: "bool_array_value",
+    7: "integer_array_value",
+    8: "double_array_value",
+    9: "string_array_value",
+}
+
+
+def parameter_from_ros(value: Any) -> tuple[bool, Any]:
+    """A decoded ``rcl_interfaces/msg/ParameterValue`` as ``(set, plain)``:
+    ``(False, None)`` for PARAMETER_NOT_SET."""
+    code = _field(value, "type")
+    name = _PARAM_FIELDS.get(code) if isinstance(code, int) else None
+    if name is None:
+        return False, None
+    plain = _field(value, name)
+    if code == 5 and not isinstance(plain, bytes | bytearray):
+        plain = bytes(plain or ())
+    elif code >= 6 and plain is not None and not isinstance(plain, list):
+        plain = list(plain)
+    return True, plain
+
+
+def parameter_to_ros(value: Any) -> dict[str, Any]:
+    """A Python value as an ``rcl_interfaces/msg/ParameterValue`` dict;
+    ``ValueError`` for a value no parameter type holds."""
+    if isinstance(value, bool):
+        return {"type": 1, "bool_value": value}
+    if isinstance(value, int):
+        return {"type": 2, "integer_value": value}
+    if isinstance(value, float):
+        return {"type": 3, "double_value": value}
+    if isinstance(value, str):
+        return {"type": 4, "string_value": value}
+    if isinstance(value, bytes | bytearray):
+        return {"type": 5, "byte_array_value": list(value)}
+    if isinstance(value, list | tuple):
+        items = list(value)
+        if all(isinstance(v, bool) for v in items):
+            return {"type": 6, "bool_array_value": items}
+        if all(isinstance(v, int) and not isinstance(v, bool) for v in items):
+            return {"type": 7, "integer_array_value": items}
+        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
+            return {"type": 8, "double_array_value": [float(v) for v in items]}
+        if all(isinstance(v, str) for v in items):
+            return {"type": 9, "string_array_value": items}
+    raise ValueError(f"no ROS parameter type holds {value!r}")
+
+
+def _split_type(type_name: str, namespace: str) -> tuple[str, str, str]:
+    parts = type_name.split("/")
+    if len(parts) == 2:
+        return parts[0], namespace, parts[1]
+    if len(parts) == 3 and parts[1] == namespace:
+        return parts[0], parts[1], parts[2]
+    raise ValueError(f"not a {namespace} type: {type_name!r}")

@@ -1,0 +1,394 @@
+"""rmw_zenoh's naming conventions (ROS 2 Jazzy), both ways, as pure functions.
+
+No sessions, no threads, no event loop: this module turns ROS names, types and
+QoS into the Zenoh key expressions, liveliness tokens and attachments that
+``rmw_zenoh_cpp`` uses, and parses what a peer sends back. The backend
+(``backends/_zenoh.py``) owns the Zenoh session and feeds these functions.
+
+The conventions, as ``rmw_zenoh_cpp`` (Jazzy) writes them:
+
+* **Data keys** (publications, subscriptions, service queries)::
+
+      <domain>/<name without its leading slash>/<pkg>::<kind>::dds_::<Type>_/RIHS01_<64 hex>
+
+  e.g. ``0/chatter/std_msgs::msg::dds_::String_/RIHS01_df66...``. The name may
+  hold slashes, so :func:`parse_key` reads the type and hash from the right.
+* **Liveliness tokens** (the graph)::
+
+      @ros2_lv/<domain>/<zid>/<node id>/<entity id>/<NN|MP|MS|SS|SC>/<enclave>/<namespace>/<node>
+              [/<name>/<dds type>/<type hash>/<qos>]
+
+  with every ``/`` inside a name replaced by ``%`` and an empty part written
+  ``%`` (:func:`mangle`). Node and entity ids count from 0 in every process,
+  so only the whole token identifies an entity.
+* **Attachments**: every publication and service request carries 33 bytes:
+  the sequence number (int64, little-endian), the source timestamp in
+  nanoseconds (int64, little-endian), then the 16-byte source gid with its
+  length as one byte (``0x10``) in front, as zenoh-ext serializes them.
+  ``rmw_zenoh_cpp`` drops a sample without one, and so do we.
+
+Peer input never makes a parser do anything but return or raise
+:class:`MalformedKey` / :class:`MalformedAttachment` (both ``ValueError``);
+the caller logs and skips. Inputs are bounded: a key or token longer than
+:data:`MAX_KEY_LENGTH` characters is refused before it is split. Bad *caller*
+arguments to the formatting functions raise ``ValueError`` at once.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+import struct
+from dataclasses import dataclass
+from typing import Final
+
+import xxhash
+
+__all__ = [
+    "ATTACHMENT_SIZE",
+    "LIVELINESS_PREFIX",
+    "MAX_KEY_LENGTH",
+    "Attachment",
+    "EntityKind",
+    "MalformedAttachment",
+    "MalformedKey",
+    "Qos",
+    "Token",
+    "TopicKey",
+    "dds_type_name",
+    "decode_attachment",
+    "encode_attachment",
+    "entity_gid",
+    "format_key",
+    "format_qos",
+    "format_token",
+    "liveliness_selector",
+    "mangle",
+    "parse_key",
+    "parse_qos",
+    "parse_token",
+    "ros_type_name",
+    "unmangle",
+]
+
+LIVELINESS_PREFIX: Final = "@ros2_lv"
+MAX_KEY_LENGTH: Final = 4096
+"""The longest key or token (in characters) the parsers look at."""
+ATTACHMENT_SIZE: Final = 33
+_GID_SIZE: Final = 16
+_ATTACHMENT: Final = struct.Struct("<qqB16s")
+_MAX_DOMAIN: Final = 232  # ROS 2's highest valid domain id
+_HASH = re.compile(r"RIHS01_[0-9a-f]{64}")
+_NAME_PART = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_DDS_TYPE = re.compile(
+    r"(?P<pkg>[A-Za-z_][A-Za-z0-9_]*)::(?P<kind>msg|srv|action)::dds_::(?P<type>[A-Za-z_][A-Za-z0-9_]*)_"
+)
+_ZID = re.compile(r"[0-9a-f]{1,32}")
+_INT = re.compile(r"[0-9]{1,19}")
+
+
+class MalformedKey(ValueError):
+    """A key expression or liveliness token that does not follow rmw_zenoh's
+    conventions (or is longer than :data:`MAX_KEY_LENGTH`)."""
+
+
+class MalformedAttachment(ValueError):
+    """An attachment that is missing, short, long or not rmw_zenoh's layout."""
+
+
+# -- names and types ----------------------------------------------------------------------
+def mangle(name: str) -> str:
+    """A name as one token part: ``/`` becomes ``%``; the empty name is ``%``."""
+    return name.replace("/", "%") if name else "%"
+
+
+def unmangle(part: str) -> str:
+    """The inverse of :func:`mangle` (``%`` alone reads back as ``/``)."""
+    return part.replace("%", "/")
+
+
+def dds_type_name(type_name: str) -> str:
+    """``pkg/msg/Type`` -> ``pkg::msg::dds_::Type_`` (also ``srv`` and ``action``).
+
+    Raises ``ValueError`` for a name that is not ``pkg/<msg|srv|action>/Type``.
+    """
+    parts = type_name.split("/")
+    if (
+        len(parts) != 3
+        or parts[1] not in ("msg", "srv", "action")
+        or not all(_NAME_PART.fullmatch(p) for p in (parts[0], parts[2]))
+    ):
+        raise ValueError(f"not a ROS 2 type name of the form pkg/msg/Type: {type_name!r}")
+    return f"{parts[0]}::{parts[1]}::dds_::{parts[2]}_"
+
+
+def ros_type_name(dds_name: str) -> str:
+    """``pkg::msg::dds_::Type_`` -> ``pkg/msg/Type``; :class:`MalformedKey` otherwise."""
+    match = _DDS_TYPE.fullmatch(dds_name)
+    if match is None:
+        raise MalformedKey(f"not a DDS type name: {dds_name[:200]!r}")
+    return f"{match['pkg']}/{match['kind']}/{match['type']}"
+
+
+def _check_domain(domain: int) -> None:
+    if isinstance(domain, bool) or not isinstance(domain, int) or not 0 <= domain <= _MAX_DOMAIN:
+        raise ValueError(f"domain id must be an int in 0..{_MAX_DOMAIN}, got {domain!r}")
+
+
+def _parse_domain(part: str) -> int:
+    if not _INT.fullmatch(part) or int(part) > _MAX_DOMAIN:
+        raise MalformedKey(f"bad domain id {part[:40]!r}")
+    return int(part)
+
+
+def _check_length(text: str) -> None:
+    if len(text) > MAX_KEY_LENGTH:
+        raise MalformedKey(f"longer than {MAX_KEY_LENGTH} characters ({len(text)})")
+
+
+# -- data keys ----------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class TopicKey:
+    """One data key: the domain, the ROS name (with its leading slash), the
+    ROS type name (``pkg/msg/Type``) and its ``RIHS01_`` hash."""
+
+    domain: int
+    name: str
+    type_name: str
+    type_hash: str
+
+
+def format_key(key: TopicKey) -> str:
+    """The key expression of ``key``; ``ValueError`` for an invalid part."""
+    _check_domain(key.domain)
+    name = key.name.strip("/")
+    if not name or "//" in name or any(c in name for c in "*$?#% "):
+        raise ValueError(f"not a ROS name: {key.name!r}")
+    if not _HASH.fullmatch(key.type_hash):
+        raise ValueError(f"not a RIHS01 type hash: {key.type_hash!r}")
+    return f"{key.domain}/{name}/{dds_type_name(key.type_name)}/{key.type_hash}"
+
+
+def parse_key(key: str) -> TopicKey:
+    """Parse a data key; :class:`MalformedKey` for anything else."""
+    _check_length(key)
+    parts = key.split("/")
+    if len(parts) < 4 or not all(parts[1:-2]):
+        raise MalformedKey(f"not <domain>/<name>/<type>/<hash>: {key[:200]!r}")
+    domain = _parse_domain(parts[0])
+    type_name = ros_type_name(parts[-2])
+    if not _HASH.fullmatch(parts[-1]):
+        raise MalformedKey(f"not a RIHS01 type hash: {parts[-1][:80]!r}")
+    return TopicKey(domain, "/" + "/".join(parts[1:-2]), type_name, parts[-1])
+
+
+def liveliness_selector(domain: int) -> str:
+    """The key expression matching every liveliness token of ``domain``."""
+    _check_domain(domain)
+    return f"{LIVELINESS_PREFIX}/{domain}/**"
+
+
+# -- QoS ------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Qos:
+    """The QoS settings this library reads and writes in a token's QoS part.
+
+    Deadline, lifespan and liveliness are parsed for validity and otherwise
+    ignored (written as defaults)."""
+
+    reliable: bool = True
+    transient_local: bool = False
+    keep_all: bool = False
+    depth: int = 10
+
+
+def format_qos(qos: Qos) -> str:
+    """``<rel>:<dur>:<hist>,<depth>:<deadline>:<lifespan>:<liveliness>``, with
+    defaults (reliable, volatile, keep-last) left empty as rmw_zenoh does."""
+    if isinstance(qos.depth, bool) or not isinstance(qos.depth, int) or qos.depth < 0:
+        raise ValueError(f"QoS depth must be an int >= 0, got {qos.depth!r}")
+    rel = "" if qos.reliable else "2"
+    dur = "1" if qos.transient_local else ""
+    hist = "2" if qos.keep_all else ""
+    return f"{rel}:{dur}:{hist},{qos.depth}:,:,:,,"
+
+
+def _enum(part: str, allowed: tuple[str, ...], what: str) -> str:
+    if part not in allowed:
+        raise MalformedKey(f"bad QoS {what} {part[:20]!r}")
+    return part
+
+
+def parse_qos(text: str) -> Qos:
+    """Parse a token's QoS part; :class:`MalformedKey` for anything else.
+
+    Reliability 1 = reliable, 2 = best effort; durability 1 = transient local,
+    2 = volatile; history 1 = keep last, 2 = keep all; 0 or empty = default.
+    """
+    _check_length(text)
+    parts = text.split(":")
+    if len(parts) != 6:
+        raise MalformedKey(f"QoS with {len(parts)} parts, expected 6: {text[:80]!r}")
+    rel = _enum(parts[0], ("", "0", "1", "2"), "reliability")
+    dur = _enum(parts[1], ("", "0", "1", "2"), "durability")
+    history = parts[2].split(",")
+    if len(history) != 2:
+        raise MalformedKey(f"bad QoS history {parts[2][:40]!r}")
+    hist = _enum(history[0], ("", "0", "1", "2"), "history")
+    if history[1] and not _INT.fullmatch(history[1]):
+        raise MalformedKey(f"bad QoS depth {history[1][:40]!r}")
+    for index, count in ((3, 2), (4, 2), (5, 3)):
+        fields = parts[index].split(",")
+        if len(fields) != count or any(f and not _INT.fullmatch(f) for f in fields):
+            raise MalformedKey(f"bad QoS part {parts[index][:40]!r}")
+    return Qos(
+        reliable=rel != "2",
+        transient_local=dur == "1",
+        keep_all=hist == "2",
+        depth=int(history[1]) if history[1] else 10,
+    )
+
+
+# -- liveliness tokens ------------------------------------------------------------------------
+class EntityKind(enum.Enum):
+    """The entity kinds of a liveliness token."""
+
+    NODE = "NN"
+    PUBLISHER = "MP"
+    SUBSCRIPTION = "MS"
+    SERVICE = "SS"
+    CLIENT = "SC"
+
+
+@dataclass(frozen=True, slots=True)
+class Token:
+    """One liveliness token. ``namespace`` and ``name`` are ROS names with
+    their leading slash; ``name``, ``type_name``, ``type_hash`` and ``qos`` are
+    ``None`` exactly for a node token."""
+
+    domain: int
+    zid: str
+    node_id: int
+    entity_id: int
+    kind: EntityKind
+    enclave: str
+    namespace: str
+    node_name: str
+    name: str | None = None
+    type_name: str | None = None
+    type_hash: str | None = None
+    qos: Qos | None = None
+
+
+def format_token(token: Token) -> str:
+    """The liveliness key of ``token``; ``ValueError`` for an invalid part."""
+    _check_domain(token.domain)
+    if not _ZID.fullmatch(token.zid):
+        raise ValueError(f"not a zenoh id (lowercase hex): {token.zid!r}")
+    if not _NAME_PART.fullmatch(token.node_name):
+        raise ValueError(f"not a node name: {token.node_name!r}")
+    head = (
+        f"{LIVELINESS_PREFIX}/{token.domain}/{token.zid}/{token.node_id}/{token.entity_id}/"
+        f"{token.kind.value}/{mangle(token.enclave)}/{mangle(token.namespace)}/{token.node_name}"
+    )
+    entity = (token.name, token.type_name, token.type_hash, token.qos)
+    if token.kind is EntityKind.NODE:
+        if any(part is not None for part in entity):
+            raise ValueError("a node token has no name, type or QoS")
+        return head
+    if token.name is None or token.type_name is None or token.qos is None:
+        raise ValueError(f"a {token.kind.name} token needs a name, a type and a QoS")
+    if token.type_hash is None or not _HASH.fullmatch(token.type_hash):
+        raise ValueError(f"not a RIHS01 type hash: {token.type_hash!r}")
+    name = token.name if token.name.startswith("/") else "/" + token.name
+    return (
+        f"{head}/{mangle(name)}/{dds_type_name(token.type_name)}/{token.type_hash}/"
+        f"{format_qos(token.qos)}"
+    )
+
+
+def parse_token(key: str) -> Token:
+    """Parse a liveliness token; :class:`MalformedKey` for anything else."""
+    _check_length(key)
+    parts = key.split("/")
+    if parts[0] != LIVELINESS_PREFIX or len(parts) not in (9, 13):
+        raise MalformedKey(f"not an rmw_zenoh liveliness token: {key[:200]!r}")
+    domain = _parse_domain(parts[1])
+    zid = parts[2]
+    if not _ZID.fullmatch(zid):
+        raise MalformedKey(f"bad zenoh id {zid[:40]!r}")
+    if not (_INT.fullmatch(parts[3]) and _INT.fullmatch(parts[4])):
+        raise MalformedKey(f"bad node or entity id in {key[:200]!r}")
+    try:
+        kind = EntityKind(parts[5])
+    except ValueError:
+        raise MalformedKey(f"unknown entity kind {parts[5][:20]!r}") from None
+    if not parts[8]:
+        raise MalformedKey("empty node name")
+    base = {
+        "domain": domain,
+        "zid": zid,
+        "node_id": int(parts[3]),
+        "entity_id": int(parts[4]),
+        "kind": kind,
+        "enclave": unmangle(parts[6]),
+        "namespace": unmangle(parts[7]),
+        "node_name": parts[8],
+    }
+    if kind is EntityKind.NODE:
+        if len(parts) != 9:
+            raise MalformedKey(f"a node token with entity parts: {key[:200]!r}")
+        return Token(**base)  # type: ignore[arg-type]
+    if len(parts) != 13:
+        raise MalformedKey(f"a {kind.name} token without its entity parts: {key[:200]!r}")
+    name = unmangle(parts[9])
+    if not name.startswith("/") or name == "/":
+        raise MalformedKey(f"bad entity name {parts[9][:80]!r}")
+    if not _HASH.fullmatch(parts[11]):
+        raise MalformedKey(f"not a RIHS01 type hash: {parts[11][:80]!r}")
+    return Token(
+        **base,  # type: ignore[arg-type]
+        name=name,
+        type_name=ros_type_name(parts[10]),
+        type_hash=parts[11],
+        qos=parse_qos(parts[12]),
+    )
+
+
+# -- attachments and gids ----------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Attachment:
+    """A decoded attachment: sequence number, source timestamp (ns), gid."""
+
+    sequence: int
+    timestamp_ns: int
+    gid: bytes
+
+
+def encode_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
+    """The 33-byte attachment; ``ValueError`` for out-of-range values."""
+    if len(gid) != _GID_SIZE:
+        raise ValueError(f"a gid is {_GID_SIZE} bytes, got {len(gid)}")
+    try:
+        return _ATTACHMENT.pack(sequence, timestamp_ns, _GID_SIZE, bytes(gid))
+    except struct.error as exc:
+        raise ValueError(f"attachment field out of range: {exc}") from None
+
+
+def decode_attachment(data: bytes | bytearray | memoryview | None) -> Attachment:
+    """Decode an attachment; :class:`MalformedAttachment` if it is missing,
+    not exactly :data:`ATTACHMENT_SIZE` bytes, or its gid length is not 16."""
+    if data is None:
+        raise MalformedAttachment("no attachment")
+    if len(data) != ATTACHMENT_SIZE:
+        raise MalformedAttachment(f"attachment of {len(data)} bytes, expected {ATTACHMENT_SIZE}")
+    sequence, timestamp, gid_size, gid = _ATTACHMENT.unpack(bytes(data))
+    if gid_size != _GID_SIZE:
+        raise MalformedAttachment(f"gid length byte {gid_size}, expected {_GID_SIZE}")
+    return Attachment(sequence, timestamp, gid)
+
+
+def entity_gid(token_key: str) -> bytes:
+    """A 16-byte gid for the entity with liveliness key ``token_key``: the
+    XXH3-128 hash of the key, little-endian, as rmw_zenoh_cpp derives it."""
+    return xxhash.xxh3_128_intdigest(token_key.encode()).to_bytes(_GID_SIZE, "little")

@@ -1,0 +1,268 @@
+"""rmw_zenoh's naming conventions (wire/rmw_zenoh.py): round trips, the exact
+strings rmw_zenoh_cpp writes, and every malformed input refused with
+MalformedKey / MalformedAttachment, never another exception."""
+
+from __future__ import annotations
+
+import contextlib
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from ros_mobile_bridge.wire import rmw_zenoh as rz
+
+STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
+
+identifiers = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,15}", fullmatch=True)
+ros_names = st.lists(identifiers, min_size=1, max_size=4).map(lambda p: "/" + "/".join(p))
+type_names = st.builds(
+    lambda pkg, kind, t: f"{pkg}/{kind}/{t}",
+    identifiers,
+    st.sampled_from(["msg", "srv", "action"]),
+    identifiers,
+)
+hashes = st.from_regex(r"RIHS01_[0-9a-f]{64}", fullmatch=True)
+domains = st.integers(0, 232)
+qos_values = st.builds(rz.Qos, st.booleans(), st.booleans(), st.booleans(), st.integers(0, 10**6))
+
+
+def test_the_exact_strings_rmw_zenoh_writes() -> None:
+    key = rz.TopicKey(0, "/chatter", "std_msgs/msg/String", STRING_HASH)
+    assert rz.format_key(key) == f"0/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}"
+    token = rz.Token(
+        domain=0,
+        zid="aac3178e146ba6f1fc6e6a4085e77f21",
+        node_id=0,
+        entity_id=10,
+        kind=rz.EntityKind.PUBLISHER,
+        enclave="",
+        namespace="/",
+        node_name="talker",
+        name="/cmd_vel",
+        type_name="geometry_msgs/msg/Twist",
+        type_hash=TWIST_HASH,
+        qos=rz.Qos(),
+    )
+    assert rz.format_token(token) == (
+        "@ros2_lv/0/aac3178e146ba6f1fc6e6a4085e77f21/0/10/MP/%/%/talker/%cmd_vel/"
+        f"geometry_msgs::msg::dds_::Twist_/{TWIST_HASH}/::,10:,:,:,,"
+    )
+    assert rz.liveliness_selector(7) == "@ros2_lv/7/**"
+    assert rz.dds_type_name("example_interfaces/action/Fibonacci_SendGoal") == (
+        "example_interfaces::action::dds_::Fibonacci_SendGoal_"
+    )
+
+
+def test_a_name_with_slashes_parses_from_the_right() -> None:
+    key = f"3/robot1/camera/image_raw/sensor_msgs::msg::dds_::Image_/{STRING_HASH}"
+    parsed = rz.parse_key(key)
+    assert parsed == rz.TopicKey(
+        3, "/robot1/camera/image_raw", "sensor_msgs/msg/Image", STRING_HASH
+    )
+
+
+@given(domains, ros_names, type_names, hashes)
+def test_keys_round_trip(domain: int, name: str, type_name: str, hash_: str) -> None:
+    key = rz.TopicKey(domain, name, type_name, hash_)
+    assert rz.parse_key(rz.format_key(key)) == key
+
+
+@given(qos_values)
+def test_qos_round_trips(qos: rz.Qos) -> None:
+    assert rz.parse_qos(rz.format_qos(qos)) == qos
+
+
+def test_qos_as_peers_write_it() -> None:
+    assert rz.parse_qos("::,10:,:,:,,") == rz.Qos()
+    assert rz.parse_qos("2:1:1,5:,:,:,,") == rz.Qos(reliable=False, transient_local=True, depth=5)
+    assert rz.parse_qos("1:2:2,0:1,5:0,0:1,2,3") == rz.Qos(keep_all=True, depth=0)
+
+
+@given(
+    domains,
+    st.from_regex(r"[0-9a-f]{1,32}", fullmatch=True),
+    st.integers(0, 2**31),
+    st.integers(0, 2**31),
+    st.sampled_from(list(rz.EntityKind)),
+    st.sampled_from(["", "/", "/enclave"]),
+    st.one_of(st.just("/"), ros_names),
+    identifiers,
+    ros_names,
+    type_names,
+    hashes,
+    qos_values,
+)
+def test_tokens_round_trip(
+    domain: int,
+    zid: str,
+    node_id: int,
+    entity_id: int,
+    kind: rz.EntityKind,
+    enclave: str,
+    namespace: str,
+    node: str,
+    name: str,
+    type_name: str,
+    hash_: str,
+    qos: rz.Qos,
+) -> None:
+    if kind is rz.EntityKind.NODE:
+        token = rz.Token(domain, zid, node_id, entity_id, kind, enclave, namespace, node)
+    else:
+        token = rz.Token(
+            domain,
+            zid,
+            node_id,
+            entity_id,
+            kind,
+            enclave,
+            namespace,
+            node,
+            name,
+            type_name,
+            hash_,
+            qos,
+        )
+    parsed = rz.parse_token(rz.format_token(token))
+    # the empty enclave is written "%" and reads back as "/", as in rmw_zenoh
+    assert parsed == rz.Token(
+        domain,
+        zid,
+        node_id,
+        entity_id,
+        kind,
+        enclave or "/",
+        namespace,
+        node,
+        *((name, type_name, hash_, qos) if kind is not rz.EntityKind.NODE else ()),
+    )
+
+
+@given(
+    st.integers(-(2**63), 2**63 - 1),
+    st.integers(-(2**63), 2**63 - 1),
+    st.binary(min_size=16, max_size=16),
+)
+def test_attachments_round_trip(seq: int, ts: int, gid: bytes) -> None:
+    data = rz.encode_attachment(seq, ts, gid)
+    assert len(data) == rz.ATTACHMENT_SIZE == 33
+    assert data[16] == 0x10
+    assert rz.decode_attachment(data) == rz.Attachment(seq, ts, gid)
+
+
+def test_attachment_layout_is_little_endian() -> None:
+    data = rz.encode_attachment(1, 2, bytes(range(16)))
+    assert data == (1).to_bytes(8, "little") + (2).to_bytes(8, "little") + b"\x10" + bytes(
+        range(16)
+    )
+
+
+@pytest.mark.parametrize(
+    "data",
+    [None, b"", b"\x00" * 32, b"\x00" * 34, b"\x00" * 16 + b"\x0f" + b"\x00" * 16],
+    ids=["missing", "empty", "short", "long", "bad-gid-length"],
+)
+def test_malformed_attachments(data: bytes | None) -> None:
+    with pytest.raises(rz.MalformedAttachment):
+        rz.decode_attachment(data)
+
+
+@given(st.binary(max_size=64))
+def test_any_bytes_decode_or_raise_malformed(data: bytes) -> None:
+    with contextlib.suppress(rz.MalformedAttachment):
+        rz.decode_attachment(data)
+
+
+BAD_KEYS = [
+    "",
+    "0/chatter",
+    f"0/std_msgs::msg::dds_::String_/{STRING_HASH}",  # no name
+    f"x/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}",
+    f"233/chatter/std_msgs::msg::dds_::String_/{STRING_HASH}",
+    f"0/chatter/std_msgs/msg/String/{STRING_HASH}",
+    "0/chatter/std_msgs::msg::dds_::String_/RIHS01_short",
+    "0/chatter/std_msgs::msg::dds_::String_/TypeHashNotSupported",
+    f"0//chatter/std_msgs::msg::dds_::String_/{STRING_HASH}",
+    "0/" + "a/" * 3000 + f"std_msgs::msg::dds_::String_/{STRING_HASH}",
+]
+
+
+@pytest.mark.parametrize("key", BAD_KEYS)
+def test_malformed_keys(key: str) -> None:
+    with pytest.raises(rz.MalformedKey):
+        rz.parse_key(key)
+
+
+GOOD_TOKEN = (
+    "@ros2_lv/0/aac3178e146ba6f1fc6e6a4085e77f21/0/10/MP/%/%/talker/%cmd_vel/"
+    f"geometry_msgs::msg::dds_::Twist_/{TWIST_HASH}/::,10:,:,:,,"
+)
+BAD_TOKENS = [
+    "",
+    "@ros2_lv/0",
+    GOOD_TOKEN.replace("@ros2_lv", "@ros_lv"),
+    GOOD_TOKEN.replace("/MP/", "/XX/"),
+    GOOD_TOKEN.replace("/0/10/", "/a/10/"),
+    GOOD_TOKEN.replace("aac3178e", "AAC3178E"),
+    GOOD_TOKEN.replace("/talker/", "//"),
+    GOOD_TOKEN.replace("%cmd_vel", "cmd_vel"),
+    GOOD_TOKEN.replace("::,10:,:,:,,", "::,10"),
+    GOOD_TOKEN.replace("::,10:,:,:,,", "9::,10:,:,:,,"),
+    GOOD_TOKEN.replace("::,10:,:,:,,", "::,x:,:,:,,"),
+    GOOD_TOKEN.replace(TWIST_HASH, "RIHS01_00"),
+    GOOD_TOKEN.replace("geometry_msgs::msg::dds_::Twist_", "geometry_msgs/msg/Twist"),
+    "@ros2_lv/0/aac3/0/0/NN/%/%/node/%extra/t::msg::dds_::T_/" + TWIST_HASH + "/::,10:,:,:,,"[:0],
+    "@ros2_lv/0/aac3/0/0/NN/%/%/node/%x/a::msg::dds_::T_/" + TWIST_HASH,
+    GOOD_TOKEN + "x" * rz.MAX_KEY_LENGTH,
+]
+
+
+@pytest.mark.parametrize("token", BAD_TOKENS)
+def test_malformed_tokens(token: str) -> None:
+    with pytest.raises(rz.MalformedKey):
+        rz.parse_token(token)
+
+
+@given(st.text(max_size=300))
+def test_any_text_parses_or_raises_malformed(text: str) -> None:
+    for parser in (rz.parse_key, rz.parse_token, rz.parse_qos, rz.ros_type_name):
+        with contextlib.suppress(rz.MalformedKey):
+            parser(text)
+
+
+@given(
+    st.lists(
+        st.sampled_from(["@ros2_lv", "0", "%", "MP", "NN", "a", "", "::,10:,:,:,,"]), max_size=14
+    )
+)
+def test_token_shaped_text_parses_or_raises_malformed(parts: list[str]) -> None:
+    with contextlib.suppress(rz.MalformedKey):
+        rz.parse_token("/".join(parts))
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: rz.format_key(rz.TopicKey(233, "/a", "std_msgs/msg/String", STRING_HASH)),
+        lambda: rz.format_key(rz.TopicKey(0, "/", "std_msgs/msg/String", STRING_HASH)),
+        lambda: rz.format_key(rz.TopicKey(0, "/a/*", "std_msgs/msg/String", STRING_HASH)),
+        lambda: rz.format_key(rz.TopicKey(0, "/a", "String", STRING_HASH)),
+        lambda: rz.format_key(rz.TopicKey(0, "/a", "std_msgs/msg/String", "RIHS01_x")),
+        lambda: rz.format_qos(rz.Qos(depth=-1)),
+        lambda: rz.encode_attachment(0, 0, b"short"),
+        lambda: rz.encode_attachment(2**63, 0, bytes(16)),
+        lambda: rz.liveliness_selector(-1),
+    ],
+)
+def test_bad_caller_arguments_raise_value_error(call: object) -> None:
+    with pytest.raises(ValueError):  # noqa: PT011 - each call names its own reason
+        call()  # type: ignore[operator]
+
+
+def test_entity_gid_is_16_stable_bytes() -> None:
+    gid = rz.entity_gid(GOOD_TOKEN)
+    assert len(gid) == 16
+    assert gid == rz.entity_gid(GOOD_TOKEN)
+    assert gid != rz.entity_gid(GOOD_TOKEN.replace("/10/", "/11/"))
