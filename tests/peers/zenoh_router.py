@@ -1,0 +1,133 @@
+"""An eclipse-zenoh router, in its own process, for the Zenoh tests.
+
+Run as a script it opens a zenoh session in *router* mode listening on
+``tcp/127.0.0.1:<port>`` only (multicast scouting and gossip off, shared
+memory off, no plugins), prints ``READY <port>`` and serves until its stdin
+closes or it gets SIGTERM. :class:`ZenohRouter` starts one on a free port and
+stops it; the process also dies with its parent (``PR_SET_PDEATHSIG``).
+
+    python tests/peers/zenoh_router.py 7447
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from types import TracebackType
+
+try:  # imported as tests/peers/zenoh_router.py or as peers.zenoh_router
+    from peers.rosbridge import _die_with_parent, free_port
+except ImportError:  # pragma: no cover - run as a script
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+    from peers.rosbridge import _die_with_parent, free_port
+
+READY = "READY"
+START_TIMEOUT = 20.0
+
+
+def router_config(port: int) -> object:
+    """A zenoh router config: one loopback endpoint, nothing discovered."""
+    import zenoh
+
+    config = zenoh.Config()
+    config.insert_json5("mode", '"router"')
+    config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("scouting/gossip/enabled", "false")
+    config.insert_json5("transport/shared_memory/enabled", "false")
+    return config
+
+
+def serve(port: int) -> None:
+    """Serve until stdin closes or SIGTERM / SIGINT."""
+    import zenoh
+
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
+    session = zenoh.open(router_config(port))
+    try:
+        print(f"{READY} {port}", flush=True)
+        stop.wait()
+    finally:
+        session.close()
+
+
+class ZenohRouter:
+    """A router process on 127.0.0.1: ``.port``, ``.locator``; a context
+    manager (``stop()`` on exit, also when the test failed)."""
+
+    def __init__(self, port: int | None = None) -> None:
+        self.port = port or free_port()
+        self.locator = f"tcp/127.0.0.1:{self.port}"
+        self._proc: subprocess.Popen[str] | None = None
+
+    def start(self) -> ZenohRouter:
+        proc = subprocess.Popen(
+            [sys.executable, __file__, str(self.port)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            preexec_fn=_die_with_parent,
+            env={**os.environ, "RUST_LOG": os.environ.get("RUST_LOG", "error")},
+        )
+        self._proc = proc
+        line: list[str] = []
+        reader = threading.Thread(
+            target=lambda: line.append(proc.stdout.readline() if proc.stdout else "")
+        )
+        reader.start()
+        reader.join(START_TIMEOUT)
+        if not line or not line[0].startswith(READY):
+            self.stop()
+            raise RuntimeError(f"the zenoh router did not start on {self.locator}")
+        return self
+
+    @property
+    def running(self) -> bool:
+        return self._proc is not None and self._proc.poll() is None
+
+    def stop(self) -> int | None:
+        """Stop the router (stdin closed, then SIGTERM, then SIGKILL); its exit code."""
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return None
+        with contextlib.suppress(OSError):
+            if proc.stdin:
+                proc.stdin.close()
+        try:
+            return proc.wait(5)
+        except subprocess.TimeoutExpired:
+            proc.terminate()
+            try:
+                return proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                return proc.wait(5)
+        finally:
+            for stream in (proc.stdout, proc.stderr):
+                if stream:
+                    stream.close()
+
+    def __enter__(self) -> ZenohRouter:
+        return self.start()
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()
+
+
+if __name__ == "__main__":
+    serve(int(sys.argv[1]))

@@ -1,0 +1,366 @@
+"""The Zenoh transport through a real eclipse-zenoh router: the client's own
+publications and subscriptions, its graph and liveliness tokens, domain
+isolation, teardown, and hostile input injected with raw eclipse-zenoh (keys,
+attachments, payloads and tokens a conforming rmw_zenoh peer never sends).
+
+Interoperability with an independent implementation (zenoh-ros2-sdk nodes)
+is in ``test_zenoh_sdk.py``."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import anyio
+import pytest
+
+import ros_mobile_bridge as rmb
+from ros_mobile_bridge.codec import CodecRegistry, type_hash
+from ros_mobile_bridge.wire import rmw_zenoh as rz
+
+zenoh = pytest.importorskip("zenoh")
+
+STRING = "std_msgs/msg/String"
+TWIST = "geometry_msgs/msg/Twist"
+
+
+def options(domain: int, **kw: Any) -> rmb.ClientOptions:
+    return rmb.ClientOptions(domain_id=domain, **kw)
+
+
+@pytest.fixture
+def raw(zenoh_router: Any) -> Iterator[Any]:
+    """A bare eclipse-zenoh client session to the router (the fault injector)."""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([zenoh_router.locator]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(config)
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+def data_key(domain: int, topic: str, type_name: str = STRING) -> str:
+    return rz.format_key(
+        rz.TopicKey(domain, topic, type_name, type_hash(CodecRegistry(), type_name))
+    )
+
+
+def attachment(seq: int) -> bytes:
+    return rz.encode_attachment(seq, time.time_ns(), bytes(16))
+
+
+def cdr(type_name: str, value: dict[str, Any]) -> bytes:
+    return bytes(CodecRegistry().encoder(type_name, "cdr")(value))
+
+
+async def until(predicate: Any, what: str, timeout: float = 10.0) -> None:
+    with anyio.fail_after(timeout):
+        while not predicate():
+            await anyio.sleep(0.02)
+
+
+async def collect(sub: rmb.Subscription, count: int, timeout: float = 10.0) -> list[rmb.Message]:
+    got: list[rmb.Message] = []
+    with anyio.fail_after(timeout):
+        async for message in sub:
+            got.append(message)
+            if len(got) == count:
+                break
+    return got
+
+
+# -- publish and subscribe ------------------------------------------------------------------
+async def test_publish_reaches_subscription_in_order(zenoh_router: Any, zenoh_domain: int) -> None:
+    opts = options(zenoh_domain)
+    async with (
+        rmb.connect(zenoh_router.locator, options=opts) as a,
+        rmb.connect(zenoh_router.locator, options=opts) as b,
+        b.subscribe("/chatter", schema=STRING, buffer=200) as sub,
+    ):
+        assert a.protocol == "zenoh"
+        await until(lambda: any(t.name == "/chatter" for t in a.topics), "a sees b's subscription")
+        for i in range(100):
+            await a.publish("/chatter", STRING, {"data": f"m{i}"})
+        got = await collect(sub, 100)
+        assert [m.data["data"] for m in got] == [f"m{i}" for i in range(100)]
+        assert {m.schema_name for m in got} == {STRING}
+        assert all(m.log_time_ns is not None for m in got)
+        assert b.rejections == {}
+
+
+async def test_graph_shows_the_other_client_and_our_tokens(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    opts = options(zenoh_domain)
+    async with rmb.connect(zenoh_router.locator, options=opts) as a:
+        await a.advertise("/status", STRING)
+        async with rmb.connect(zenoh_router.locator, options=opts) as b:
+            await until(lambda: [t.name for t in b.topics] == ["/status"], "b sees /status")
+            assert b.topics[0].schema_name == STRING
+        # what a ROS tool sees: our node and our publisher, as rmw_zenoh tokens
+        replies = raw.liveliness().get(rz.liveliness_selector(zenoh_domain), timeout=5.0)
+        tokens = {rz.parse_token(str(r.ok.key_expr)) for r in replies if r.ok is not None}
+        ours = [t for t in tokens if t.zid == a.server_info.session_id]
+        kinds = {t.kind for t in ours}
+        assert kinds == {rz.EntityKind.NODE, rz.EntityKind.PUBLISHER}
+        assert all(t.node_name.startswith("rmb_") for t in ours)
+        pub = next(t for t in ours if t.kind is rz.EntityKind.PUBLISHER)
+        assert (pub.name, pub.type_name) == ("/status", STRING)
+        assert pub.type_hash == type_hash(CodecRegistry(), STRING)
+    # and every token is gone once the client has left
+    await anyio.sleep(0.3)
+    replies = raw.liveliness().get(rz.liveliness_selector(zenoh_domain), timeout=5.0)
+    assert [r for r in replies if r.ok is not None] == []
+
+
+async def test_watch_topics_follows_publishers_coming_and_going(
+    zenoh_router: Any, zenoh_domain: int
+) -> None:
+    opts = options(zenoh_domain)
+    async with rmb.connect(zenoh_router.locator, options=opts) as watcher:
+        seen: list[list[str]] = []
+
+        async def follow() -> None:
+            async for topics in watcher.watch_topics():
+                seen.append([t.name for t in topics])
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(follow)
+            async with rmb.connect(zenoh_router.locator, options=opts) as other:
+                await other.advertise("/a", STRING)
+                await until(lambda: bool(seen) and seen[-1] == ["/a"], "the new publisher")
+            await until(lambda: seen[-1] == [], "the publisher gone")
+            tg.cancel_scope.cancel()
+
+
+async def test_another_domain_is_invisible(zenoh_router: Any, zenoh_domain: int, raw: Any) -> None:
+    other = zenoh_domain + 1
+    async with (
+        rmb.connect(zenoh_router.locator, options=options(other)) as far,
+        rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as near,
+        near.subscribe("/chatter", schema=STRING) as sub,
+    ):
+        await far.advertise("/chatter", STRING)
+        await far.advertise("/far_only", STRING)
+        for i in range(20):
+            await far.publish("/chatter", STRING, {"data": f"far {i}"})
+        # a raw put on the other domain's key too
+        raw.put(
+            data_key(other, "/chatter"), cdr(STRING, {"data": "raw far"}), attachment=attachment(1)
+        )
+        # then one on ours, as a marker: everything before it was not delivered
+        raw.put(
+            data_key(zenoh_domain, "/chatter"),
+            cdr(STRING, {"data": "near"}),
+            attachment=attachment(2),
+        )
+        got = await collect(sub, 1)
+        assert got[0].data["data"] == "near"
+        assert all(t.name != "/far_only" for t in near.topics)
+        assert sub.stats.received == 1
+
+
+# -- hostile input (raw eclipse-zenoh, things rmw_zenoh peers never send) -----------------------
+async def test_hostile_samples_are_skipped_and_counted(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    key = data_key(zenoh_domain, "/chatter")
+    good = cdr(STRING, {"data": "ok"})
+    async with (
+        rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
+        client.subscribe("/chatter", schema=STRING) as sub,
+    ):
+        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        raw.put(key, good)  # no attachment
+        raw.put(key, good, attachment=b"\x00" * 20)  # short
+        raw.put(key, good, attachment=attachment(1)[:16] + b"\x0f" + bytes(16))  # bad gid length
+        prefix = f"{zenoh_domain}/chatter"
+        raw.put(f"{prefix}/not_a_type/RIHS01_x", good, attachment=attachment(2))  # bad key
+        raw.put(
+            f"{prefix}/std_msgs::msg::dds_::String_/RIHS01_{'0' * 64}",
+            good,
+            attachment=attachment(3),
+        )
+        raw.put(key, b"\xff" * 7, attachment=attachment(4))  # garbage CDR
+        raw.put(key, good, attachment=attachment(5))  # and then a good one
+        got = await collect(sub, 3)
+        # a sample whose hash is not our definition's: another definition of
+        # the same name, delivered raw (bytes), never decoded with ours
+        assert isinstance(got[0].data, memoryview | bytes)
+        assert got[0].decode_error is not None
+        assert "no decoder" in got[0].decode_error
+        # the garbage payload is delivered with its decode error (as on the
+        # other transports); the good one decodes
+        assert got[1].decode_error is not None
+        assert got[2].data == {"data": "ok"}
+        assert client.rejections == {"attachment": 3, "malformed": 1}
+
+
+async def test_hostile_tokens_are_skipped_and_counted(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    bad = [
+        f"@ros2_lv/{zenoh_domain}/zz/0/0/NN/%/%/node",
+        f"@ros2_lv/{zenoh_domain}/ab/0/1/XX/%/%/node/%t/std_msgs::msg::dds_::String_/RIHS01_x/::,10:,:,:,,",
+        f"@ros2_lv/{zenoh_domain}/ab/0/1/MP/%/%/node/%t/not_a_type/RIHS01_{'0' * 64}/::,10:,:,:,,",
+    ]
+    tokens = [raw.liveliness().declare_token(k) for k in bad]
+    try:
+        async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+            await until(lambda: client.rejections.get("malformed_token", 0) >= 3, "counted", 10)
+            assert client.topics == []
+            # and tokens arriving later, through the liveliness subscriber
+            more = raw.liveliness().declare_token(f"@ros2_lv/{zenoh_domain}/ab/x/0/NN/%/%/n")
+            await until(lambda: client.rejections["malformed_token"] >= 4, "counted", 10)
+            more.undeclare()
+    finally:
+        for token in tokens:
+            token.undeclare()
+
+
+async def test_a_full_backlog_drops_and_counts(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    """Samples beyond ``zenoh_backlog`` while the reader is blocked are
+    dropped and counted as ``backlog_overflow``; none vanish."""
+    key = data_key(zenoh_domain, "/burst")
+    payload = cdr(STRING, {"data": "x"})
+    sent = 500
+    async with (
+        rmb.connect(
+            zenoh_router.locator, options=options(zenoh_domain, zenoh_backlog=64)
+        ) as client,
+        client.subscribe("/burst", schema=STRING, buffer=1000) as sub,
+    ):
+        await anyio.sleep(0.3)
+        publisher = raw.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        # block the event loop while the samples arrive, as a slow consumer would
+        for i in range(sent):
+            publisher.put(payload, attachment=attachment(i))
+        time.sleep(1.0)
+        publisher.undeclare()
+        delivered = 0
+        with anyio.move_on_after(1.0):
+            async for _ in sub:
+                delivered += 1
+        dropped = client.rejections.get("backlog_overflow", 0)
+        assert dropped > 0
+        assert delivered + dropped == sent
+
+
+async def test_a_service_without_server_fails_with_a_reason(
+    zenoh_router: Any, zenoh_domain: int
+) -> None:
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        with pytest.raises(rmb.ServiceError, match="no server"):
+            await client.call_service("/nobody", {})
+
+
+async def test_a_server_that_never_answers_times_out(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    """A queryable that takes the query and never replies (and a service
+    token advertising it): the call fails with a reason at its deadline."""
+    srv = "std_srvs/srv/Trigger"
+    hash_ = type_hash(CodecRegistry(), srv)
+    key = rz.format_key(rz.TopicKey(zenoh_domain, "/stuck", srv, hash_))
+    held: list[Any] = []
+    queryable = raw.declare_queryable(key, held.append, complete=True)  # as rmw_zenoh declares
+    token = raw.liveliness().declare_token(
+        rz.format_token(
+            rz.Token(
+                zenoh_domain,
+                "ab",
+                0,
+                1,
+                rz.EntityKind.SERVICE,
+                "",
+                "/",
+                "stuck_node",
+                "/stuck",
+                srv,
+                hash_,
+                rz.Qos(),
+            )
+        )
+    )
+    try:
+        async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+            await until(lambda: any(s.name == "/stuck" for s in client.services), "the service")
+            with pytest.raises(rmb.ServiceError, match="no response"):
+                await client.call_service("/stuck", {}, timeout=0.5)
+            assert len(held) == 1
+            assert rz.decode_attachment(bytes(held[0].attachment)).sequence >= 1
+    finally:
+        held.clear()
+        token.undeclare()
+        queryable.undeclare()
+
+
+# -- teardown --------------------------------------------------------------------------------
+async def test_zero_twist_is_the_last_message_on_exit_and_on_cancel(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    received: list[bytes] = []
+    sub = raw.declare_subscriber(
+        data_key(zenoh_domain, "/cmd_vel", TWIST), lambda s: received.append(bytes(s.payload))
+    )
+    decode = CodecRegistry().decoder(TWIST, "cdr")
+    try:
+        for cancel in (False, True):
+            received.clear()
+            with anyio.CancelScope() as scope:
+                async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as c:
+                    await anyio.sleep(0.2)
+                    for _ in range(10):
+                        await c.publish("/cmd_vel", TWIST, {"linear": {"x": 0.5}})
+                    if cancel:
+                        scope.cancel()
+                        await anyio.sleep(1)
+            await until(lambda: len(received) >= 11, "the zero Twist", 5)
+            last = decode(memoryview(received[-1]))
+            assert last["linear"]["x"] == 0.0
+            assert decode(memoryview(received[-2]))["linear"]["x"] == 0.5
+            assert len(received) == 11
+    finally:
+        sub.undeclare()
+
+
+def test_a_process_that_used_the_library_exits_by_itself(
+    zenoh_router: Any, zenoh_domain: int
+) -> None:
+    """A subscriber, a publisher and a service call left to the interpreter's
+    exit: the process ends (a zenoh callback still declared at exit would
+    hang it for 20 s or more)."""
+    code = textwrap.dedent(
+        f"""
+        import anyio, ros_mobile_bridge as rmb
+        async def main():
+            opts = rmb.ClientOptions(domain_id={zenoh_domain})
+            async with rmb.connect("{zenoh_router.locator}", options=opts) as c:
+                async with c.subscribe("/x", schema="std_msgs/msg/String"):
+                    await c.publish("/x", "std_msgs/msg/String", {{"data": "bye"}})
+                    try:
+                        await c.call_service("/nobody", {{}}, timeout=0.2)
+                    except rmb.ServiceError:
+                        pass
+            print("done")
+        anyio.run(main)
+        """
+    )
+    start = time.monotonic()
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.strip() == "done"
+    # generous: the hang this guards against is 20 s; a normal exit is well under 1 s
+    assert time.monotonic() - start < 15, result.stderr[-2000:]
