@@ -364,3 +364,66 @@ def test_a_process_that_used_the_library_exits_by_itself(
     assert result.stdout.strip() == "done"
     # generous: the hang this guards against is 20 s; a normal exit is well under 1 s
     assert time.monotonic() - start < 15, result.stderr[-2000:]
+
+
+# -- reconnect -------------------------------------------------------------------------------
+async def test_a_router_restart_is_a_reconnect_and_the_subscription_resumes(
+    zenoh_domain: int,
+) -> None:
+    from peers.zenoh_router import ZenohRouter
+
+    opts = options(
+        zenoh_domain,
+        connect_timeout=2.0,
+        keepalive_interval=0.2,
+        keepalive_timeout=0.6,
+        reconnect=rmb.ReconnectPolicy(initial_delay=0.1, max_delay=0.3),
+    )
+    router = ZenohRouter().start()
+    statuses: list[str] = []
+    got: list[str] = []
+    try:
+        async with (
+            rmb.connect(router.locator, options=opts) as client,
+            rmb.connect(router.locator, options=options(zenoh_domain)) as talker,
+            anyio.create_task_group() as tg,
+        ):
+
+            async def watch() -> None:
+                async for status in client.watch_status():
+                    statuses.append(status)
+
+            tg.start_soon(watch)
+            async with client.subscribe("/chatter", schema=STRING) as sub:
+
+                async def consume() -> None:
+                    async for message in sub:
+                        got.append(message.data["data"])
+
+                tg.start_soon(consume)
+                await until(lambda: any(t.name == "/chatter" for t in talker.topics), "sub seen")
+                await talker.publish("/chatter", STRING, {"data": "before"})
+                await until(lambda: got == ["before"], "the first message")
+
+                router.stop()
+                await until(lambda: client.status == "reconnecting", "reconnecting")
+                router = ZenohRouter(port=router.port).start()
+                await until(lambda: client.status == "connected", "reconnected", 20)
+                # the talker's own zenoh session reconnects by itself; wait
+                # until it sees the restored subscription, then publish
+                await until(
+                    lambda: any(t.name == "/chatter" for t in talker.topics), "resubscribed", 20
+                )
+
+                async def publish_until_seen() -> None:
+                    while "after" not in got:
+                        await talker.publish("/chatter", STRING, {"data": "after"})
+                        await anyio.sleep(0.1)
+
+                with anyio.fail_after(20):
+                    await publish_until_seen()
+                assert got[0] == "before"
+            tg.cancel_scope.cancel()
+        assert statuses[:3] == ["connected", "reconnecting", "connected"]
+    finally:
+        router.stop()
