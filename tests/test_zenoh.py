@@ -9,9 +9,12 @@ is in ``test_zenoh_sdk.py``."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -427,3 +430,63 @@ async def test_a_router_restart_is_a_reconnect_and_the_subscription_resumes(
         assert statuses[:3] == ["connected", "reconnecting", "connected"]
     finally:
         router.stop()
+
+
+# -- the rmb command over zenoh ---------------------------------------------------------------
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+@pytest.mark.parametrize(
+    "sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name
+)
+def test_rmb_pub_killed_leaves_a_zero_twist_last(
+    zenoh_router: Any, zenoh_domain: int, raw: Any, backend: str, sig: signal.Signals
+) -> None:
+    decode = CodecRegistry().decoder(TWIST, "cdr")
+    received: list[float] = []
+    lock = threading.Lock()
+
+    def on_sample(sample: Any) -> None:
+        with lock:
+            received.append(decode(memoryview(bytes(sample.payload)))["linear"]["x"])
+
+    sub = raw.declare_subscriber(data_key(zenoh_domain, "/cmd_vel", TWIST), on_sample)
+    twist = json.dumps({"linear": {"x": 0.3}})
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "ros_mobile_bridge",
+            "--backend",
+            backend,
+            "pub",
+            "-r",
+            "10",
+            zenoh_router.locator,
+            "/cmd_vel",
+            TWIST,
+            twist,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "ROS_DOMAIN_ID": str(zenoh_domain)},
+    )
+    try:
+        deadline = time.monotonic() + 20
+        while len(received) < 3:
+            assert time.monotonic() < deadline and proc.poll() is None, (
+                proc.stderr.read() if proc.stderr else ""
+            )
+            time.sleep(0.02)
+        proc.send_signal(sig)
+        _out, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+        sub.undeclare()
+    assert proc.returncode == 128 + sig, err
+    assert "Traceback" not in err
+    deadline = time.monotonic() + 5  # the router may still be forwarding
+    while received[-1] != 0.0 and time.monotonic() < deadline:
+        time.sleep(0.02)
+    with lock:
+        got = list(received)
+    assert got[-1] == 0.0 and set(got[:-1]) == {0.3}, got
