@@ -35,6 +35,8 @@ INT_FIELDS = {
     "max_schema_size": 64,
     "max_schema_fields": 1,
     "max_pending_requests": 1,
+    "zenoh_backlog": 1,
+    "zenoh_backlog_bytes": 1024,
 }
 
 
@@ -87,6 +89,8 @@ def test_every_field_is_covered_here() -> None:
         "breaker",
         "throttle_mode",
         "preset_overrides",
+        "domain_id",
+        "zenoh_shared_memory",
     }
     assert names == set(FLOAT_FIELDS) | set(INT_FIELDS) | others
 

@@ -19,7 +19,8 @@ from ros_mobile_bridge import DEFAULT_PORTS, Endpoint, parse_target
 )
 def test_default_port_is_the_protocols(protocol: str, port: int) -> None:
     ep = parse_target("robot.local", protocol=protocol)
-    assert ep == Endpoint(host="robot.local", port=port, secure=False, path="/")
+    zenoh = protocol == "zenoh"
+    assert ep == Endpoint(host="robot.local", port=port, secure=False, path="/", zenoh=zenoh)
     assert port == DEFAULT_PORTS.get(protocol, DEFAULT_PORTS["foxglove-ws"])
 
 

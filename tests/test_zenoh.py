@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -230,10 +231,11 @@ async def test_hostile_tokens_are_skipped_and_counted(
 
 
 async def test_a_full_backlog_drops_and_counts(
-    zenoh_router: Any, zenoh_domain: int, raw: Any
+    zenoh_router: Any, zenoh_domain: int, raw: Any, caplog: pytest.LogCaptureFixture
 ) -> None:
     """Samples beyond ``zenoh_backlog`` while the reader is blocked are
-    dropped and counted as ``backlog_overflow``; none vanish."""
+    dropped and counted as ``backlog_overflow``; none vanish, and the burst
+    is logged once per batch, not once per dropped sample."""
     key = data_key(zenoh_domain, "/burst")
     payload = cdr(STRING, {"data": "x"})
     sent = 500
@@ -257,6 +259,13 @@ async def test_a_full_backlog_drops_and_counts(
         dropped = client.rejections.get("backlog_overflow", 0)
         assert dropped > 0
         assert delivered + dropped == sent
+        lines = [r for r in caplog.records if "backlog_overflow" in r.getMessage()]
+        assert 1 <= len(lines) < dropped
+        logged = sum(
+            int(m.group(1)) if (m := re.search(r"skipped (\d+) inputs", r.getMessage())) else 1
+            for r in lines
+        )
+        assert logged == dropped
 
 
 async def test_a_service_without_server_fails_with_a_reason(

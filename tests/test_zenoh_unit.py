@@ -122,6 +122,8 @@ def test_domain_id_option(monkeypatch: pytest.MonkeyPatch) -> None:
     assert default_domain() == 0
     with pytest.raises(ValueError, match="zenoh_backlog"):
         rmb.ClientOptions(zenoh_backlog=0)
+    with pytest.raises(TypeError, match="zenoh_shared_memory"):
+        rmb.ClientOptions(zenoh_shared_memory=1)  # type: ignore[arg-type]
 
 
 # -- parameter values -----------------------------------------------------------------

@@ -495,13 +495,22 @@ class Client:
         for sub in self._subs.get(topic, ()):
             sub._set_state("active" if active else "pending")
 
-    def on_rejected(self, reason: str, detail: str) -> None:
-        """Backend callback: an inbound frame was skipped or refused. Counted
-        per ``reason`` (see :attr:`rejections`) and logged once, truncated."""
-        self._rejections[reason] = self._rejections.get(reason, 0) + 1
-        self._log.warning(
-            "skipped input from the server (%s): %s", reason, truncate_for_log(detail)
-        )
+    def on_rejected(self, reason: str, detail: str, count: int = 1) -> None:
+        """Backend callback: ``count`` inbound frames were skipped or refused
+        for one reason. Counted per ``reason`` (see :attr:`rejections`) and
+        logged once per call, truncated."""
+        self._rejections[reason] = self._rejections.get(reason, 0) + count
+        if count == 1:
+            self._log.warning(
+                "skipped input from the server (%s): %s", reason, truncate_for_log(detail)
+            )
+        else:
+            self._log.warning(
+                "skipped %d inputs from the server (%s): %s",
+                count,
+                reason,
+                truncate_for_log(detail),
+            )
 
     @property
     def rejections(self) -> dict[str, int]:

@@ -99,12 +99,14 @@ class BackendEvents(Protocol):
     def on_parameters(self, values: Mapping[str, Any]) -> None:
         """Unsolicited parameter values (a parameter subscription update)."""
 
-    def on_rejected(self, reason: str, detail: str) -> None:
-        """An inbound frame (or part of one) was skipped or refused.
-        ``reason`` is a key of ``Client.rejections`` (``"invalid_utf8"``,
-        ``"malformed"``, ``"json_depth"``, ``"schema_too_large"``,
-        ``"channel_limit"``, ``"service_limit"``, ``"fragment_limit"``, ...);
-        ``detail`` says what, untruncated (the client truncates it to log)."""
+    def on_rejected(self, reason: str, detail: str, count: int = 1) -> None:
+        """``count`` inbound frames (or parts of one) were skipped or refused
+        for the same reason. ``reason`` is a key of ``Client.rejections``
+        (``"invalid_utf8"``, ``"malformed"``, ``"json_depth"``,
+        ``"schema_too_large"``, ``"channel_limit"``, ``"service_limit"``,
+        ``"fragment_limit"``, ...); ``detail`` says what, untruncated (the
+        client truncates it to log). One call is one log line, however large
+        ``count`` is: a burst of drops is reported once, not once per frame."""
 
     async def before_inbound(self) -> None:
         """Called before each inbound message is handled: drain control frames."""

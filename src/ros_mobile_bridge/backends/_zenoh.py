@@ -379,11 +379,11 @@ class ZenohBackend:
                 for tag, count in by.items():
                     sub = by_tag.get(tag)
                     what = sub.topic if sub is not None else f"tag {tag}"
-                    for _ in range(count):
-                        events.on_rejected(
-                            "backlog_overflow",
-                            f"{what}: the reader fell behind by more than the zenoh backlog",
-                        )
+                    events.on_rejected(
+                        "backlog_overflow",
+                        f"{what}: the reader fell behind by more than the zenoh backlog",
+                        count,
+                    )
             if graph_changed:
                 self._rebuild_graph()
                 events.on_graph()
