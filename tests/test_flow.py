@@ -580,6 +580,27 @@ async def test_a_cancelled_next_does_not_lose_a_waiting_frame() -> None:
     assert (await sub.__anext__()).data == 1
 
 
+async def test_a_cancelled_consumer_of_a_steady_stream_stops_within_8_messages() -> None:
+    """The cancellation check runs on the first call and every 8th while
+    frames wait; whatever was taken before it is delivered, none is lost."""
+    decoder = CountingDecoder()
+    q = FrameQueue(clock=FakeClock(), buffer=100)
+    sub = Subscription("/t", q, logger=LOGGER)
+    for i in range(50):
+        q.offer(frame(i, decoder))
+    got: list[object] = []
+    with anyio.CancelScope() as scope:
+        got.append((await sub.__anext__()).data)
+        scope.cancel()
+        while True:
+            got.append((await sub.__anext__()).data)
+    assert scope.cancelled_caught
+    assert 1 <= len(got) <= 8
+    assert got == list(range(len(got)))
+    assert accounted(q) == q.received
+    assert (await sub.__anext__()).data == len(got)  # the rest still waits, in order
+
+
 # -- FrameQueue: argument validation ------------------------------------------------------
 @pytest.mark.parametrize("max_hz", [0, 0.0, -1, -0.5, math.nan])
 def test_max_hz_must_be_positive(max_hz: float) -> None:
