@@ -449,6 +449,79 @@ def rxqueue_main(port: int) -> None:
     print("rxqueue", *changes, flush=True)
 
 
+# -- the scale peer (bench_scale.py) ------------------------------------------------
+
+SCALE_TOPIC: Final = "/scale/tick"
+
+
+def scale_main(rate: float) -> None:
+    """``python bench/_peer.py scale RATE``: a Foxglove SDK server with one
+    ``std_msgs/msg/String`` channel, ``/scale/tick``, logged RATE times a
+    second (a fixed schedule, from the start) whether or not anyone
+    subscribes; every message carries its sequence number. Prints ``port
+    PORT``, then ``subscribers N`` after each ``count`` line on stdin (how
+    many subscriptions to the channel exist now); exits on ``quit`` or end of
+    input. The per-client backlog stays at the SDK's default."""
+    subscribers = 0
+    lock = threading.Lock()
+
+    class Listener(ServerListener):
+        def on_subscribe(self, client: Any, channel: Any) -> None:
+            nonlocal subscribers
+            with lock:
+                subscribers += 1
+
+        def on_unsubscribe(self, client: Any, channel: Any) -> None:
+            nonlocal subscribers
+            with lock:
+                subscribers -= 1
+
+    context = foxglove.Context()
+    server = foxglove.start_server(
+        name="rmb-bench-scale",
+        host="127.0.0.1",
+        port=0,
+        context=context,
+        server_listener=Listener(),
+        supported_encodings=["cdr"],
+    )
+    msgdef, _ = _STORE.generate_msgdef(STRING_TYPE, ros_version=2)
+    channel = Channel(
+        SCALE_TOPIC,
+        message_encoding="cdr",
+        schema=Schema(name=STRING_TYPE, encoding="ros2msg", data=msgdef.encode()),
+        context=context,
+    )
+    stop = threading.Event()
+
+    def publish() -> None:
+        period = 1.0 / rate
+        start = time.perf_counter()
+        i = 0
+        while not stop.is_set():
+            delay = start + i * period - time.perf_counter()
+            if delay > 0:
+                stop.wait(delay)
+            channel.log(cdr(STRING_TYPE, data=f"tick {i:010d}"))
+            i += 1
+
+    publisher = threading.Thread(target=publish, daemon=True)
+    publisher.start()
+    print(f"port {server.port}", flush=True)
+    try:
+        for line in sys.stdin:
+            if line.strip() == "quit":
+                break
+            if line.strip() == "count":
+                with lock:
+                    print(f"subscribers {subscribers}", flush=True)
+    finally:
+        stop.set()
+        publisher.join(timeout=2)
+        channel.close()
+        server.stop()
+
+
 if __name__ == "__main__":
     if sys.argv[1:2] == ["reliability"]:
         reliability_main(int(sys.argv[2]) if len(sys.argv) > 2 else 8)
@@ -456,5 +529,7 @@ if __name__ == "__main__":
         rxqueue_main(int(sys.argv[2]))
     elif sys.argv[1:2] == ["publisher"]:
         publisher_main(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
+    elif sys.argv[1:2] == ["scale"]:
+        scale_main(float(sys.argv[2]) if len(sys.argv) > 2 else 20.0)
     else:
         main()

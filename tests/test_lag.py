@@ -396,6 +396,66 @@ async def test_a_blocked_loop_shows_up_as_lag() -> None:
         tg.cancel_scope.cancel()
 
 
+# -- the shared tick -----------------------------------------------------------------------
+async def test_tick_callbacks_run_in_the_one_sampler_and_survive_a_handover(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Every registered callback runs on each tick, in the sampling task (one
+    sampler however many participants); a failing one is logged and the
+    others still run; a removed one stops; the ticks go on after the sampling
+    participant leaves."""
+    monitor = CountingMonitor(interval=0.001, tick_interval=0.005)
+    calls = {"a": 0, "b": 0, "bad": 0}
+
+    def bad() -> None:
+        calls["bad"] += 1
+        raise RuntimeError("a bug in one client")
+
+    keys = {
+        "a": monitor.add_tick(lambda: calls.__setitem__("a", calls["a"] + 1)),
+        "bad": monitor.add_tick(bad),
+        "b": monitor.add_tick(lambda: calls.__setitem__("b", calls["b"] + 1)),
+    }
+    assert monitor.ticks == 3
+    async with anyio.create_task_group() as tg:
+        first = anyio.CancelScope()
+
+        async def member(scope: anyio.CancelScope) -> None:
+            with scope:
+                await monitor.participate()
+
+        tg.start_soon(member, first)
+        tg.start_soon(monitor.participate)
+        await wait_until(lambda: calls["a"] >= 3)
+        assert calls["b"] >= calls["a"] - 1  # the failing one between them did not stop it
+        assert calls["bad"] >= 3
+        assert any("periodic callback failed" in r.getMessage() for r in caplog.records)
+        assert monitor.most_running == 1
+
+        first.cancel()  # the sampler's client leaves: the other takes over
+        await wait_until(lambda: monitor.runs == 2)
+        monitor.remove_tick(keys["a"])
+        monitor.remove_tick(keys["a"])  # twice is harmless
+        a, b = calls["a"], calls["b"]
+        await wait_until(lambda: calls["b"] >= b + 3)
+        assert calls["a"] == a  # removed: no more calls
+        tg.cancel_scope.cancel()
+    assert monitor.ticks == 2
+
+
+async def test_without_a_participant_no_tick_runs() -> None:
+    monitor = LagMonitor(interval=0.001, tick_interval=0.002)
+    calls: list[int] = []
+    monitor.add_tick(lambda: calls.append(1))
+    await anyio.sleep(0.02)
+    assert calls == []
+
+
+def test_tick_interval_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="tick_interval"):
+        LagMonitor(tick_interval=0)
+
+
 # -- one monitor per loop, and the rmb.lag readers ---------------------------------------------
 async def test_current_monitor_is_one_per_loop() -> None:
     assert current_monitor() is current_monitor()

@@ -216,6 +216,26 @@ async def test_lag_monitor_runs_while_a_client_is_open(server: SdkServer) -> Non
     await wait_until(lambda: not monitor.sampling, what="sampling stops with the last client")
 
 
+async def test_clients_on_one_loop_share_one_tick(server: SdkServer) -> None:
+    """Each client registers one callback with the loop's one sampler (no
+    timer of its own) and removes it when it closes; a breaker still trips
+    through the shared tick."""
+    monitor = current_monitor()
+    before = monitor.ticks
+    async with (
+        rmb.connect(server.url, options=options()) as a,
+        rmb.connect(server.url, options=options()) as b,
+    ):
+        await wait_until(lambda: monitor.ticks == before + 2, what="two ticks registered")
+        async with a.subscribe("/log") as sub:
+            await wait_until(lambda: monitor.sampling, what="sampling")
+            sub.breaker.disable()
+            assert sub.breaker.state == "tripped_manual"
+            await wait_until(lambda: sub._queue.blocked, what="the tick applied the trip")
+        assert b.connected
+    assert monitor.ticks == before
+
+
 async def test_idle_latency_probe_reports_ping_round_trips(server: SdkServer) -> None:
     rtts: list[float] = []
     opts = options(keepalive_interval=0.05, on_latency=rtts.append)

@@ -62,7 +62,6 @@ __all__ = ["Client"]
 
 _TWIST: Final = "geometry_msgs/msg/Twist"
 _READER_YIELD_EVERY: Final = 64
-_RELIABILITY_TICK: Final = 0.2
 T = TypeVar("T")
 _TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
 
@@ -166,6 +165,8 @@ class Client:
         self._writing = False
         self._wrote = anyio.Event()  # set after each frame the writer sends
         self._inbound = 0
+        self._breaker_changed = anyio.Event()  # set by the tick when a breaker changed
+        self._breaker_topics: set[str] = set()  # the topics whose breakers changed
         self._user_types: dict[str, tuple[str, str | bytes]] = {}
         self._user_types_in: Backend | None = None  # the backend that holds them
         self._publish_checked: set[tuple[str, str, bool]] = set()
@@ -703,39 +704,53 @@ class Client:
             self.on_topic_state(topic, False)
 
     async def _reliability(self) -> None:
-        """Every 200 ms: refresh each adaptive subscription's throttle, feed
-        its breaker the lag, and apply breaker states (tripped: the bridge
-        stops sending; half-open or closed: it sends again)."""
+        """Apply breaker changes. The checks run in :meth:`_reliability_tick`,
+        which the event loop's shared lag sampler calls every 200 ms for every
+        client on the loop (one wake-up per loop, not one per client); this
+        task wakes only when a breaker changed state and the bridge must stop
+        or resume sending a topic."""
         monitor = current_monitor()
-        policy = self._options.breaker
-        while True:
-            await anyio.sleep(_RELIABILITY_TICK)
-            if self._status.value != "connected":
-                continue
-            lag = monitor.recurring_lag_ms()
-            for topic, subs in list(self._subs.items()):
-                changed = False
-                for sub in subs:
-                    throttle = sub._throttle
-                    if throttle is not None and policy is not None:
-                        throttle.interval_s()  # refresh at_deepest
-                        sub.breaker.observe(lag, throttle.at_deepest)
-                    else:
-                        sub.breaker.poll()
-                    blocked = sub.breaker.state in ("tripped_auto", "tripped_manual")
-                    if blocked != sub._queue.blocked:
-                        sub._queue.blocked = blocked
-                        changed = True
-                        self._log.warning(
-                            "subscription to %s: breaker %s", topic, sub.breaker.state
-                        )
-                if changed:
+        key = monitor.add_tick(self._reliability_tick)
+        try:
+            while True:
+                await self._breaker_changed.wait()
+                self._breaker_changed = anyio.Event()
+                topics, self._breaker_topics = self._breaker_topics, set()
+                for topic in sorted(topics):
+                    if topic not in self._subs or self._status.value != "connected":
+                        continue
                     try:
                         await self._sync_topic(topic)
                     except ConnectError as exc:
                         self._log.debug("breaker change on %s not applied: %s", topic, exc)
                     except Exception:  # a bug must not take the user's program down
                         self._log.exception("breaker change on %s failed", topic)
+        finally:
+            monitor.remove_tick(key)
+
+    def _reliability_tick(self) -> None:
+        """Every 200 ms (see :meth:`_reliability`): refresh each adaptive
+        subscription's throttle, feed its breaker the lag, and note breaker
+        changes (tripped: the bridge stops sending; half-open or closed: it
+        sends again) for :meth:`_reliability` to apply."""
+        if not self._subs or self._status.value != "connected":
+            return
+        lag = current_monitor().recurring_lag_ms()
+        policy = self._options.breaker
+        for topic, subs in self._subs.items():
+            for sub in subs:
+                throttle = sub._throttle
+                if throttle is not None and policy is not None:
+                    throttle.interval_s()  # refresh at_deepest
+                    sub.breaker.observe(lag, throttle.at_deepest)
+                else:
+                    sub.breaker.poll()
+                blocked = sub.breaker.state in ("tripped_auto", "tripped_manual")
+                if blocked != sub._queue.blocked:
+                    sub._queue.blocked = blocked
+                    self._breaker_topics.add(topic)
+                    self._breaker_changed.set()
+                    self._log.warning("subscription to %s: breaker %s", topic, sub.breaker.state)
 
     async def _remove_subscription(self, sub: Subscription) -> None:
         sub.close()

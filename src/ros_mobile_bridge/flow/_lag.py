@@ -36,12 +36,18 @@ loop runs :func:`participate` as one of its own tasks; the first participant
 samples, the others wait, and when the sampling participant is cancelled
 (its client closed) a waiting one takes over at once. When the last leaves,
 sampling stops; the history stays readable until :meth:`LagMonitor.clear`.
+
+The same sampler drives the clients' periodic work: callbacks registered
+with :meth:`LagMonitor.add_tick` run every ``tick_interval`` (200 ms), right
+after a sample, in the sampling task. One wake-up per loop serves every
+client on it, so a thousand idle clients cost what one does.
 """
 
 from __future__ import annotations
 
 import bisect
 import heapq
+import logging
 import math
 import time
 from collections import deque
@@ -51,6 +57,8 @@ from typing import Final, NoReturn
 
 import anyio
 from anyio.lowlevel import RunVar
+
+_log = logging.getLogger("ros_mobile_bridge.lag")
 
 __all__ = [
     "LagMonitor",
@@ -111,7 +119,8 @@ class LagMonitor:
     ``interval`` is the sampler's sleep, seconds. Samples older than
     ``history_seconds`` (relative to the newest one) are dropped.
     ``max_window_s`` and ``sustained_window_s`` are the windows of
-    :meth:`max_lag_ms` and :meth:`sustained_lag_ms`.
+    :meth:`max_lag_ms` and :meth:`sustained_lag_ms`. ``tick_interval`` is
+    how often the sampler runs the callbacks of :meth:`add_tick`.
 
     Not thread-safe: use it from its event loop's thread only."""
 
@@ -123,8 +132,10 @@ class LagMonitor:
         history_seconds: float = 120.0,
         max_window_s: float = 1.0,
         sustained_window_s: float = 4.0,
+        tick_interval: float = 0.2,
     ) -> None:
         self.interval = _check_positive("interval", interval)
+        self.tick_interval = _check_positive("tick_interval", tick_interval)
         self.history_seconds = _check_positive("history_seconds", history_seconds)
         self.max_window_s = _check_positive("max_window_s", max_window_s)
         self.sustained_window_s = _check_positive("sustained_window_s", sustained_window_s)
@@ -143,6 +154,8 @@ class LagMonitor:
         self._participants = 0
         self._sampling = False
         self._handover = anyio.Event()
+        self._ticks: dict[int, Callable[[], object]] = {}
+        self._next_tick_key = 0
 
     # -- signals (O(1)) --------------------------------------------------------
     def max_lag_ms(self) -> float:
@@ -271,17 +284,53 @@ class LagMonitor:
         """Whether a participant is sampling now."""
         return self._sampling
 
+    # -- the shared tick ----------------------------------------------------------
+    def add_tick(self, callback: Callable[[], object]) -> int:
+        """Run ``callback()`` every ``tick_interval`` seconds, right after a
+        sample, in the sampling task, while any participant samples. Returns
+        the key for :meth:`remove_tick`. The callback must not block: it
+        runs between two samples, for every client on the loop. An exception
+        it raises is logged and the others still run."""
+        key = self._next_tick_key
+        self._next_tick_key += 1
+        self._ticks[key] = callback
+        return key
+
+    def remove_tick(self, key: int) -> None:
+        """Stop running the callback :meth:`add_tick` returned ``key`` for
+        (a key already removed is ignored)."""
+        self._ticks.pop(key, None)
+
+    @property
+    def ticks(self) -> int:
+        """How many tick callbacks are registered."""
+        return len(self._ticks)
+
+    def run_ticks(self) -> None:
+        """Run every registered tick callback once (the sampler calls this)."""
+        for callback in list(self._ticks.values()):
+            try:
+                callback()
+            except Exception:  # one client's bug must not stop the others' ticks
+                _log.exception("a periodic callback failed")
+
     async def run(self) -> NoReturn:
         """The sampler loop, until cancelled: sleep ``interval``, record how
-        much later than that the loop woke (ms, at least 0). Normally driven
-        by :meth:`participate`, which guarantees one sampler per monitor."""
+        much later than that the loop woke (ms, at least 0), and every
+        ``tick_interval`` run the tick callbacks. Normally driven by
+        :meth:`participate`, which guarantees one sampler per monitor."""
         clock = self._clock
         interval = self.interval
+        next_tick = clock() + self.tick_interval
         while True:
             start = clock()
             await anyio.sleep(interval)
             now = clock()
             self.record((now - start - interval) * 1000.0, now)
+            if now >= next_tick:
+                next_tick = now + self.tick_interval
+                if self._ticks:
+                    self.run_ticks()
 
     async def participate(self) -> NoReturn:
         """Take part in sampling until cancelled: the first participant

@@ -1,0 +1,318 @@
+"""Many connections in one process: connect time, idle cost, and a throttled
+subscription each (stand-alone script).
+
+    .venv/bin/python bench/bench_scale.py [--backend asyncio|trio|both]
+        [--sizes 10,100,1000] [--seconds 5] [--rate 20] [--max-hz 5] [--json PATH]
+        [--strict]
+
+The server is the official Foxglove SDK server in its own process
+(``bench/_peer.py scale RATE``) on 127.0.0.1, with one ``std_msgs/String``
+channel, ``/scale/tick``, logged RATE times a second whether or not anyone
+listens. For each size N, in this process on one event loop:
+
+1. **connect**: N tasks each open ``rmb.connect(url)`` at once; the time until
+   all N are connected.
+2. **idle**: after 1 s, this process's CPU time (``time.process_time()``, all
+   threads) over ``--seconds`` while the N clients sit connected with no
+   subscription: the cost of each client's own periodic work.
+3. **subscribed**: every client subscribes to ``/scale/tick`` with
+   ``max_hz=MAX_HZ`` (default adaptive throttle) and consumes it with ``async
+   for`` touching ``msg.data["data"]``. Once the server has seen all N
+   subscriptions, after 2 s, over ``--seconds``: messages delivered per
+   second against the N x min(RATE, MAX_HZ) the caps allow, and CPU.
+4. **memory**: this process's resident set (``/proc/self/statm``) with the N
+   clients subscribed, minus what it was before they connected (after one
+   warm-up client had connected and subscribed), over N.
+
+Every subscription's fate counts are summed at the end of the window
+(received, delivered, each drop reason, still queued); a run fails when
+frames vanished or were dropped for any reason but the throttle or the
+breaker (which may trip under overload; its drops show in the table). The
+throttle's bucket of each subscription at the end is tallied too: a bucket
+other than the cap's means the adaptive throttle tightened on the event
+loop's lag.
+
+Targets (issue 10), checked at the largest size: all connected within 5 s;
+idle <= 1% of a core in total; subscribed >= 95% of the allowed rate
+delivered at <= 50% of a core, <= 0.1 MB per connection.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Final, Literal
+
+import anyio
+
+import ros_mobile_bridge as rmb
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import DROP_REASONS, check_fates, subscription_counts, versions
+from _peer import SCALE_TOPIC
+
+Backend = Literal["asyncio", "trio"]
+PEER: Final = Path(__file__).resolve().parent / "_peer.py"
+PAGE: Final = os.sysconf("SC_PAGE_SIZE")
+CONNECT_LIMIT_S: Final = 5.0
+IDLE_LIMIT: Final = 0.01
+SUB_CPU_LIMIT: Final = 0.50
+DELIVERY_TARGET: Final = 0.95
+MB_PER_CONNECTION_LIMIT: Final = 0.1
+
+
+def rss_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * PAGE
+
+
+class Peer:
+    """The scale server in a subprocess."""
+
+    def __init__(self, rate: float) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, str(PEER), "scale", str(rate)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            bufsize=1,
+        )
+        assert self.proc.stdout is not None
+        words = self.proc.stdout.readline().split()
+        if words[:1] != ["port"]:
+            raise RuntimeError(f"the scale peer did not start: {words!r}")
+        self.url = f"ws://127.0.0.1:{words[1]}"
+
+    def subscribers(self) -> int:
+        assert self.proc.stdin is not None
+        assert self.proc.stdout is not None
+        self.proc.stdin.write("count\n")
+        self.proc.stdin.flush()
+        return int(self.proc.stdout.readline().split()[1])
+
+    def close(self) -> None:
+        assert self.proc.stdin is not None
+        try:
+            self.proc.stdin.write("quit\n")
+            self.proc.stdin.close()
+        except BrokenPipeError:
+            pass
+        try:
+            self.proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+async def warm_up(url: str, max_hz: float) -> None:
+    """One client connects, subscribes and takes a message: imports, codec
+    caches and the decoder of the type exist before the baseline RSS."""
+    async with rmb.connect(url) as client, client.subscribe(SCALE_TOPIC, max_hz=max_hz) as sub:
+        with anyio.fail_after(10):
+            async for _msg in sub:
+                break
+
+
+async def run_size(
+    peer: Peer, n: int, seconds: float, rate: float, max_hz: float
+) -> dict[str, Any]:
+    rss_before = rss_bytes()
+    connected = 0
+    all_connected = anyio.Event()
+    go = anyio.Event()
+    delivered = [0] * n
+    subs: list[rmb.Subscription] = []
+    failures: list[str] = []
+
+    async def client_task(i: int) -> None:
+        nonlocal connected
+        try:
+            async with rmb.connect(peer.url) as client:
+                connected += 1
+                if connected == n:
+                    all_connected.set()
+                await go.wait()
+                async with client.subscribe(SCALE_TOPIC, max_hz=max_hz) as sub:
+                    subs.append(sub)
+                    async for msg in sub:
+                        msg.data["data"]
+                        delivered[i] += 1
+        except rmb.RosBridgeError as exc:
+            failures.append(f"client {i}: {exc!r}")
+            all_connected.set()
+
+    result: dict[str, Any] = {"n": n}
+    async with anyio.create_task_group() as tg:
+        start = time.perf_counter()
+        for i in range(n):
+            tg.start_soon(client_task, i)
+        with anyio.fail_after(120):
+            await all_connected.wait()
+        result["connect_s"] = time.perf_counter() - start
+        if failures:
+            tg.cancel_scope.cancel()
+            result["failures"] = failures
+            return result
+
+        await anyio.sleep(1.0)
+        cpu0, t0 = time.process_time(), time.perf_counter()
+        await anyio.sleep(seconds)
+        result["idle_core"] = (time.process_time() - cpu0) / (time.perf_counter() - t0)
+        result["idle_rss_mb_per_conn"] = (rss_bytes() - rss_before) / n / 1e6
+
+        go.set()
+        with anyio.fail_after(120):
+            # the server is another process: its count can only be polled
+            while await anyio.to_thread.run_sync(peer.subscribers) < n:  # noqa: ASYNC110
+                await anyio.sleep(0.2)
+        await anyio.sleep(2.0)
+        count0, cpu0, t0 = sum(delivered), time.process_time(), time.perf_counter()
+        received0 = sum(s.stats.received for s in subs)
+        await anyio.sleep(seconds)
+        elapsed = time.perf_counter() - t0
+        result["sub_core"] = (time.process_time() - cpu0) / elapsed
+        result["delivered_per_s"] = (sum(delivered) - count0) / elapsed
+        result["received_per_s"] = (sum(s.stats.received for s in subs) - received0) / elapsed
+        result["allowed_per_s"] = n * min(rate, max_hz)
+        result["sub_rss_mb_per_conn"] = (rss_bytes() - rss_before) / n / 1e6
+        totals: collections.Counter[str] = collections.Counter()
+        problems: list[str] = []
+        for sub in subs:
+            counts = subscription_counts(sub)
+            totals.update(counts)
+            # the breaker may trip under overload: counted, and it shows in
+            # the delivered rate
+            problems += check_fates(counts, may_drop=("dropped_throttle", "dropped_breaker"))
+        result["fates"] = dict(totals)
+        result["problems"] = problems[:5] + (
+            [f"... {len(problems) - 5} more"] if len(problems) > 5 else []
+        )
+        result["buckets"] = dict(collections.Counter(s.stats.bucket or "-" for s in subs))
+        tg.cancel_scope.cancel()
+    return result
+
+
+def verdicts(r: dict[str, Any]) -> list[tuple[str, bool]]:
+    return [
+        (
+            f"all connected in {r['connect_s']:.2f} s (<= {CONNECT_LIMIT_S:g} s)",
+            r["connect_s"] <= CONNECT_LIMIT_S,
+        ),
+        (
+            f"idle {r['idle_core']:.1%} of a core (<= {IDLE_LIMIT:.0%})",
+            r["idle_core"] <= IDLE_LIMIT,
+        ),
+        (
+            f"delivered {r['delivered_per_s'] / r['allowed_per_s']:.1%} of the allowed"
+            f" {r['allowed_per_s']:,.0f} msg/s (>= {DELIVERY_TARGET:.0%})",
+            r["delivered_per_s"] >= DELIVERY_TARGET * r["allowed_per_s"],
+        ),
+        (
+            f"subscribed {r['sub_core']:.1%} of a core (<= {SUB_CPU_LIMIT:.0%})",
+            r["sub_core"] <= SUB_CPU_LIMIT,
+        ),
+        (
+            f"{r['sub_rss_mb_per_conn']:.3f} MB per connection (<= {MB_PER_CONNECTION_LIMIT} MB)",
+            r["sub_rss_mb_per_conn"] <= MB_PER_CONNECTION_LIMIT,
+        ),
+    ]
+
+
+async def run_backend(args: argparse.Namespace) -> list[dict[str, Any]]:
+    peer = Peer(args.rate)
+    try:
+        await warm_up(peer.url, args.max_hz)
+        results = []
+        for n in args.sizes:
+            r = await run_size(peer, n, args.seconds, args.rate, args.max_hz)
+            results.append(r)
+            await anyio.sleep(1.0)  # let the server see the previous clients go
+        return results
+    finally:
+        peer.close()
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--backend", choices=["asyncio", "trio", "both"], default="both")
+    parser.add_argument("--sizes", default="10,100,1000", help="connection counts, comma-separated")
+    parser.add_argument("--seconds", type=float, default=5.0, help="length of each measured window")
+    parser.add_argument("--rate", type=float, default=20.0, help="the topic's rate (Hz)")
+    parser.add_argument("--max-hz", type=float, default=5.0, help="each subscription's max_hz")
+    parser.add_argument("--json", type=Path)
+    parser.add_argument("--strict", action="store_true", help="a missed target fails the run")
+    args = parser.parse_args()
+    args.sizes = [int(x) for x in args.sizes.split(",")]
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    need = 2 * max(args.sizes) + 256
+    if soft < need:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (min(need, hard), hard))
+    backends: list[Backend] = ["asyncio", "trio"] if args.backend == "both" else [args.backend]
+    print(versions(["ros-mobile-bridge", "anyio", "trio", "foxglove-sdk"]))
+    print(
+        f"{os.cpu_count()} CPUs; one Foxglove SDK server in a subprocess, {SCALE_TOPIC} at"
+        f" {args.rate:g} Hz; every client max_hz={args.max_hz:g}; windows of {args.seconds:g} s"
+    )
+    out: dict[str, Any] = {}
+    failed: list[str] = []
+    missed: list[str] = []
+    for backend in backends:
+        results = anyio.run(run_backend, args, backend=backend)
+        out[backend] = results
+        print(f"\n{backend}:")
+        print(
+            f"  {'conns':>6} {'connect s':>9} {'idle core':>9} {'idle MB/conn':>12}"
+            f" {'sub core':>8} {'delivered/s':>11} {'allowed/s':>9} {'received/s':>10}"
+            f" {'MB/conn':>7}  buckets"
+        )
+        for r in results:
+            if "failures" in r:
+                print(f"  {r['n']:>6} connect failed: {r['failures'][:3]}")
+                failed.append(f"{backend} n={r['n']}: connect failed")
+                continue
+            buckets = ", ".join(f"{k} x{v}" for k, v in sorted(r["buckets"].items()))
+            print(
+                f"  {r['n']:>6} {r['connect_s']:>9.2f} {r['idle_core']:>9.1%}"
+                f" {r['idle_rss_mb_per_conn']:>12.3f} {r['sub_core']:>8.1%}"
+                f" {r['delivered_per_s']:>11,.0f} {r['allowed_per_s']:>9,.0f}"
+                f" {r['received_per_s']:>10,.0f} {r['sub_rss_mb_per_conn']:>7.3f}  {buckets}"
+            )
+        for r in results:
+            if "failures" in r:
+                continue
+            fates = r["fates"]
+            print(
+                f"  fates at n={r['n']}: received {fates['received']:,}, delivered"
+                f" {fates['delivered']:,}, "
+                + ", ".join(f"{d} {fates[d]:,}" for d in DROP_REASONS)
+                + f", queued {fates['queued']:,}"
+                + (f"; PROBLEMS: {r['problems']}" if r["problems"] else "; ok")
+            )
+            if r["problems"]:
+                failed.append(f"{backend} n={r['n']}: {r['problems']}")
+        last = next((r for r in reversed(results) if "failures" not in r), None)
+        if last is not None:
+            print(f"  targets at n={last['n']}:")
+            for text, ok in verdicts(last):
+                print(f"    {'PASS' if ok else 'MISS'}  {text}")
+                if not ok:
+                    missed.append(f"{backend}: {text}")
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1))
+        print(f"\nwrote {args.json}")
+    if missed:
+        print("\nmissed targets:\n  " + "\n  ".join(missed))
+    if failed:
+        print("FAILED: " + "; ".join(failed), file=sys.stderr)
+        return 1
+    return 1 if (missed and args.strict) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
