@@ -190,6 +190,7 @@ async def test_a_control_publish_to_a_peer_that_stopped_reading_raises() -> None
 
     async def stop_reading(peer: Peer) -> None:
         await peer.send_text(SERVER_INFO)
+        peer.stop_reading()
         await anyio.sleep(60)
 
     options = rmb.ClientOptions(

@@ -46,6 +46,16 @@ class Peer:
         """Bytes straight onto the TCP stream, bypassing WebSocket framing."""
         await self.stream.send(data)
 
+    def stop_reading(self) -> None:
+        """Read nothing more from the socket, so the client's writes fill the
+        kernel's buffers and stall. On trio nothing reads unless ``recv`` is
+        called; anyio's asyncio stream can be left reading into its own
+        queue after a receive that found data waiting, so its transport is
+        paused here (a private attribute: this is a test peer)."""
+        transport = getattr(self.stream, "_transport", None)
+        if transport is not None:
+            transport.pause_reading()
+
     async def recv(self) -> str | bytes:
         """The next data message from the client (pings are answered).
         ``anyio.EndOfStream`` once the connection is closed."""

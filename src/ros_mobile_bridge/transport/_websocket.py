@@ -17,6 +17,7 @@ from typing import Final
 
 import anyio
 import anyio.abc
+import sniffio
 from websockets.client import ClientProtocol
 from websockets.exceptions import InvalidHandshake, InvalidStatus, InvalidURI
 from websockets.frames import Frame, Opcode
@@ -26,6 +27,7 @@ from websockets.typing import Subprotocol
 from websockets.uri import parse_uri
 
 from .._errors import ConnectError
+from . import _asyncio_stream
 
 __all__ = ["ConnectionLost", "HandshakeRejected", "WebSocket", "connect_websocket"]
 
@@ -437,6 +439,8 @@ async def connect_websocket(
                 stream = await anyio.connect_tcp(
                     uri.host, uri.port, ssl_context=ctx, tls_standard_compatible=False
                 )
+            elif sniffio.current_async_library() == "asyncio":
+                stream = await _asyncio_stream.connect_tcp(uri.host, uri.port)
             else:
                 stream = await anyio.connect_tcp(uri.host, uri.port)
             proto.send_request(proto.connect())

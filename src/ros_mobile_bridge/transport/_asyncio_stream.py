@@ -1,0 +1,177 @@
+"""A TCP byte stream for asyncio built on ``asyncio.Protocol``.
+
+anyio's ``SocketStream`` on asyncio resumes and pauses the transport's
+reading around every ``receive()``: two epoll registrations per read, and a
+checkpoint. For a client that wakes once per small frame on many connections
+that bookkeeping costs more than the read itself. This stream keeps the
+socket registered while data flows: ``data_received`` appends to a buffer and
+wakes the reader, and reading is paused only when the buffer holds more than
+:data:`_HIGH_WATER` bytes the reader has not taken (back-pressure on the
+peer, as anyio's stream does).
+
+It implements the part of ``anyio.abc.ByteStream`` the WebSocket uses
+(``receive``, ``send``, ``send_eof``, ``aclose``) with anyio's exceptions:
+``EndOfStream`` after the peer's EOF, ``BrokenResourceError`` once the
+connection failed, ``ClosedResourceError`` after :meth:`aclose`. ``receive``
+does not checkpoint when data is already buffered: the WebSocket's reader
+yields to the loop on its own schedule. Used for plain TCP on asyncio only;
+TLS and trio keep anyio's streams.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections import deque
+from typing import Final
+
+import anyio
+import anyio.abc
+
+__all__ = ["ProtocolStream", "connect_tcp"]
+
+_HIGH_WATER: Final = 4 * 1024 * 1024
+"""Unread bytes at which reading from the socket pauses."""
+_LOW_WATER: Final = 1024 * 1024
+"""Unread bytes below which it resumes."""
+
+
+class _Protocol(asyncio.Protocol):
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+        self.transport: asyncio.Transport | None = None
+        self.chunks: deque[bytes] = deque()
+        self.buffered = 0
+        self.read_paused = False
+        self.eof = False
+        self.error: BaseException | None = None
+        self.reader: asyncio.Future[None] | None = None
+        self.write_paused = False
+        self.drainers: list[asyncio.Future[None]] = []
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+
+    def data_received(self, data: bytes) -> None:
+        self.chunks.append(data)
+        self.buffered += len(data)
+        if self.buffered > _HIGH_WATER and not self.read_paused and self.transport is not None:
+            self.read_paused = True
+            self.transport.pause_reading()
+        self._wake_reader()
+
+    def eof_received(self) -> bool:
+        self.eof = True
+        self._wake_reader()
+        return True  # half-closed, as a socket: our close reply may still go out
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.eof = True
+        if exc is not None and self.error is None:
+            self.error = exc
+        self._wake_reader()
+        self.write_paused = False
+        self._wake_drainers()
+
+    def pause_writing(self) -> None:
+        self.write_paused = True
+
+    def resume_writing(self) -> None:
+        self.write_paused = False
+        self._wake_drainers()
+
+    def _wake_reader(self) -> None:
+        reader = self.reader
+        if reader is not None:
+            self.reader = None
+            if not reader.done():
+                reader.set_result(None)
+
+    def _wake_drainers(self) -> None:
+        drainers, self.drainers = self.drainers, []
+        for fut in drainers:
+            if not fut.done():
+                fut.set_result(None)
+
+
+class ProtocolStream(anyio.abc.ByteStream):
+    """One connected TCP socket (see the module docstring). Single reader:
+    two tasks must not wait in :meth:`receive` at once."""
+
+    def __init__(self, transport: asyncio.Transport, protocol: _Protocol) -> None:
+        self._transport = transport
+        self._protocol = protocol
+        self._closed = False
+
+    async def receive(self, max_bytes: int = 65536) -> bytes:
+        p = self._protocol
+        while not p.chunks:
+            if self._closed:
+                raise anyio.ClosedResourceError
+            if p.eof:
+                if p.error is not None:
+                    raise anyio.BrokenResourceError from p.error
+                raise anyio.EndOfStream
+            if p.reader is not None:
+                raise RuntimeError("another task is already reading from this stream")
+            p.reader = waiter = p.loop.create_future()
+            try:
+                await waiter
+            finally:
+                if p.reader is waiter:
+                    p.reader = None
+        data = p.chunks.popleft()  # one chunk as the socket gave it: no joining copy
+        if len(data) > max_bytes:
+            p.chunks.appendleft(data[max_bytes:])
+            data = data[:max_bytes]
+        p.buffered -= len(data)
+        if p.read_paused and p.buffered < _LOW_WATER and not self._transport.is_closing():
+            p.read_paused = False
+            self._transport.resume_reading()
+        return data
+
+    async def send(self, item: bytes) -> None:
+        if self._closed:
+            raise anyio.ClosedResourceError
+        p = self._protocol
+        if p.error is not None or self._transport.is_closing():
+            raise anyio.BrokenResourceError from p.error
+        self._transport.write(item)
+        # the socket's buffer is over its high-water mark: wait until it
+        # drains, or until the connection is closed (then the data is lost)
+        while p.write_paused:
+            fut: asyncio.Future[None] = p.loop.create_future()
+            p.drainers.append(fut)
+            await fut
+            if self._closed:
+                raise anyio.ClosedResourceError
+            if p.error is not None or self._transport.is_closing():
+                raise anyio.BrokenResourceError from p.error
+
+    async def send_eof(self) -> None:
+        if self._closed:
+            raise anyio.ClosedResourceError
+        if not self._transport.is_closing():
+            self._transport.write_eof()
+
+    async def aclose(self) -> None:
+        """Close the socket at once, discarding what is not yet written (a
+        write stuck on a peer that stopped reading ends here); never raises."""
+        self._closed = True
+        if not self._transport.is_closing():
+            with contextlib.suppress(OSError):
+                self._transport.write_eof()
+            self._transport.close()
+        self._transport.abort()
+        self._protocol._wake_reader()
+        self._protocol._wake_drainers()
+
+
+async def connect_tcp(host: str, port: int) -> ProtocolStream:
+    """Connect to ``host:port`` on the running asyncio loop (``OSError`` on
+    failure, as ``anyio.connect_tcp`` raises)."""
+    loop = asyncio.get_running_loop()
+    transport, protocol = await loop.create_connection(lambda: _Protocol(loop), host, port)
+    assert isinstance(transport, asyncio.Transport)
+    return ProtocolStream(transport, protocol)

@@ -1,0 +1,229 @@
+"""The asyncio TCP stream (``transport/_asyncio_stream.py``) against real
+sockets: order, EOF, a reset, closing, back-pressure both ways. On trio the
+WebSocket keeps anyio's stream, which the last test checks."""
+
+from __future__ import annotations
+
+import socket
+import threading
+from collections.abc import Iterator
+
+import anyio
+import pytest
+
+from peers.scripted import Peer, scripted_server
+from ros_mobile_bridge.transport import _asyncio_stream, connect_websocket
+from ros_mobile_bridge.transport._asyncio_stream import ProtocolStream
+
+
+class RawPeer:
+    """A blocking TCP server in a thread: accepts one connection and runs
+    ``script(conn)`` on it."""
+
+    def __init__(self) -> None:
+        self.listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self.listener.getsockname()[1]
+        self.conn: socket.socket | None = None
+        self.accepted = threading.Event()
+        self.thread = threading.Thread(target=self._accept, daemon=True)
+        self.thread.start()
+
+    def _accept(self) -> None:
+        self.conn, _ = self.listener.accept()
+        self.accepted.set()
+
+    def wait(self) -> socket.socket:
+        assert self.accepted.wait(10)
+        assert self.conn is not None
+        return self.conn
+
+    def close(self) -> None:
+        if self.conn is not None:
+            self.conn.close()
+        self.listener.close()
+
+
+@pytest.fixture
+def peer() -> Iterator[RawPeer]:
+    p = RawPeer()
+    yield p
+    p.close()
+
+
+asyncio_only = pytest.mark.parametrize("anyio_backend", ["asyncio"])
+
+
+async def recv_all(stream: ProtocolStream, n: int) -> bytes:
+    got = b""
+    while len(got) < n:
+        got += await stream.receive()
+    return got
+
+
+@asyncio_only
+async def test_bytes_arrive_in_order_both_ways(peer: RawPeer) -> None:
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    await stream.send(b"hello")
+    assert await anyio.to_thread.run_sync(conn.recv, 5) == b"hello"
+    data = bytes(range(256)) * 4096  # 1 MiB
+    await anyio.to_thread.run_sync(conn.sendall, data)
+    assert await recv_all(stream, len(data)) == data
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_receive_honours_max_bytes(peer: RawPeer) -> None:
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    await anyio.to_thread.run_sync(conn.sendall, b"abcdefgh")
+    got = b""
+    while len(got) < 8:
+        chunk = await stream.receive(3)
+        assert 1 <= len(chunk) <= 3
+        got += chunk
+    assert got == b"abcdefgh"
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_eof_is_end_of_stream_and_writes_still_go_out(peer: RawPeer) -> None:
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    await anyio.to_thread.run_sync(conn.sendall, b"last")
+    await anyio.to_thread.run_sync(conn.shutdown, socket.SHUT_WR)
+    assert await recv_all(stream, 4) == b"last"
+    with pytest.raises(anyio.EndOfStream):
+        await stream.receive()
+    await stream.send(b"reply")  # half-closed: our side may still write
+    assert await anyio.to_thread.run_sync(conn.recv, 5) == b"reply"
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_a_reset_is_a_broken_resource(peer: RawPeer) -> None:
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    conn.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
+    conn.close()  # linger 0: RST
+    peer.conn = None
+    with pytest.raises((anyio.BrokenResourceError, anyio.EndOfStream)):
+        with anyio.fail_after(5):
+            while True:
+                await stream.receive()
+    with pytest.raises(anyio.BrokenResourceError):
+        with anyio.fail_after(5):
+            while True:  # the first write may still be accepted by the kernel
+                await stream.send(b"x" * 65536)
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_after_aclose_everything_raises_closed(peer: RawPeer) -> None:
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    await anyio.to_thread.run_sync(peer.wait)
+    await stream.aclose()
+    await stream.aclose()  # twice is harmless
+    with pytest.raises(anyio.ClosedResourceError):
+        await stream.receive()
+    with pytest.raises(anyio.ClosedResourceError):
+        await stream.send(b"x")
+    with pytest.raises(anyio.ClosedResourceError):
+        await stream.send_eof()
+
+
+@asyncio_only
+async def test_a_waiting_receive_is_cancellable_and_loses_nothing(peer: RawPeer) -> None:
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    with anyio.move_on_after(0.05) as scope:
+        await stream.receive()
+    assert scope.cancelled_caught
+    await anyio.to_thread.run_sync(conn.sendall, b"after")
+    assert await recv_all(stream, 5) == b"after"
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_a_send_stuck_on_a_peer_that_does_not_read_raises_when_closed(
+    peer: RawPeer,
+) -> None:
+    """The peer reads nothing: writes fill the kernel's buffers, then the
+    transport's, then ``send`` waits. Closing the stream ends that wait with
+    an error: the bytes were never written, so the send must not return."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    conn.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    outcome: list[str] = []
+    sent = 0
+
+    async def writer() -> None:
+        nonlocal sent
+        try:
+            while True:
+                await stream.send(b"x" * 65536)
+                sent += 1
+        except anyio.ClosedResourceError:
+            outcome.append("closed")
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(writer)
+        with anyio.fail_after(10):
+            while True:  # until the writer has been waiting a while
+                before = sent
+                await anyio.sleep(0.2)
+                if sent == before:
+                    break
+        assert stream._protocol.write_paused
+        await stream.aclose()
+    assert outcome == ["closed"]
+
+
+@asyncio_only
+async def test_a_reader_that_falls_behind_pauses_the_socket(peer: RawPeer) -> None:
+    """More than the high-water mark unread: reading from the socket pauses
+    (the peer's writes back up in the kernel), and resumes once taken."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    total = 3 * _asyncio_stream._HIGH_WATER
+    block = b"y" * (1 << 20)
+    done = threading.Event()
+
+    def send_all() -> None:
+        for _ in range(total // len(block)):
+            conn.sendall(block)
+        done.set()
+
+    thread = threading.Thread(target=send_all, daemon=True)
+    thread.start()
+    with anyio.fail_after(10):
+        while not stream._protocol.read_paused:
+            await anyio.sleep(0.01)
+    assert stream._protocol.buffered <= _asyncio_stream._HIGH_WATER + (1 << 20)
+    assert await recv_all(stream, total) == b"y" * total
+    assert not stream._protocol.read_paused
+    assert done.wait(10)
+    await stream.aclose()
+
+
+async def test_the_websocket_uses_this_stream_only_on_asyncio(
+    anyio_backend_name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A plain ``ws://`` connection on asyncio goes through this stream; on
+    trio through anyio's."""
+    calls: list[str] = []
+    real = _asyncio_stream.connect_tcp
+
+    async def spy(host: str, port: int) -> ProtocolStream:
+        calls.append(host)
+        return await real(host, port)
+
+    monkeypatch.setattr(_asyncio_stream, "connect_tcp", spy)
+
+    async def until_closed(peer: Peer) -> None:
+        await peer.drain()
+
+    async with scripted_server(until_closed) as url:
+        ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",))
+        await ws.aclose(timeout=0.5)
+    assert calls == (["127.0.0.1"] if anyio_backend_name == "asyncio" else [])
