@@ -425,7 +425,9 @@ async def test_tick_callbacks_run_in_the_one_sampler_and_survive_a_handover(
                 await monitor.participate()
 
         tg.start_soon(member, first)
+        await wait_until(lambda: monitor.sampling)  # the first one samples
         tg.start_soon(monitor.participate)
+        await wait_until(lambda: monitor.participants == 2)
         await wait_until(lambda: calls["a"] >= 3)
         assert calls["b"] >= calls["a"] - 1  # the failing one between them did not stop it
         assert calls["bad"] >= 3
