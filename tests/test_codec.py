@@ -935,3 +935,41 @@ def test_cdr_sequence_length_beyond_the_payload_is_refused_before_allocating(
     finally:
         tracemalloc.stop()
     assert peak < 1_000_000
+
+
+# -- codecs shared between registries (many connections, one build) -------------------------
+def test_registries_with_the_same_definitions_share_built_codecs() -> None:
+    from ros_mobile_bridge.codec import _registry
+
+    a, b = CodecRegistry(), CodecRegistry()
+    for reg in (a, b):
+        reg.add_schema("demo_pkg/msg/Shared", "ros2msg", "string name\nint32 count")
+    assert a.decoder("demo_pkg/msg/Shared", "cdr") is b.decoder("demo_pkg/msg/Shared", "cdr")
+    assert a.encoder("demo_pkg/msg/Shared", "cdr") is b.encoder("demo_pkg/msg/Shared", "cdr")
+    # another definition under the same name is another codec, never the shared one
+    c = CodecRegistry()
+    c.add_schema("demo_pkg/msg/Shared", "ros2msg", "float64 count")
+    decode_c = c.decoder("demo_pkg/msg/Shared", "cdr")
+    assert decode_c is not a.decoder("demo_pkg/msg/Shared", "cdr")
+    payload = c.encoder("demo_pkg/msg/Shared", "cdr")({"count": 2.5})
+    assert decode_c(memoryview(payload)) == {"count": 2.5}
+    assert a.decoder("demo_pkg/msg/Shared", "cdr")(
+        memoryview(a.encoder("demo_pkg/msg/Shared", "cdr")({"name": "x", "count": 3}))
+    ) == {"name": "x", "count": 3}
+    assert len(_registry._SHARED) <= _registry.SHARED_CODECS_MAX
+
+
+def test_the_shared_codec_cache_is_bounded_and_counts_evictions() -> None:
+    from ros_mobile_bridge.codec._registry import _SharedCodecs
+
+    cache = _SharedCodecs(max_entries=3)
+    for i in range(5):
+        cache.put(("k", i), f"codec {i}")
+    assert len(cache) == 3
+    assert cache.evicted == 2
+    assert cache.get(("k", 0)) is None  # the oldest went first
+    assert cache.get(("k", 2)) == "codec 2"
+    cache.put(("k", 5), "codec 5")  # ("k", 3) is now the least recently used
+    assert cache.get(("k", 3)) is None
+    assert cache.get(("k", 2)) == "codec 2"
+    assert cache.hits == 2

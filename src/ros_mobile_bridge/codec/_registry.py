@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import json
 import threading
-from collections.abc import Callable, Mapping
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final, cast
 
 import numpy as np
 from rosbags.typesys.store import Typestore
@@ -51,6 +52,54 @@ class _Generation:
 
 
 _PARSED = ("ros2msg", "ros2idl", "ros2action", "jsonschema")
+
+SHARED_CODECS_MAX: Final = 512
+"""How many built CDR codecs the process keeps for reuse by any registry."""
+
+
+class _SharedCodecs:
+    """Built CDR codecs shared by every registry in the process, keyed by the
+    type and the exact definitions of it and everything it uses: a thousand
+    connections that see the same ``std_msgs/String`` build its decoder once
+    (rosbags generates and compiles code per typestore, about 40 KB and a
+    millisecond a type). A codec is a pure function of those definitions, so
+    sharing it is safe; a redefined type is another key. Bounded at
+    :data:`SHARED_CODECS_MAX` entries, least recently used first out
+    (``evicted`` counts them; a registry keeps the codecs it built itself
+    either way). Thread-safe."""
+
+    def __init__(self, max_entries: int = SHARED_CODECS_MAX) -> None:
+        self.max_entries = max_entries
+        self.evicted = 0
+        self.hits = 0
+        self._entries: OrderedDict[Hashable, object] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, key: Hashable) -> object | None:
+        with self._lock:
+            value = self._entries.get(key)
+            if value is not None:
+                self._entries.move_to_end(key)
+                self.hits += 1
+            return value
+
+    def put(self, key: Hashable, value: object) -> None:
+        with self._lock:
+            self._entries[key] = value
+            self._entries.move_to_end(key)
+            while len(self._entries) > self.max_entries:
+                self._entries.popitem(last=False)
+                self.evicted += 1
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def clear(self) -> None:
+        with self._lock:
+            self._entries.clear()
+
+
+_SHARED = _SharedCodecs()
 
 
 class SchemaTooLarge(SchemaError):
@@ -443,12 +492,17 @@ class CodecRegistry:
             raise _unsupported(message_encoding, schema_name)
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
+            shared_key = ("decode", key, frozenset(self._closure(key, msgdef).items()))
+            shared = _SHARED.get(shared_key)
+            if shared is not None:
+                return cast(Decoder, shared)
             gen = self._prepare(key, msgdef)
             decode = gen.decoders.get(key)
             if decode is None:
                 conv = build_converter(key, gen.defs, gen.converters)
                 decode = _make_cdr_decoder(key, gen.store, conv)
                 gen.decoders[key] = decode
+            _SHARED.put(shared_key, decode)
             return decode
 
     def encoder(
@@ -476,12 +530,17 @@ class CodecRegistry:
             raise _unsupported(message_encoding, schema_name)
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
+            shared_key = ("encode", key, frozenset(self._closure(key, msgdef).items()))
+            shared = _SHARED.get(shared_key)
+            if shared is not None:
+                return cast(Encoder, shared)
             gen = self._prepare(key, msgdef)
             encode = gen.encoders.get(key)
             if encode is None:
                 build = build_builder(key, gen.defs, gen.store.types, gen.builders)
                 encode = _make_cdr_encoder(key, gen.store, build)
                 gen.encoders[key] = encode
+            _SHARED.put(shared_key, encode)
             return encode
 
     def _json_encoder(self, schema_name: str) -> Encoder:
