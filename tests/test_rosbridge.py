@@ -219,6 +219,42 @@ async def test_max_hz_is_forwarded_as_throttle_rate(peer: RosPeer) -> None:
     assert arrived <= 20, arrived
 
 
+async def test_the_adaptive_throttle_is_forwarded_as_throttle_rate(peer: RosPeer) -> None:
+    """A loop that keeps lagging tightens the adaptive throttle; the shared
+    tick forwards its interval, so the bridge itself sends less; once the
+    lag is gone the bridge sends everything again."""
+    from ros_mobile_bridge.flow import current_monitor
+
+    lagging = True
+
+    async def keep_lagging() -> None:
+        while lagging:  # a loop busy with other work, as the throttle sees it
+            for _ in range(3):
+                current_monitor().record(1500.0)
+            await anyio.sleep(0.05)
+
+    opts = options(breaker=None)  # the breaker would stop the topic outright
+    async with rmb.connect(peer.url, protocol="rosbridge", options=opts) as robot:
+        async with robot.subscribe("/counter") as sub, anyio.create_task_group() as tg:
+            await take(sub, 1)
+            tg.start_soon(keep_lagging)
+            await wait_until(lambda: sub.stats.bucket == "1 Hz", timeout=10, what="1 Hz")
+            await anyio.sleep(1.0)  # the next tick forwards it; frames in flight land
+            start = sub.stats.received
+            await anyio.sleep(2.0)
+            throttled = sub.stats.received - start
+            lagging = False
+            current_monitor().clear()
+            await wait_until(lambda: sub.stats.bucket == "full rate", timeout=15, what="relaxed")
+            await anyio.sleep(1.0)
+            start = sub.stats.received
+            await anyio.sleep(1.0)
+            relaxed = sub.stats.received - start
+    # /counter runs at 50 Hz: about 2 frames in 2 s at 1 Hz, 50 a second after
+    assert throttled <= 8, throttled
+    assert relaxed >= 25, relaxed
+
+
 async def test_the_loosest_cap_among_local_subscriptions_is_forwarded(peer: RosPeer) -> None:
     async with rmb.connect(peer.url, protocol="rosbridge", options=options()) as robot:
         async with robot.subscribe("/counter", max_hz=2) as slow:

@@ -166,7 +166,8 @@ class Client:
         self._wrote = anyio.Event()  # set after each frame the writer sends
         self._inbound = 0
         self._breaker_changed = anyio.Event()  # set by the tick when a breaker changed
-        self._breaker_topics: set[str] = set()  # the topics whose breakers changed
+        self._breaker_topics: set[str] = set()  # topics to subscribe again at the bridge
+        self._forwarded_hz: dict[str, float | None] = {}  # the rate each topic's bridge sub asks
         self._user_types: dict[str, tuple[str, str | bytes]] = {}
         self._user_types_in: Backend | None = None  # the backend that holds them
         self._publish_checked: set[tuple[str, str, bool]] = set()
@@ -667,13 +668,33 @@ class Client:
             self, sub, SubscribeHints(max_hz=max_hz, schema=schema, compression=compression)
         )
 
+    def _rate_for(self, sub: Subscription) -> float | None:
+        """The rate the bridge need not exceed for ``sub`` (None: all): its
+        ``max_hz``, tightened by its adaptive throttle's current interval.
+        rosbridge gets it as ``throttle_rate``; the other bridges have no
+        such option."""
+        hz = self._hints[sub].max_hz
+        throttle = sub._throttle
+        if throttle is not None and (interval := throttle.interval) > 0.0:
+            adaptive = 1.0 / interval
+            hz = adaptive if hz is None else min(hz, adaptive)
+        return hz
+
     def _merged_hints(self, topic: str) -> SubscribeHints:
-        hints = [self._hints[s] for s in self._subs.get(topic, ()) if not s._queue.blocked]
-        caps = [h.max_hz for h in hints]
+        subs = [s for s in self._subs.get(topic, ()) if not s._queue.blocked]
+        hints = [self._hints[s] for s in subs]
+        caps = [self._rate_for(s) for s in subs]
         loosest = None if not caps or None in caps else max(c for c in caps if c is not None)
         schema = next((h.schema for h in hints if h.schema), None)
         compression = next((h.compression for h in hints if h.compression), None)
         return SubscribeHints(max_hz=loosest, schema=schema, compression=compression)
+
+    async def _subscribe_at_bridge(self, topic: str, backend: Backend | None = None) -> None:
+        """Subscribe (again) at the bridge with the merged hints of the local
+        subscriptions, and remember the rate forwarded."""
+        hints = self._merged_hints(topic)
+        self._forwarded_hz[topic] = hints.max_hz
+        await (backend or self._backend).subscribe(topic, hints)
 
     async def _add_subscription(self, sub: Subscription, hints: SubscribeHints) -> None:
         reconnecting = self._status.value == "reconnecting"
@@ -684,7 +705,7 @@ class Client:
         if reconnecting:
             return  # pending; the reconnect subscribes it
         try:
-            await self._backend.subscribe(sub.topic, self._merged_hints(sub.topic))
+            await self._subscribe_at_bridge(sub.topic)
         except BaseException:
             await self._remove_subscription(sub)
             raise
@@ -696,15 +717,17 @@ class Client:
         whose breaker is not tripped wants it."""
         backend = self._backend
         if any(not s._queue.blocked for s in self._subs.get(topic, ())):
-            await backend.subscribe(topic, self._merged_hints(topic))
+            await self._subscribe_at_bridge(topic, backend)
             if backend.topic_active(topic):
                 self.on_topic_state(topic, True)
         else:
+            self._forwarded_hz.pop(topic, None)
             await backend.unsubscribe(topic)
             self.on_topic_state(topic, False)
 
     async def _reliability(self) -> None:
-        """Apply breaker changes. The checks run in :meth:`_reliability_tick`,
+        """Apply breaker and forwarded-rate changes at the bridge. The checks
+        run in :meth:`_reliability_tick`,
         which the event loop's shared lag sampler calls every 200 ms for every
         client on the loop (one wake-up per loop, not one per client); this
         task wakes only when a breaker changed state and the bridge must stop
@@ -722,17 +745,19 @@ class Client:
                     try:
                         await self._sync_topic(topic)
                     except ConnectError as exc:
-                        self._log.debug("breaker change on %s not applied: %s", topic, exc)
+                        self._log.debug("bridge change on %s not applied: %s", topic, exc)
                     except Exception:  # a bug must not take the user's program down
-                        self._log.exception("breaker change on %s failed", topic)
+                        self._log.exception("bridge change on %s failed", topic)
         finally:
             monitor.remove_tick(key)
 
     def _reliability_tick(self) -> None:
         """Every 200 ms (see :meth:`_reliability`): refresh each adaptive
-        subscription's throttle, feed its breaker the lag, and note breaker
-        changes (tripped: the bridge stops sending; half-open or closed: it
-        sends again) for :meth:`_reliability` to apply."""
+        subscription's throttle, feed its breaker the lag, and note for
+        :meth:`_reliability` to apply at the bridge the topics whose breakers
+        changed (tripped: the bridge stops sending; half-open or closed: it
+        sends again) or whose forwarded rate moved with an adaptive throttle
+        (rosbridge's ``throttle_rate``)."""
         if not self._subs or self._status.value != "connected":
             return
         lag = current_monitor().recurring_lag_ms()
@@ -751,6 +776,14 @@ class Client:
                     self._breaker_topics.add(topic)
                     self._breaker_changed.set()
                     self._log.warning("subscription to %s: breaker %s", topic, sub.breaker.state)
+            if (
+                topic not in self._breaker_topics
+                and topic in self._forwarded_hz
+                and self._merged_hints(topic).max_hz != self._forwarded_hz[topic]
+            ):
+                # an adaptive throttle moved: the bridge may send less (or more)
+                self._breaker_topics.add(topic)
+                self._breaker_changed.set()
 
     async def _remove_subscription(self, sub: Subscription) -> None:
         sub.close()
@@ -762,13 +795,15 @@ class Client:
         if not self.connected:
             if not subs:
                 del self._subs[sub.topic]
+                self._forwarded_hz.pop(sub.topic, None)
             return
         with anyio.CancelScope(shield=True), anyio.move_on_after(self._options.teardown_timeout):
             try:
                 if subs:
-                    await self._backend.subscribe(sub.topic, self._merged_hints(sub.topic))
+                    await self._subscribe_at_bridge(sub.topic)
                 else:
                     del self._subs[sub.topic]
+                    self._forwarded_hz.pop(sub.topic, None)
                     await self._backend.unsubscribe(sub.topic)
             except ConnectError as exc:
                 self._log.debug("unsubscribe from %s failed: %s", sub.topic, exc)

@@ -278,6 +278,12 @@ class AdaptiveThrottle:
         self._interval = 0.0
         self._evaluate(mode(), lag.recurring_lag_ms(), lag.sustained_lag_ms(), initial=True)
 
+    @property
+    def interval(self) -> float:
+        """The interval of the last :meth:`interval_s` (seconds, 0.0 = no
+        cap), without evaluating again."""
+        return self._interval
+
     def interval_s(self) -> float:
         """The minimum interval between delivered messages now, in seconds
         (0.0 = no cap). Call it for every received frame: it reads the mode
