@@ -1,0 +1,165 @@
+"""The WebSocket's fast path for data frames against websockets' own parser.
+
+Any sequence of frames a server may send (data, fragments, pings, pongs,
+close, masked or reserved-bit frames, frames over ``max_size``, garbage), cut
+into any chunks, must give exactly what websockets alone gives: the same
+messages in the same order, the same connection failure, the same bytes to
+send back (pongs, close replies)."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import struct
+
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from websockets.client import ClientProtocol
+from websockets.protocol import State
+from websockets.uri import parse_uri
+
+from ros_mobile_bridge.transport import _websocket
+from ros_mobile_bridge.transport._websocket import WebSocket
+
+MAX_SIZE = 300
+
+
+def frame_bytes(fin: bool, rsv: int, opcode: int, masked: bool, payload: bytes) -> bytes:
+    head = bytes([(0x80 if fin else 0) | (rsv << 4) | opcode])
+    n = len(payload)
+    mask_bit = 0x80 if masked else 0
+    if n < 126:
+        head += bytes([mask_bit | n])
+    elif n < 1 << 16:
+        head += bytes([mask_bit | 126]) + struct.pack("!H", n)
+    else:
+        head += bytes([mask_bit | 127]) + struct.pack("!Q", n)
+    if masked:
+        key = os.urandom(4)
+        head += key
+        payload = bytes(b ^ key[i % 4] for i, b in enumerate(payload))
+    return head + payload
+
+
+def close_payload(code: int, reason: bytes) -> bytes:
+    return struct.pack("!H", code) + reason
+
+
+common_frame = st.one_of(
+    st.tuples(
+        st.just(True), st.just(0), st.sampled_from([1, 2]), st.just(False), st.binary(max_size=400)
+    ),
+    st.tuples(
+        st.just(True), st.just(0), st.sampled_from([9, 10]), st.just(False), st.binary(max_size=125)
+    ),
+)
+rare_frame = st.one_of(
+    st.tuples(
+        st.booleans(),
+        st.just(0),
+        st.sampled_from([0, 1, 2]),
+        st.just(False),
+        st.binary(max_size=200),
+    ),
+    st.tuples(
+        st.just(True), st.just(0), st.just(8), st.just(False), st.just(close_payload(1000, b"bye"))
+    ),
+    st.tuples(
+        st.just(True),
+        st.integers(1, 7),
+        st.sampled_from([1, 2]),
+        st.just(False),
+        st.binary(max_size=20),
+    ),
+    st.tuples(
+        st.just(True), st.just(0), st.sampled_from([1, 2, 9]), st.just(True), st.binary(max_size=20)
+    ),
+    st.tuples(
+        st.just(True),
+        st.just(0),
+        st.sampled_from([3, 7, 11, 15]),
+        st.just(False),
+        st.binary(max_size=20),
+    ),
+    st.tuples(
+        st.just(True), st.just(0), st.just(9), st.just(False), st.binary(min_size=126, max_size=130)
+    ),
+)
+frame_lists = st.lists(
+    st.one_of(common_frame, common_frame, common_frame, rare_frame), min_size=1, max_size=25
+)
+
+
+def run(data: bytes, cuts: list[int], *, fast: bool) -> tuple[object, ...]:
+    proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=MAX_SIZE)
+    ws = WebSocket(None, proto, MAX_SIZE)  # type: ignore[arg-type]  # never reads or writes
+    ws._fast = fast
+    points = sorted({c % (len(data) + 1) for c in cuts} | {0, len(data)})
+    for a, b in itertools.pairwise(points):
+        ws._feed(data[a:b])
+        while ws._more:
+            ws._more = False
+            ws._feed(b"")
+    messages = [(text, bytes(payload)) for text, payload in ws._messages]
+    reason = str(ws._closed_reason) if ws._closed_reason is not None else None
+    return messages, reason, proto.state, unmask_all(b"".join(proto.data_to_send()))
+
+
+def unmask_all(data: bytes) -> list[tuple[int, bytes]]:
+    """The client's outgoing frames as (first byte, payload): their masking
+    keys are random, so the raw bytes of two runs never match."""
+    frames = []
+    pos = 0
+    while pos < len(data):
+        b0, b1 = data[pos], data[pos + 1]
+        n, pos = b1 & 0x7F, pos + 2
+        if n == 126:
+            n, pos = struct.unpack_from("!H", data, pos)[0], pos + 2
+        elif n == 127:
+            n, pos = struct.unpack_from("!Q", data, pos)[0], pos + 8
+        key, pos = data[pos : pos + 4], pos + 4
+        frames.append((b0, bytes(b ^ key[i % 4] for i, b in enumerate(data[pos : pos + n]))))
+        pos += n
+    return frames
+
+
+@settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow], deadline=None)
+@given(
+    frames=frame_lists,
+    cuts=st.lists(st.integers(0, 1 << 16), max_size=12),
+    tail=st.binary(max_size=12),
+)
+def test_the_fast_path_gives_what_websockets_gives(
+    frames: list[tuple[bool, int, int, bool, bytes]], cuts: list[int], tail: bytes
+) -> None:
+    data = b"".join(frame_bytes(*f) for f in frames) + tail
+    assert run(data, cuts, fast=True) == run(data, cuts, fast=False)
+
+
+def test_many_small_frames_are_parsed_a_bounded_number_at_a_time() -> None:
+    proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=MAX_SIZE)
+    ws = WebSocket(None, proto, MAX_SIZE)  # type: ignore[arg-type]
+    count = 3 * _websocket._FAST_FRAMES + 5
+    ws._feed(frame_bytes(True, 0, 2, False, b"") * count)
+    assert len(ws._messages) == _websocket._FAST_FRAMES
+    assert ws._more
+    got = len(ws._messages)
+    while ws._more:
+        ws._messages.clear()
+        ws._more = False
+        ws._feed(b"")
+        got += len(ws._messages)
+    assert got == count
+
+
+def test_a_huge_declared_length_is_not_buffered_by_the_fast_path() -> None:
+    """A frame header announcing more than ``max_size`` goes to websockets
+    at once (which fails the connection with 1009), not into a buffer that
+    waits for the announced bytes."""
+    proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=MAX_SIZE)
+    ws = WebSocket(None, proto, MAX_SIZE)  # type: ignore[arg-type]
+    ws._feed(bytes([0x82, 127]) + struct.pack("!Q", 1 << 40) + b"x" * 100)
+    assert not ws._buf
+    assert not ws._fast
+    assert ws._closed_reason is not None
+    assert "1009" in str(ws._closed_reason)
