@@ -450,6 +450,17 @@ def _fragment_step(
         events: list[Any] = []
         for frag in frags:
             events = _send_fragment(engine, frag, data)
+        # another message's parts that expired meanwhile (the clock moved in
+        # an earlier step) are reported on this receipt: not this message's
+        events = [
+            e
+            for e in events
+            if not (
+                isinstance(e, rb.ProtocolViolation)
+                and e.kind == "fragment_limit"
+                and repr(key) not in e.reason
+            )
+        ]
         expected = rb.RosbridgeEngine().receive_text(whole)
         assert [type(e) for e in events] == [type(e) for e in expected], (events, expected)
         for got, want in zip(events, expected, strict=True):

@@ -1007,3 +1007,17 @@ async def test_request_sends_then_waits_and_a_failed_send_leaves_nothing_pending
         await pending.request(2, broken)
     assert 2 not in pending
     assert len(pending) == 0
+
+
+def test_the_fast_message_constructor_builds_the_same_frozen_message() -> None:
+    from dataclasses import FrozenInstanceError
+
+    from ros_mobile_bridge._types import Message, new_message
+
+    args = ("/t", "std_msgs/msg/String", "cdr", {"data": "x"}, 5, None, 9, "why")
+    fast = new_message(*args)
+    assert type(fast) is Message
+    assert fast == Message(*args)
+    assert hash(fast.topic) == hash("/t")
+    with pytest.raises(FrozenInstanceError):
+        fast.topic = "/other"  # type: ignore[misc]

@@ -33,7 +33,7 @@ import anyio.lowlevel
 import sniffio
 
 from .._errors import DecodeError, NotConnected
-from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats
+from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats, new_message
 from ._breaker import CircuitBreaker
 from ._frame import RawFrame
 from ._throttle import AdaptiveThrottle
@@ -375,7 +375,7 @@ class Subscription:
                 payload.nbytes,
                 error,
             )
-        return Message(  # positional: measurably cheaper on this hot path
+        return new_message(
             frame.topic,
             frame.schema_name,
             frame.encoding,
