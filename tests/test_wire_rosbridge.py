@@ -336,8 +336,9 @@ def test_decode_json_msg_of_a_slice_and_of_bytearray() -> None:
     [
         (b"", "Expecting value"),
         (b"nope", "Expecting value"),
-        (b"\xff\xfe{}", "Expecting value"),
-        (b"\xff\xfe", "utf-16|Expecting value"),
+        (b"\xff\xfe{}", "not UTF-8 JSON"),
+        (b"\xff\xfe", "not UTF-8 JSON"),
+        (b"{\x00}\x00", "not UTF-8 JSON"),
         (b"[1,2]", "no 'msg'"),
         (b'{"op":"publish"}', "no 'msg'"),
         (b'"msg"', "no 'msg'"),
@@ -1629,6 +1630,31 @@ def test_json_depth_limit_is_a_classified_violation() -> None:
 def test_invalid_utf8_text_frame_is_its_own_kind() -> None:
     event = one(RosbridgeEngine().receive_text(b'{"op":"status","msg":"\xff"}'))
     assert isinstance(event, ProtocolViolation) and event.kind == "invalid_utf8"
+
+
+@pytest.mark.parametrize("encoding", ["utf-16-le", "utf-16-be", "utf-16", "utf-32"])
+def test_text_frame_in_utf16_or_utf32_is_not_json(encoding: str) -> None:
+    """json.loads would guess the encoding from NULs or a BOM and parse the
+    operation; a text frame is UTF-8 JSON or nothing (found by the fragment
+    reassembly property: a reassembled ':\\x000000000' read as UTF-16)."""
+    op = '{"op":"status","level":"error","msg":"x"}'.encode(encoding)
+    for e in (RosbridgeEngine(),):
+        event = one(e.receive_text(op))
+        assert isinstance(event, ProtocolViolation), event
+        assert "not JSON" in event.reason
+    parts = [op[: len(op) // 2], op[len(op) // 2 :]]
+    # the same bytes reassembled from fragments (as latin-1 text so they survive JSON)
+    e = RosbridgeEngine()
+    assert e.receive_text(frag("k", parts[0].decode("latin-1"), 0, 2)) == []
+    event = one(e.receive_text(frag("k", parts[1].decode("latin-1"), 1, 2)))
+    assert isinstance(event, ProtocolViolation)
+
+
+def test_text_frame_reassembled_with_a_nul_second_is_not_json() -> None:
+    e = RosbridgeEngine()
+    event = one(e.receive_text(frag("k", ":\x000000000", 0, 1)))
+    assert isinstance(event, ProtocolViolation)
+    assert "the reassembled message is not JSON" in event.reason
 
 
 def test_fragment_over_the_size_bound_is_a_fragment_limit() -> None:

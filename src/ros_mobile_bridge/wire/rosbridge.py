@@ -195,13 +195,29 @@ Event = (
 # Decoding kept messages
 
 
+def _loads_utf8(raw: bytes | bytearray) -> Any:
+    """``json.loads`` of UTF-8 bytes, and only UTF-8.
+
+    ``json.loads`` given bytes guesses UTF-16 or UTF-32 from a NUL in the first
+    two bytes or from a byte order mark, so a text frame holding an operation
+    spelled in UTF-16 (valid UTF-8, NULs and all) would be parsed as that
+    operation. JSON on a WebSocket is UTF-8 (RFC 8259), and no UTF-8 JSON text
+    starts with a NUL or with the bytes 0xFE or 0xFF: such bytes raise
+    ``ValueError`` (not JSON) instead."""
+    if b"\x00" in raw[:2] or raw[:1] in (b"\xfe", b"\xff"):
+        raise ValueError(
+            "not UTF-8 JSON text (a NUL byte or a UTF-16/32 byte order mark at its start)"
+        )
+    return json.loads(raw)
+
+
 def decode_json_msg(payload: memoryview) -> Any:
     """The ``msg`` of a JSON ``publish`` frame. Raises ``ValueError`` for a
     frame that is not JSON or has no ``msg`` (``RecursionError`` for one
     nested too deeply)."""
     obj = payload.obj
     data = obj if isinstance(obj, bytes | bytearray) and len(obj) == payload.nbytes else payload
-    frame = json.loads(bytes(data) if isinstance(data, memoryview) else data)
+    frame = _loads_utf8(bytes(data) if isinstance(data, memoryview) else data)
     if not isinstance(frame, dict) or "msg" not in frame:
         raise ValueError("the publish frame has no 'msg'")
     return frame["msg"]
@@ -499,7 +515,7 @@ class RosbridgeEngine:
         if json_too_deep(raw, self.max_json_depth):
             return [self._too_deep(what, len(raw))]
         try:
-            obj = json.loads(raw)
+            obj = _loads_utf8(raw)
         except RecursionError:
             return [self._too_deep(what, len(raw))]
         except UnicodeDecodeError as exc:
