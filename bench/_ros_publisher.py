@@ -6,8 +6,11 @@ not reach 5 kHz). Run with the ROS peer environment's Python
     python bench/_ros_publisher.py TOPIC RATE CHARS
 
 Each message's ``data`` is the decimal sequence number (0, 1, ...) padded
-with zeros to 10 digits, a space, then filler up to CHARS characters, so a
-receiver can count the messages it did not get. Publishing follows a fixed
+with zeros to 10 digits, a space, ``time.monotonic_ns()`` just before the
+publish padded to 19 digits, a space, then filler up to CHARS characters, so
+a receiver can count the messages it did not get and measure how long each
+one took to reach it (the monotonic clock is the same in every process of
+the machine). Publishing follows a fixed
 schedule (message ``n`` is due at ``start + n / RATE``); when it falls behind,
 the due messages go out back to back. Prints ``ready`` once the publisher
 exists (publishing starts at once), then answers commands on stdin:
@@ -34,7 +37,7 @@ def main() -> int:
     rclpy.init()
     node = rclpy.create_node("rmb_bench_publisher")
     publisher = node.create_publisher(String, topic, QoSProfile(depth=100))
-    filler = "x" * max(0, chars - 11)
+    filler = "x" * max(0, chars - 31)
     published = 0
     stop = threading.Event()
     out_lock = threading.Lock()
@@ -67,7 +70,7 @@ def main() -> int:
                 if wait > 0.0002:
                     time.sleep(wait - 0.0001)
                 continue
-            msg.data = f"{published:010d} {filler}"
+            msg.data = f"{published:010d} {time.monotonic_ns():019d} {filler}"
             publisher.publish(msg)
             published += 1
     finally:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import socket
 import threading
+import time
 from collections.abc import Iterator
 
 import anyio
@@ -203,6 +204,41 @@ async def test_a_reader_that_falls_behind_pauses_the_socket(peer: RawPeer) -> No
     assert await recv_all(stream, total) == b"y" * total
     assert not stream._protocol.read_paused
     assert done.wait(10)
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_what_arrives_during_a_hold_is_read_in_one_go(peer: RawPeer) -> None:
+    """``hold`` pauses reading: segments sent meanwhile wait in the kernel
+    and come back as one chunk after it (one wake-up, not one each)."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def send_three() -> None:
+        for part in (b"one,", b"two,", b"three"):
+            conn.sendall(part)
+            time.sleep(0.02)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(anyio.to_thread.run_sync, send_three)
+        await stream.hold(0.3)
+        assert not stream._protocol.chunks  # nothing was read while held
+        assert not stream._protocol.read_paused
+    assert await stream.receive() == b"one,two,three"
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_a_cancelled_hold_resumes_reading(peer: RawPeer) -> None:
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    with anyio.move_on_after(0.05) as scope:
+        await stream.hold(10)
+    assert scope.cancelled_caught
+    assert not stream._protocol.read_paused
+    await anyio.to_thread.run_sync(conn.sendall, b"after")
+    assert await recv_all(stream, 5) == b"after"
     await stream.aclose()
 
 

@@ -180,6 +180,7 @@ async def _open_backend(endpoint: Endpoint, protocol: str, options: ClientOption
         max_size=options.max_frame_size,
         ssl_context=options.ssl_context,
         timeout=options.connect_timeout,
+        read_coalesce=options.read_coalesce,
     )
     if ws.subprotocol is None:
         return await start_rosbridge(ws, options, deadline)

@@ -119,6 +119,14 @@ class ClientOptions:
     max_frame_size: int = 64 * 1024 * 1024
     """Largest inbound message in bytes. A larger one closes the connection
     with a clear error (raw 1080p images need about 6 MiB)."""
+    read_coalesce: float = 0.002
+    """Foxglove and rosbridge: seconds a read may wait under a steady stream
+    of small messages, so the frames that arrive meanwhile are read and
+    handed to the consumers at one wake-up instead of one each. Engages only
+    while reads come at least every ``2 * read_coalesce`` and return under
+    64 KiB; a message then reaches ``async for`` at most this much later (a
+    service reply arriving within the stream too). 0 reads every frame as it
+    arrives. At most 0.1."""
     keepalive_interval: float = 10.0
     """Seconds between WebSocket pings (0 disables keep-alive)."""
     keepalive_timeout: float = 10.0
@@ -225,6 +233,9 @@ class ClientOptions:
         _positive("connect_timeout", self.connect_timeout)
         _positive("discovery_grace", self.discovery_grace, allow_zero=True)
         _positive("keepalive_interval", self.keepalive_interval, allow_zero=True)
+        _positive("read_coalesce", self.read_coalesce, allow_zero=True)
+        if self.read_coalesce > 0.1:
+            raise ValueError(f"read_coalesce must be at most 0.1 s, got {self.read_coalesce!r}")
         _positive("keepalive_timeout", self.keepalive_timeout)
         _positive("service_timeout", self.service_timeout)
         _positive("teardown_timeout", self.teardown_timeout)

@@ -59,6 +59,7 @@ async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
         max_size=options.max_frame_size,
         ssl_context=options.ssl_context,
         timeout=options.connect_timeout,
+        read_coalesce=options.read_coalesce,
     )
     return await start_foxglove(ws, options, deadline)
 

@@ -104,6 +104,7 @@ async def open_rosbridge(url: str, options: ClientOptions) -> RosbridgeBackend:
             max_size=options.max_frame_size,
             ssl_context=options.ssl_context,
             timeout=options.connect_timeout,
+            read_coalesce=options.read_coalesce,
         )
     except HandshakeRejected as exc:
         if _is_foxglove_rejection(exc):

@@ -131,6 +131,34 @@ class ProtocolStream(anyio.abc.ByteStream):
             self._transport.resume_reading()
         return data
 
+    @property
+    def has_data(self) -> bool:
+        """Bytes are buffered: :meth:`receive` returns without waiting."""
+        return bool(self._protocol.chunks)
+
+    async def hold(self, seconds: float) -> None:
+        """Leave the socket unread for ``seconds``: reading is paused, so what
+        arrives meanwhile waits in the kernel and is then read in one go
+        (one wake-up of the loop instead of one per arriving segment).
+        Cancellable; reading resumes on every exit unless back-pressure
+        paused it."""
+        p = self._protocol
+        paused = not p.read_paused and not self._transport.is_closing()
+        if paused:
+            p.read_paused = True
+            self._transport.pause_reading()
+        try:
+            fut: asyncio.Future[None] = p.loop.create_future()
+            handle = p.loop.call_later(seconds, _set_done, fut)
+            try:
+                await fut
+            finally:
+                handle.cancel()
+        finally:
+            if paused and p.read_paused and not self._transport.is_closing():
+                p.read_paused = False
+                self._transport.resume_reading()
+
     async def send(self, item: bytes) -> None:
         if self._closed:
             raise anyio.ClosedResourceError
@@ -166,6 +194,11 @@ class ProtocolStream(anyio.abc.ByteStream):
         self._transport.abort()
         self._protocol._wake_reader()
         self._protocol._wake_drainers()
+
+
+def _set_done(fut: asyncio.Future[None]) -> None:
+    if not fut.done():
+        fut.set_result(None)
 
 
 async def connect_tcp(host: str, port: int) -> ProtocolStream:

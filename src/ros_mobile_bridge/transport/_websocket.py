@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import ssl as _ssl
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -44,6 +45,9 @@ objects (~3 MB) parsed at once whatever follows it."""
 _FAST_FRAMES: Final = 1024
 """Data frames the fast path parses before the reader handles them: a 1 MiB
 read of empty frames is parsed 1024 at a time, never 500,000 at once."""
+_COALESCE_BELOW: Final = 64 * 1024
+"""A read of this many bytes or more ends read coalescing until the next
+small read: the stream is saturated, and waiting could only slow it."""
 _OP_TEXT: Final = 0x1
 _OP_BINARY: Final = 0x2
 
@@ -102,6 +106,16 @@ class WebSocket:
         self._stream_closed = False
         self.send_timeout = 10.0
         """Seconds one send may take before the connection is declared lost."""
+        self.read_coalesce = 0.0
+        """Seconds a read may wait under a steady stream of small reads so
+        that several frames are read and handed over at one wake-up
+        (:meth:`receive_raw`); 0 reads as soon as anything arrives."""
+        self._last_read = 0.0  # time.monotonic() when the last read returned
+        self._steady = False  # the last two reads came within 2 * read_coalesce
+        self.reads = 0
+        """Reads from the socket so far (each one wake-up of the reader)."""
+        self.coalesced = 0
+        """Reads that waited for :attr:`read_coalesce` first."""
         self.close_timeout = 1.0
         """Seconds the peer gets to end the TCP connection once the close
         handshake is done (or we failed the connection) before the client
@@ -135,6 +149,8 @@ class WebSocket:
             if self._closed_reason is not None:
                 await self._finish_closing()
                 raise self._closed_reason
+            if self._steady:
+                await self._coalesce()
             try:
                 data = await self._stream.receive(_READ_CHUNK)
             except (
@@ -151,9 +167,36 @@ class WebSocket:
                 )
                 await self._finish_closing()
                 raise self._closed_reason from exc  # type: ignore[misc]
+            self.reads += 1
+            window = self.read_coalesce
+            if window:
+                now = time.monotonic()
+                self._steady = now - self._last_read < 2 * window and len(data) < _COALESCE_BELOW
+                self._last_read = now
             self._feed(data)
             await self._flush()  # pongs, close replies: usually nothing, and then no lock
         return messages.popleft()
+
+    async def _coalesce(self) -> None:
+        """Under a steady stream, wait until :attr:`read_coalesce` seconds
+        after the last read returned before reading again (not at all when
+        handling that read took longer): the frames that arrive meanwhile
+        are read and handed over together. Each frame waits at most that
+        long; a stream slower than one read per ``2 * read_coalesce``, or
+        reads of :data:`_COALESCE_BELOW` bytes or more (the socket is
+        saturated and reading already batches), never waits."""
+        delay = self._last_read + self.read_coalesce - time.monotonic()
+        if delay <= 0:
+            return
+        stream = self._stream
+        if isinstance(stream, _asyncio_stream.ProtocolStream):
+            if stream.has_data:
+                return  # bytes that arrived before the wait are read at once
+            self.coalesced += 1
+            await stream.hold(delay)  # reading paused: no wake-up per arriving segment
+        else:
+            self.coalesced += 1
+            await anyio.sleep(delay)  # anyio's streams read only when asked
 
     def _feed(self, data: bytes) -> None:
         """Parse ``data`` and handle its frames.
@@ -522,6 +565,7 @@ async def connect_websocket(
     max_size: int | None = 1 << 20,
     ssl_context: _ssl.SSLContext | None = None,
     timeout: float = 10.0,
+    read_coalesce: float = 0.0,
 ) -> WebSocket:
     """Open a WebSocket to ``url`` (``ws://`` or ``wss://``) offering
     ``subprotocols``. ``timeout`` covers TCP connect, TLS and the HTTP upgrade.
@@ -530,7 +574,8 @@ async def connect_websocket(
     status, ``ConnectError`` for anything else that prevents the connection
     (refused, unreachable, timeout, TLS failure), ``ValueError`` for a bad URL.
     ``max_size`` bounds one message (``None``: no bound); a larger message
-    closes the connection with code 1009."""
+    closes the connection with code 1009. ``read_coalesce`` sets
+    :attr:`WebSocket.read_coalesce`."""
     try:
         uri = parse_uri(url)
     except InvalidURI as exc:
@@ -598,6 +643,7 @@ async def connect_websocket(
             raise ConnectError(f"WebSocket handshake with {url} failed: {failure}") from failure
         raise ConnectError(f"WebSocket handshake with {url} failed: {failure!r}") from failure
     ws = WebSocket(stream, proto, max_size)
+    ws.read_coalesce = read_coalesce
     for frame in leftover:
         ws._on_frame(frame)
     return ws
