@@ -17,6 +17,7 @@ FLOAT_FIELDS = {
     "connect_timeout": False,
     "discovery_grace": True,
     "keepalive_interval": True,
+    "read_coalesce": True,
     "keepalive_timeout": False,
     "service_timeout": False,
     "teardown_timeout": False,

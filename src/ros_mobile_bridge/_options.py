@@ -119,14 +119,16 @@ class ClientOptions:
     max_frame_size: int = 64 * 1024 * 1024
     """Largest inbound message in bytes. A larger one closes the connection
     with a clear error (raw 1080p images need about 6 MiB)."""
-    read_coalesce: float = 0.002
+    read_coalesce: float = 0.004
     """Foxglove and rosbridge: seconds a read may wait under a steady stream
     of small messages, so the frames that arrive meanwhile are read and
-    handed to the consumers at one wake-up instead of one each. Engages only
-    while reads come at least every ``2 * read_coalesce`` and return under
-    64 KiB; a message then reaches ``async for`` at most this much later (a
-    service reply arriving within the stream too). 0 reads every frame as it
-    arrives. At most 0.1."""
+    handed to the consumers at one wake-up instead of one each. Starts when
+    two reads come less than this apart, and stays on while each wait
+    gathers more than one message and reads stay under 64 KiB; a message
+    then reaches ``async for`` at most this much later (a service reply
+    arriving within the stream too). Sporadic messages, streams slower than
+    the window and saturated sockets are read as they arrive. 0 reads every
+    frame as it arrives. At most 0.1."""
     keepalive_interval: float = 10.0
     """Seconds between WebSocket pings (0 disables keep-alive)."""
     keepalive_timeout: float = 10.0

@@ -111,7 +111,8 @@ class WebSocket:
         that several frames are read and handed over at one wake-up
         (:meth:`receive_raw`); 0 reads as soon as anything arrives."""
         self._last_read = 0.0  # time.monotonic() when the last read returned
-        self._steady = False  # the last two reads came within 2 * read_coalesce
+        self._steady = False  # read coalescing is on for the next read
+        self._held = False  # the last read waited for read_coalesce first
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
         self.coalesced = 0
@@ -150,7 +151,7 @@ class WebSocket:
                 await self._finish_closing()
                 raise self._closed_reason
             if self._steady:
-                await self._coalesce()
+                self._held = await self._coalesce()
             try:
                 data = await self._stream.receive(_READ_CHUNK)
             except (
@@ -168,35 +169,45 @@ class WebSocket:
                 await self._finish_closing()
                 raise self._closed_reason from exc  # type: ignore[misc]
             self.reads += 1
+            self._feed(data)
             window = self.read_coalesce
             if window:
                 now = time.monotonic()
-                self._steady = now - self._last_read < 2 * window and len(data) < _COALESCE_BELOW
+                if self._held:  # keep waiting while it gathers more than one message
+                    self._held = False
+                    self._steady = len(messages) > 1
+                else:  # start when reads come faster than the window
+                    self._steady = now - self._last_read < window
+                if len(data) >= _COALESCE_BELOW:
+                    self._steady = False
                 self._last_read = now
-            self._feed(data)
             await self._flush()  # pongs, close replies: usually nothing, and then no lock
         return messages.popleft()
 
-    async def _coalesce(self) -> None:
+    async def _coalesce(self) -> bool:
         """Under a steady stream, wait until :attr:`read_coalesce` seconds
         after the last read returned before reading again (not at all when
-        handling that read took longer): the frames that arrive meanwhile
-        are read and handed over together. Each frame waits at most that
-        long; a stream slower than one read per ``2 * read_coalesce``, or
-        reads of :data:`_COALESCE_BELOW` bytes or more (the socket is
-        saturated and reading already batches), never waits."""
+        handling that read took longer), so the frames that arrive meanwhile
+        are read and handed over together. True when it waited.
+
+        Coalescing starts when two reads come less than the window apart,
+        and stops when a read that waited brought one message or none (the
+        stream is too slow to gather several) or a read brings
+        :data:`_COALESCE_BELOW` bytes or more (the socket is saturated and
+        reading already batches). Each frame waits at most the window."""
         delay = self._last_read + self.read_coalesce - time.monotonic()
         if delay <= 0:
-            return
+            return False
         stream = self._stream
         if isinstance(stream, _asyncio_stream.ProtocolStream):
             if stream.has_data:
-                return  # bytes that arrived before the wait are read at once
+                return False  # bytes that arrived before the wait are read at once
             self.coalesced += 1
             await stream.hold(delay)  # reading paused: no wake-up per arriving segment
         else:
             self.coalesced += 1
             await anyio.sleep(delay)  # anyio's streams read only when asked
+        return True
 
     def _feed(self, data: bytes) -> None:
         """Parse ``data`` and handle its frames.
