@@ -56,7 +56,7 @@ import sys
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Coroutine
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 from typing import Any, Final, Literal, NamedTuple
@@ -196,13 +196,17 @@ class Receiver:
 ClientFactory = Callable[[str, str, int], AbstractAsyncContextManager[Receiver]]
 
 
-def library(max_hz: float | None = None) -> ClientFactory:
-    """The full client: receive, route, throttle, decode, deliver."""
+def library(max_hz: float | None = None, read_coalesce: float | None = None) -> ClientFactory:
+    """The full client: receive, route, throttle, decode, deliver. Default
+    options but ``read_coalesce`` when given."""
+    options = rmb.ClientOptions()
+    if read_coalesce is not None:
+        options = replace(options, read_coalesce=read_coalesce)
 
     @asynccontextmanager
     async def factory(url: str, topic: str, count: int) -> AsyncIterator[Receiver]:
         async with (
-            rmb.connect(url, protocol="foxglove-ws") as robot,
+            rmb.connect(url, protocol="foxglove-ws", options=options) as robot,
             robot.subscribe(topic, buffer=count, max_hz=max_hz) as sub,
         ):
             assert sub.state == "active"
@@ -381,7 +385,12 @@ def cases(backend: Backend) -> list[Case]:
             "paced",
             f"String paced {PACE_HZ / 1000:g} kHz",
             STRING_TOPIC,
-            {"library": library(), **capped, **raw},
+            {
+                "library": library(),
+                "library read_coalesce=0": library(read_coalesce=0.0),
+                **capped,
+                **raw,
+            },
             pace=PACE_HZ,
         ),
     ]
