@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal, cast
+from typing import Any, Literal
+
+from ._slots import new_object, slot_setter
 
 __all__ = [
     "DEFAULT_PORTS",
@@ -57,23 +59,14 @@ class Message:
     decode_error: str | None = None
 
 
-_new_object = object.__new__
-
-
-def _slot_setter(name: str) -> Callable[[Message, Any], None]:
-    """The setter of one of Message's slots (it ignores ``frozen``)."""
-    descriptor: Any = Message.__dict__[name]
-    return cast(Callable[[Message, Any], None], descriptor.__set__)
-
-
-_set_topic = _slot_setter("topic")
-_set_schema_name = _slot_setter("schema_name")
-_set_encoding = _slot_setter("encoding")
-_set_data = _slot_setter("data")
-_set_receive_time_ns = _slot_setter("receive_time_ns")
-_set_log_time_ns = _slot_setter("log_time_ns")
-_set_byte_size = _slot_setter("byte_size")
-_set_decode_error = _slot_setter("decode_error")
+_set_topic = slot_setter(Message, "topic")
+_set_schema_name = slot_setter(Message, "schema_name")
+_set_encoding = slot_setter(Message, "encoding")
+_set_data = slot_setter(Message, "data")
+_set_receive_time_ns = slot_setter(Message, "receive_time_ns")
+_set_log_time_ns = slot_setter(Message, "log_time_ns")
+_set_byte_size = slot_setter(Message, "byte_size")
+_set_decode_error = slot_setter(Message, "decode_error")
 
 
 def new_message(
@@ -90,7 +83,7 @@ def new_message(
     built through its slots instead of the dataclass ``__init__`` (which sets
     each field through ``object.__setattr__``): about half the cost, once
     per delivered message."""
-    message: Message = _new_object(Message)
+    message: Message = new_object(Message)
     _set_topic(message, topic)
     _set_schema_name(message, schema_name)
     _set_encoding(message, encoding)

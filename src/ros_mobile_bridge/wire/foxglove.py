@@ -39,6 +39,7 @@ from types import MappingProxyType
 from typing import Any, Final
 
 from .._limits import json_too_deep
+from .._slots import new_object, slot_setter
 
 __all__ = [
     "DEFAULT_SCHEMA_ENCODINGS",
@@ -301,6 +302,25 @@ class MessageData(Event):
     channel: Channel
     log_time_ns: int
     payload: memoryview
+
+
+_set_md_subscription_id = slot_setter(MessageData, "subscription_id")
+_set_md_channel = slot_setter(MessageData, "channel")
+_set_md_log_time_ns = slot_setter(MessageData, "log_time_ns")
+_set_md_payload = slot_setter(MessageData, "payload")
+
+
+def _message_data(
+    subscription_id: int, channel: Channel, log_time_ns: int, payload: memoryview
+) -> MessageData:
+    """``MessageData(...)`` for the hot path, built through its slots (see
+    ``_slots``): once per received message."""
+    event: MessageData = new_object(MessageData)
+    _set_md_subscription_id(event, subscription_id)
+    _set_md_channel(event, channel)
+    _set_md_log_time_ns(event, log_time_ns)
+    _set_md_payload(event, payload)
+    return event
 
 
 @dataclass(frozen=True, slots=True)
@@ -1078,7 +1098,7 @@ class FoxgloveEngine:
                     if 0 < sub_id < self._next_sub_id:
                         return []  # unsubscribed; a late frame
                     return [ProtocolViolation(f"message data for unknown subscription id {sub_id}")]
-                return [MessageData(sub_id, channel, log_time, view[_MESSAGE_DATA_PAYLOAD_AT:])]
+                return [_message_data(sub_id, channel, log_time, view[_MESSAGE_DATA_PAYLOAD_AT:])]
             if opcode == _OP_TIME:
                 if size < 1 + _TIME.size:
                     return [self._truncated(opcode, size, 1 + _TIME.size)]
