@@ -14,6 +14,7 @@ import random
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
+from functools import partial
 from typing import Any, Final, TypeVar
 
 import anyio
@@ -46,6 +47,7 @@ from .flow import (
     AdaptiveThrottle,
     Bucket,
     FrameQueue,
+    LagMonitor,
     Outbox,
     RawFrame,
     Subscription,
@@ -733,7 +735,7 @@ class Client:
         task wakes only when a breaker changed state and the bridge must stop
         or resume sending a topic."""
         monitor = current_monitor()
-        key = monitor.add_tick(self._reliability_tick)
+        key = monitor.add_tick(partial(self._reliability_tick, monitor))
         try:
             while True:
                 await self._breaker_changed.wait()
@@ -751,7 +753,7 @@ class Client:
         finally:
             monitor.remove_tick(key)
 
-    def _reliability_tick(self) -> None:
+    def _reliability_tick(self, monitor: LagMonitor) -> None:
         """Every 200 ms (see :meth:`_reliability`): refresh each adaptive
         subscription's throttle, feed its breaker the lag, and note for
         :meth:`_reliability` to apply at the bridge the topics whose breakers
@@ -760,7 +762,7 @@ class Client:
         (rosbridge's ``throttle_rate``)."""
         if not self._subs or self._status.value != "connected":
             return
-        lag = current_monitor().recurring_lag_ms()
+        lag = monitor.recurring_lag_ms()  # the loop's monitor, not looked up per client
         policy = self._options.breaker
         for topic, subs in self._subs.items():
             for sub in subs:
