@@ -196,9 +196,12 @@ class Receiver:
 ClientFactory = Callable[[str, str, int], AbstractAsyncContextManager[Receiver]]
 
 
-def library(max_hz: float | None = None, read_coalesce: float | None = None) -> ClientFactory:
+def library(
+    max_hz: float | None = None, read_coalesce: float | None = None, batches: bool = False
+) -> ClientFactory:
     """The full client: receive, route, throttle, decode, deliver. Default
-    options but ``read_coalesce`` when given."""
+    options but ``read_coalesce`` when given; ``batches``: the consumer
+    iterates ``sub.batches()`` instead of ``sub``."""
     options = rmb.ClientOptions()
     if read_coalesce is not None:
         options = replace(options, read_coalesce=read_coalesce)
@@ -219,11 +222,19 @@ def library(max_hz: float | None = None, read_coalesce: float | None = None) -> 
                     if got.n == count:
                         got.finish()
 
+            async def run_batches() -> None:
+                async for batch in sub.batches():
+                    for msg in batch:
+                        got.bytes += len(msg.data["data"])
+                        got.n += 1
+                        if got.n == count:
+                            got.finish()
+
             def extra() -> dict[str, int]:
                 return subscription_counts(sub)
 
             progress = (lambda: sub.stats.received) if max_hz else None
-            yield Receiver(run, got, progress, extra)
+            yield Receiver(run_batches if batches else run, got, progress, extra)
 
     return factory
 
@@ -378,7 +389,12 @@ def cases(backend: Backend) -> list[Case]:
         raw["websockets"] = websockets_asyncio
     capped = {"library max_hz=10": library(max_hz=10)}
     return [
-        Case("string", "String 99 B", STRING_TOPIC, {"library": library(), **raw}),
+        Case(
+            "string",
+            "String 99 B",
+            STRING_TOPIC,
+            {"library": library(), "library batches": library(batches=True), **raw},
+        ),
         Case("image", "Image 640x480 rgb8", IMAGE_TOPIC, {"library": library(), **raw}),
         Case("string_hz10", "String, max_hz=10", STRING_TOPIC, capped),
         Case(
@@ -574,6 +590,7 @@ def report(backend: Backend, result: Result) -> dict[str, dict[str, dict[str, fl
         if base != "transport":
             line += f"   (library / transport: {ratio(key, 'library', 'transport')})"
         print(line)
+    print(f"    string, library batches / {base}: {ratio('string', 'library batches', base)}")
     paced = table["paced"]
     print(
         f"    paced   {paced['library']['cpu_us_per_frame'] / paced[base]['cpu_us_per_frame']:.2f}x"

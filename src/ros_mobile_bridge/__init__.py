@@ -41,6 +41,7 @@ from ._types import SubscriptionState as SubscriptionState
 from ._types import SubscriptionStats as SubscriptionStats
 from ._types import TopicInfo as TopicInfo
 from .codec import FieldDef as FieldDef
+from .flow import Batches as Batches
 from .flow import Subscription as Subscription
 from .flow._breaker import BreakerState as BreakerState
 from .flow._breaker import CircuitBreaker as CircuitBreaker
@@ -57,6 +58,7 @@ __all__ = [
     "ActionGoal",
     "ActionGoalError",
     "ActionOutcome",
+    "Batches",
     "BreakerPolicy",
     "BreakerState",
     "Bucket",

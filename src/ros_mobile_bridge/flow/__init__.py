@@ -13,6 +13,7 @@ from ._outbox import Outbox as Outbox
 from ._outbox import TopicMessage as TopicMessage
 from ._outbox import WireMessage as WireMessage
 from ._pending import PendingRequests as PendingRequests
+from ._subscription import Batches as Batches
 from ._subscription import FrameQueue as FrameQueue
 from ._subscription import Subscription as Subscription
 from ._throttle import DEFAULT_PRESETS as DEFAULT_PRESETS
