@@ -11,7 +11,6 @@ stops it; the process also dies with its parent (``PR_SET_PDEATHSIG``).
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
@@ -100,22 +99,9 @@ class ZenohRouter:
         proc, self._proc = self._proc, None
         if proc is None:
             return None
-        with contextlib.suppress(OSError):
-            if proc.stdin:
-                proc.stdin.close()
-        try:
-            return proc.wait(5)
-        except subprocess.TimeoutExpired:
-            proc.terminate()
-            try:
-                return proc.wait(5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                return proc.wait(5)
-        finally:
-            for stream in (proc.stdout, proc.stderr):
-                if stream:
-                    stream.close()
+        from peers._process import end_process  # this file also runs as a script
+
+        return end_process(proc)
 
     def __enter__(self) -> ZenohRouter:
         return self.start()

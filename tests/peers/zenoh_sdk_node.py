@@ -22,7 +22,6 @@ script makes any download attempt fail loudly instead.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import queue
 import subprocess
@@ -311,21 +310,9 @@ class SdkNode:
         return list(self._received)
 
     def stop(self) -> int | None:
-        proc = self._proc
-        with contextlib.suppress(OSError):
-            if proc.stdin:
-                proc.stdin.close()
-        try:
-            return proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            return proc.wait(5)
-        finally:
-            for reader in self._readers:  # they end at the pipes' EOF
-                reader.join(5)
-            for stream in (proc.stdout, proc.stderr):
-                if stream:
-                    stream.close()
+        from peers._process import end_process  # this file also runs as a script
+
+        return end_process(self._proc, grace=10, readers=self._readers)
 
     def __enter__(self) -> SdkNode:
         return self

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import anyio
 
@@ -17,6 +17,7 @@ from ..flow import RawFrame, TopicMessage, WireMessage
 
 __all__ = [
     "Advertisement",
+    "Advertisements",
     "Backend",
     "BackendEvents",
     "GoalEvents",
@@ -67,6 +68,33 @@ class Advertisement:
     def ready_schema(ad: Advertisement | None) -> str | None:
         """``ad``'s type once it is ready to publish, else None."""
         return ad.schema if ad is not None and ad.ready.is_set() else None
+
+
+A = TypeVar("A", bound=Advertisement)
+
+
+class Advertisements(dict[str, A]):
+    """The topics a backend publishes, by name: the same bookkeeping for
+    every backend."""
+
+    def schemas(self) -> dict[str, str]:
+        """Every published topic's type (``Backend.publishing``)."""
+        return {topic: ad.schema for topic, ad in self.items()}
+
+    def ready_schema(self, topic: str) -> str | None:
+        """``topic``'s type once it is ready to publish, else None
+        (``Backend.advertised``)."""
+        return Advertisement.ready_schema(self.get(topic))
+
+    async def reuse(self, topic: str, schema: str) -> bool:
+        """True when ``topic`` is advertised already: with the same type,
+        once it is ready; ``ValueError`` with another. False when it is not
+        advertised."""
+        existing = self.get(topic)
+        if existing is None:
+            return False
+        await existing.reuse(topic, schema)
+        return True
 
 
 class GoalEvents(Protocol):

@@ -30,7 +30,14 @@ from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket, connect_websocket
 from ..wire import foxglove as fx
-from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints, socket_frame
+from ._base import (
+    Advertisement,
+    Advertisements,
+    BackendEvents,
+    GoalEvents,
+    SubscribeHints,
+    socket_frame,
+)
 
 __all__ = ["FoxgloveBackend", "open_foxglove", "start_foxglove"]
 
@@ -148,7 +155,7 @@ class FoxgloveBackend:
         self._topic_infos: list[TopicInfo] = []
         self._wanted: dict[str, SubscribeHints] = {}
         self._active: dict[str, int] = {}  # topic -> subscription id
-        self._client_channels: dict[str, _ClientChannel] = {}
+        self._client_channels: Advertisements[_ClientChannel] = Advertisements()
         self._calls: PendingRequests[Any] = PendingRequests()
         self._params: PendingRequests[dict[str, Any]] = PendingRequests()
         self._call_ids = itertools.count(1)
@@ -415,10 +422,10 @@ class FoxgloveBackend:
 
     # -- publishing ---------------------------------------------------------
     def publishing(self) -> Mapping[str, str]:
-        return {topic: ch.schema for topic, ch in self._client_channels.items()}
+        return self._client_channels.schemas()
 
     def advertised(self, topic: str) -> str | None:
-        return Advertisement.ready_schema(self._client_channels.get(topic))
+        return self._client_channels.ready_schema(topic)
 
     def _publish_encoding(self, schema: str) -> str:
         supported = self.server_info.supported_encodings
@@ -435,9 +442,7 @@ class FoxgloveBackend:
     async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
         if latch:
             raise NotSupportedError("the Foxglove protocol has no latched publishing")
-        existing = self._client_channels.get(topic)
-        if existing is not None:
-            await existing.reuse(topic, schema)
+        if await self._client_channels.reuse(topic, schema):
             return
         if "clientPublish" not in self.server_info.capabilities:
             raise NotSupportedError(

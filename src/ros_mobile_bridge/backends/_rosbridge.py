@@ -38,7 +38,14 @@ from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket, connect_websocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
-from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints, socket_frame
+from ._base import (
+    Advertisement,
+    Advertisements,
+    BackendEvents,
+    GoalEvents,
+    SubscribeHints,
+    socket_frame,
+)
 
 __all__ = ["RosbridgeBackend", "open_rosbridge", "start_rosbridge"]
 
@@ -180,7 +187,7 @@ class RosbridgeBackend:
         self._live: set[str] = set()  # topics we reported active
         self._decoders: dict[tuple[str, str], Decoder | None] = {}
         self._stray: set[str] = set()  # topics we were sent but never subscribed
-        self._pubs: dict[str, _Publisher] = {}
+        self._pubs: Advertisements[_Publisher] = Advertisements()
         self._calls: PendingRequests[rb.ServiceResponse] = PendingRequests()
         self._call_names: dict[str, str] = {}
         self._goals: dict[str, tuple[str, GoalEvents]] = {}
@@ -652,15 +659,13 @@ class RosbridgeBackend:
 
     # -- publishing --------------------------------------------------------------
     def publishing(self) -> Mapping[str, str]:
-        return {topic: pub.schema for topic, pub in self._pubs.items()}
+        return self._pubs.schemas()
 
     def advertised(self, topic: str) -> str | None:
-        return Advertisement.ready_schema(self._pubs.get(topic))
+        return self._pubs.ready_schema(topic)
 
     async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
-        existing = self._pubs.get(topic)
-        if existing is not None:
-            await existing.reuse(topic, schema)
+        if await self._pubs.reuse(topic, schema):
             return
         pub = _Publisher(
             schema,

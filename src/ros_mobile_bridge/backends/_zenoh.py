@@ -66,7 +66,7 @@ from ..transport._zenoh import (
     ZenohSession,
 )
 from ..wire import rmw_zenoh as rz
-from ._base import Advertisement, BackendEvents, GoalEvents, SubscribeHints
+from ._base import Advertisement, Advertisements, BackendEvents, GoalEvents, SubscribeHints
 
 __all__ = ["ZenohBackend", "open_zenoh"]
 
@@ -183,7 +183,7 @@ class ZenohBackend:
         self._wanted: dict[str, SubscribeHints] = {}
         self._subs: dict[str, _Subscription] = {}
         self._by_tag: dict[int, _Subscription] = {}
-        self._pubs: dict[str, _Publisher] = {}
+        self._pubs: Advertisements[_Publisher] = Advertisements()
         self._client_gids: dict[str, tuple[bytes, int]] = {}  # service -> (gid, token)
         self._call_seq = itertools.count(1)
         self._queries: dict[int, _Query] = {}
@@ -568,15 +568,13 @@ class ZenohBackend:
 
     # -- publishing ---------------------------------------------------------------------
     def publishing(self) -> Mapping[str, str]:
-        return {topic: pub.schema for topic, pub in self._pubs.items()}
+        return self._pubs.schemas()
 
     def advertised(self, topic: str) -> str | None:
-        return Advertisement.ready_schema(self._pubs.get(topic))
+        return self._pubs.ready_schema(topic)
 
     async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
-        existing = self._pubs.get(topic)
-        if existing is not None:
-            await existing.reuse(topic, schema)
+        if await self._pubs.reuse(topic, schema):
             return
         if latch:
             raise NotSupportedError(

@@ -358,24 +358,17 @@ class Subscription:
             await anyio.lowlevel.checkpoint()
         else:
             await anyio.lowlevel.checkpoint_if_cancelled()
-        frame = queue.take()
-        if frame is None:
-            try:
-                frame = await queue.get()
-            except anyio.EndOfStream:
-                if self._error is not None:
-                    raise self._error from None
-                raise StopAsyncIteration from None
+        frame = queue.take() or await self._wait()
         decode = self._decode
         batch = [decode(frame)]
         size = frame.payload.nbytes
         take = queue.take
         while len(batch) < max_size and size < _LARGE_PAYLOAD:
-            frame = take()
-            if frame is None:
+            more = take()
+            if more is None:
                 break
-            batch.append(decode(frame))
-            size = frame.payload.nbytes
+            batch.append(decode(more))
+            size = more.payload.nbytes
         return batch
 
     async def __anext__(self) -> Message:
@@ -396,17 +389,23 @@ class Subscription:
             await anyio.lowlevel.checkpoint_if_cancelled()
         frame = queue.take()
         if frame is None:
-            try:
-                frame = await queue.get()
-            except anyio.EndOfStream:
-                if self._error is not None:
-                    raise self._error from None
-                raise StopAsyncIteration from None
+            frame = await self._wait()
             self._since_yield = 0
         message = self._decode(frame)
         if frame.payload.nbytes >= _LARGE_PAYLOAD:
             self._since_yield = _YIELD_EVERY  # yield before the next big decode
         return message
+
+    async def _wait(self) -> RawFrame:
+        """The next frame once one arrives; ``StopAsyncIteration`` once the
+        subscription is closed and drained (the connection's error instead,
+        when it was lost)."""
+        try:
+            return await self._queue.get()
+        except anyio.EndOfStream:
+            if self._error is not None:
+                raise self._error from None
+            raise StopAsyncIteration from None
 
     def _decode(self, frame: RawFrame) -> Message:
         queue = self._queue
