@@ -255,6 +255,48 @@ async def test_the_adaptive_throttle_is_forwarded_as_throttle_rate(peer: RosPeer
     assert relaxed >= 25, relaxed
 
 
+async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) -> None:
+    """Read coalescing against the condition it exists for: a topic the graph
+    publishes at about 1 kHz, through the bridge. Every frame received is
+    delivered; with the default window the reader takes several frames per
+    read; with ``read_coalesce=0`` no read waits."""
+    from ros_mobile_bridge.transport import WebSocket
+
+    topic = unique("/fast")
+    await command(
+        peer,
+        {"cmd": "publish", "topic": topic, "type": "std_msgs/msg/String", "hz": 1000.0,
+         "data": {"data": "x" * 50}},
+    )  # fmt: skip
+    try:
+        for window in (0.004, 0.0):
+            opts = options(read_coalesce=window)
+            async with rmb.connect(peer.url, protocol="rosbridge", options=opts) as robot:
+                ws = robot._backend._ws  # type: ignore[attr-defined]
+                assert isinstance(ws, WebSocket)
+                async with robot.subscribe(
+                    topic, schema="std_msgs/msg/String", adaptive=False, buffer=10_000
+                ) as sub:
+                    await take(sub, 1)
+                    reads, waited, received = ws.reads, ws.coalesced, sub.stats.received
+                    got = 0
+                    with anyio.move_on_after(2.0):
+                        async for _msg in sub:
+                            got += 1
+                    stats = sub.stats
+                    frames = stats.received - received
+                    assert frames > 500, frames  # the stream really was fast
+                    assert stats.delivered - 1 == got  # nothing dropped or kept back
+                    assert stats.dropped_throttle == stats.dropped_overflow == 0
+                    if window:
+                        assert ws.coalesced - waited > 0
+                        assert ws.reads - reads < frames * 0.6, (ws.reads - reads, frames)
+                    else:
+                        assert ws.coalesced == waited == 0
+    finally:
+        await command(peer, {"cmd": "stop", "topic": topic})
+
+
 async def test_the_loosest_cap_among_local_subscriptions_is_forwarded(peer: RosPeer) -> None:
     async with rmb.connect(peer.url, protocol="rosbridge", options=options()) as robot:
         async with robot.subscribe("/counter", max_hz=2) as slow:
