@@ -12,6 +12,7 @@ import itertools
 import os
 import struct
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from websockets.client import ClientProtocol
@@ -121,6 +122,25 @@ def unmask_all(data: bytes) -> list[tuple[int, bytes]]:
         frames.append((b0, bytes(b ^ key[i % 4] for i, b in enumerate(data[pos : pos + n]))))
         pos += n
     return frames
+
+
+@pytest.mark.parametrize(
+    "tail",
+    [
+        b"\x00\xfe",  # a masked continuation frame, its length still to come
+        b"\x81\xfe",  # a masked text frame, the same
+        b"\x8b\x7d",  # a reserved control opcode, its payload still to come
+        b"\x81\x80",  # a masked text frame, its mask key still to come
+    ],
+)
+def test_a_frame_websockets_refuses_on_two_bytes_fails_at_once(tail: bytes) -> None:
+    """Found by the property below in CI: the fast path waited for the rest
+    of such a frame where websockets fails the connection on its first two
+    bytes."""
+    data = frame_bytes(True, 0, 1, False, b"") + tail
+    fast = run(data, [], fast=True)
+    assert fast == run(data, [], fast=False)
+    assert fast[1] is not None  # the connection failed
 
 
 @settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow], deadline=None)

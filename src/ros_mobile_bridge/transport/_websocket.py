@@ -50,6 +50,8 @@ _COALESCE_BELOW: Final = 64 * 1024
 small read: the stream is saturated, and waiting could only slow it."""
 _OP_TEXT: Final = 0x1
 _OP_BINARY: Final = 0x2
+_CONTROL_OPCODES: Final = (0x8, 0x9, 0xA)
+"""Close, ping, pong: the control frames websockets accepts."""
 
 
 class HandshakeRejected(ConnectError):
@@ -274,36 +276,38 @@ class WebSocket:
                 break
             b0 = view[pos]
             b1 = view[pos + 1]
-            length = b1 & 0x7F
-            start = pos + 2
-            if length == 126:
-                if end - pos < 4:
-                    break
-                length = (view[pos + 2] << 8) | view[pos + 3]
-                start = pos + 4
-            elif length == 127:
-                if end - pos < 10:
-                    break
-                length = int.from_bytes(view[pos + 2 : pos + 10], "big")
-                start = pos + 10
             opcode = b0 & 0x0F
+            # decided on the first two bytes, as websockets decides (it fails a
+            # masked frame or a reserved opcode before any length byte arrives)
+            plain = (b0 & 0xF0) == 0x80 and b1 < 0x80  # FIN, no RSV bit, not masked
             if (
-                (b0 & 0xF0) == 0x80  # FIN, no RSV bit
-                and b1 < 0x80  # not masked
+                plain
                 and opcode in (_OP_BINARY, _OP_TEXT)
                 and self._fragment is None
-                and (max_size is None or length <= max_size)
                 and proto.state is State.OPEN
             ):
-                stop = start + length
-                if stop > end:
-                    break  # the rest of the frame is still on its way
-                messages.append((opcode == _OP_TEXT, view[start:stop]))
-                pos = stop
-                frames += 1
-                continue
-            if (b0 & 0xF0) == 0x80 and b1 < 0x80 and opcode >= 0x8 and length <= 125:
-                stop = start + length
+                length = b1
+                start = pos + 2
+                if length == 126:
+                    if end - pos < 4:
+                        break
+                    length = (view[pos + 2] << 8) | view[pos + 3]
+                    start = pos + 4
+                elif length == 127:
+                    if end - pos < 10:
+                        break
+                    length = int.from_bytes(view[pos + 2 : pos + 10], "big")
+                    start = pos + 10
+                if max_size is None or length <= max_size:
+                    stop = start + length
+                    if stop > end:
+                        break  # the rest of the frame is still on its way
+                    messages.append((opcode == _OP_TEXT, view[start:stop]))
+                    pos = stop
+                    frames += 1
+                    continue
+            elif plain and opcode in _CONTROL_OPCODES and b1 <= 125:
+                stop = pos + 2 + b1
                 if stop > end:
                     break
                 # a whole control frame: websockets' parser holds nothing after it
