@@ -14,9 +14,15 @@ import anyio
 from ._client import Client
 from ._options import ClientOptions
 from ._types import DEFAULT_PORTS
-from .backends import Backend, open_foxglove, open_rosbridge, start_foxglove, start_rosbridge
+from .backends import (
+    Backend,
+    open_foxglove,
+    open_rosbridge,
+    open_websocket,
+    start_foxglove,
+    start_rosbridge,
+)
 from .flow import resolve_presets
-from .transport import connect_websocket
 from .wire.foxglove import SUBPROTOCOLS
 
 __all__ = ["Endpoint", "connect", "parse_target"]
@@ -174,14 +180,7 @@ async def _open_backend(endpoint: Endpoint, protocol: str, options: ClientOption
     # auto: offer the Foxglove subprotocols; a Foxglove server picks one, a
     # rosbridge server picks none. One handshake decides.
     deadline = anyio.current_time() + options.connect_timeout
-    ws = await connect_websocket(
-        endpoint.url,
-        subprotocols=SUBPROTOCOLS,
-        max_size=options.max_frame_size,
-        ssl_context=options.ssl_context,
-        timeout=options.connect_timeout,
-        read_coalesce=options.read_coalesce,
-    )
+    ws = await open_websocket(endpoint.url, options, SUBPROTOCOLS)
     if ws.subprotocol is None:
         return await start_rosbridge(ws, options, deadline)
     return await start_foxglove(ws, options, deadline)

@@ -5,6 +5,7 @@ from ._base import Backend as Backend
 from ._base import BackendEvents as BackendEvents
 from ._base import GoalEvents as GoalEvents
 from ._base import SubscribeHints as SubscribeHints
+from ._base import open_websocket as open_websocket
 from ._foxglove import FoxgloveBackend as FoxgloveBackend
 from ._foxglove import open_foxglove as open_foxglove
 from ._foxglove import start_foxglove as start_foxglove

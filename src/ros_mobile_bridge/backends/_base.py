@@ -11,9 +11,11 @@ from typing import Any, Protocol, TypeVar
 
 import anyio
 
+from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, same_type_name
 from ..flow import RawFrame, TopicMessage, WireMessage
+from ..transport import WebSocket, connect_websocket
 
 __all__ = [
     "Advertisement",
@@ -22,8 +24,27 @@ __all__ = [
     "BackendEvents",
     "GoalEvents",
     "SubscribeHints",
+    "open_websocket",
     "socket_frame",
 ]
+
+
+async def open_websocket(
+    url: str, options: ClientOptions, subprotocols: tuple[str, ...] = ()
+) -> WebSocket:
+    """:func:`~ros_mobile_bridge.transport.connect_websocket` to ``url`` with
+    the client's options (message size bound, TLS context, connect timeout,
+    read coalescing): the one place every WebSocket of a client is opened,
+    by either backend and by ``protocol="auto"``. Raises as
+    ``connect_websocket`` does."""
+    return await connect_websocket(
+        url,
+        subprotocols=subprotocols,
+        max_size=options.max_frame_size,
+        ssl_context=options.ssl_context,
+        timeout=options.connect_timeout,
+        read_coalesce=options.read_coalesce,
+    )
 
 
 def socket_frame(message: WireMessage) -> str | bytes:

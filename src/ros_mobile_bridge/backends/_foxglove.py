@@ -28,7 +28,7 @@ from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
-from ..transport import WebSocket, connect_websocket
+from ..transport import WebSocket
 from ..wire import foxglove as fx
 from ._base import (
     Advertisement,
@@ -36,6 +36,7 @@ from ._base import (
     BackendEvents,
     GoalEvents,
     SubscribeHints,
+    open_websocket,
     socket_frame,
 )
 
@@ -60,14 +61,7 @@ async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
     Raises ``ProtocolMismatchError`` when the server does not speak Foxglove
     (it picked none of the subprotocols, or never sent ``serverInfo``)."""
     deadline = anyio.current_time() + options.connect_timeout
-    ws = await connect_websocket(
-        url,
-        subprotocols=fx.SUBPROTOCOLS,
-        max_size=options.max_frame_size,
-        ssl_context=options.ssl_context,
-        timeout=options.connect_timeout,
-        read_coalesce=options.read_coalesce,
-    )
+    ws = await open_websocket(url, options, fx.SUBPROTOCOLS)
     return await start_foxglove(ws, options, deadline)
 
 

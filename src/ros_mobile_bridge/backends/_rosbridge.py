@@ -35,7 +35,7 @@ from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, SchemaTooLarge, same_type_name
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
-from ..transport import HandshakeRejected, WebSocket, connect_websocket
+from ..transport import HandshakeRejected, WebSocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
 from ._base import (
@@ -44,6 +44,7 @@ from ._base import (
     BackendEvents,
     GoalEvents,
     SubscribeHints,
+    open_websocket,
     socket_frame,
 )
 
@@ -106,13 +107,7 @@ async def open_rosbridge(url: str, options: ClientOptions) -> RosbridgeBackend:
     frames) or answers nothing."""
     deadline = anyio.current_time() + options.connect_timeout
     try:
-        ws = await connect_websocket(
-            url,
-            max_size=options.max_frame_size,
-            ssl_context=options.ssl_context,
-            timeout=options.connect_timeout,
-            read_coalesce=options.read_coalesce,
-        )
+        ws = await open_websocket(url, options)
     except HandshakeRejected as exc:
         if _is_foxglove_rejection(exc):
             raise ProtocolMismatchError(

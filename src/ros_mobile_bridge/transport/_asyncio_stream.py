@@ -148,12 +148,7 @@ class ProtocolStream(anyio.abc.ByteStream):
             p.read_paused = True
             self._transport.pause_reading()
         try:
-            fut: asyncio.Future[None] = p.loop.create_future()
-            handle = p.loop.call_later(seconds, _set_done, fut)
-            try:
-                await fut
-            finally:
-                handle.cancel()
+            await asyncio.sleep(seconds)
         finally:
             if paused and p.read_paused and not self._transport.is_closing():
                 p.read_paused = False
@@ -194,11 +189,6 @@ class ProtocolStream(anyio.abc.ByteStream):
         self._transport.abort()
         self._protocol._wake_reader()
         self._protocol._wake_drainers()
-
-
-def _set_done(fut: asyncio.Future[None]) -> None:
-    if not fut.done():
-        fut.set_result(None)
 
 
 async def connect_tcp(host: str, port: int) -> ProtocolStream:

@@ -114,7 +114,6 @@ class WebSocket:
         (:meth:`receive_raw`); 0 reads as soon as anything arrives."""
         self._last_read = 0.0  # time.monotonic() when the last read returned
         self._steady = False  # read coalescing is on for the next read
-        self._held = False  # the last read waited for read_coalesce first
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
         self.coalesced = 0
@@ -152,8 +151,7 @@ class WebSocket:
             if self._closed_reason is not None:
                 await self._finish_closing()
                 raise self._closed_reason
-            if self._steady:
-                self._held = await self._coalesce()
+            held = await self._coalesce() if self._steady else False
             try:
                 data = await self._stream.receive(_READ_CHUNK)
             except (
@@ -175,8 +173,7 @@ class WebSocket:
             window = self.read_coalesce
             if window:
                 now = time.monotonic()
-                if self._held:  # keep waiting while it gathers more than one message
-                    self._held = False
+                if held:  # keep waiting while it gathers more than one message
                     self._steady = len(messages) > 1
                 else:  # start when reads come faster than the window
                     self._steady = now - self._last_read < window
