@@ -50,7 +50,7 @@ from .flow._throttle import DEFAULT_PRESETS as DEFAULT_PRESETS
 from .flow._throttle import Bucket as Bucket
 from .flow._throttle import ThrottleMode as ThrottleMode
 
-__version__ = "0.1.0.dev0"
+from ._version import __version__ as __version__
 
 __all__ = [
     "DEFAULT_PORTS",
