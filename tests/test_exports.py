@@ -9,6 +9,8 @@ import ast
 import importlib.resources
 import inspect
 import re
+import subprocess
+import sys
 import types
 from pathlib import Path
 
@@ -40,7 +42,13 @@ def _is_private_path(dotted: str) -> bool:
 def _init_imports() -> dict[str, tuple[str, str | None]]:
     """Name bound in ``__init__`` -> (absolute source module, ``as`` name)."""
     bound: dict[str, tuple[str, str | None]] = {}
+    nodes: list[ast.stmt] = []
     for node in ast.parse(INIT_SOURCE).body:
+        if isinstance(node, ast.If) and ast.unparse(node.test) == "_typing.TYPE_CHECKING":
+            nodes.extend(node.body)  # the lazy names, as type checkers read them
+        else:
+            nodes.append(node)
+    for node in nodes:
         if isinstance(node, ast.ImportFrom):
             assert node.level == 1, f"absolute import in __init__: {ast.unparse(node)}"
             module = f"{PACKAGE}.{node.module}" if node.module else PACKAGE
@@ -110,6 +118,44 @@ def test_star_import_gives_exactly_all() -> None:
     exec(f"from {PACKAGE} import *", namespace)  # the point of the test
     namespace.pop("__builtins__")
     assert set(namespace) == set(rmb.__all__)
+
+
+def test_lazy_table_matches_the_type_checking_imports() -> None:
+    # what type checkers read (the TYPE_CHECKING block) is what loads at run time
+    table = {
+        name: (f"{PACKAGE}{module}" if module else PACKAGE, attr)
+        for name, (module, attr) in rmb._LAZY.items()
+    }
+    bound = _init_imports()
+    bound.pop("__version__")
+    assert {name: module for name, (module, _) in table.items()} == {
+        name: module for name, (module, _) in bound.items()
+    }
+    assert set(table) | {"__version__"} == set(rmb.__all__)
+
+
+def test_import_loads_no_dependency() -> None:
+    # ``import ros_mobile_bridge`` stays light (issue 11: it took 161 ms with
+    # numpy loaded eagerly); each name loads its module on first use
+    code = (
+        "import sys, ros_mobile_bridge as rmb\n"
+        "heavy = ('numpy', 'websockets', 'rosbags', 'cbor2', 'anyio', 'zenoh')\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & set(heavy)))\n"
+        "rmb.ConnectError\n"
+        "print(sorted({m.split('.')[0] for m in sys.modules} & set(heavy)))\n"
+        "rmb.connect\n"
+        "print('numpy' in sys.modules, 'websockets' in sys.modules)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split("\n")
+    assert out[:3] == ["[]", "[]", "True True"]
+
+
+def test_unknown_attribute_is_an_attribute_error() -> None:
+    with pytest.raises(AttributeError, match="no attribute 'nosuch'"):
+        rmb.nosuch  # noqa: B018
+    assert not hasattr(rmb, "_nosuch")
 
 
 def test_version_is_a_string() -> None:

@@ -4,53 +4,130 @@ robots over Foxglove WebSocket or rosbridge v2, without installing ROS.
 Start with :func:`connect`; everything else is reached from the
 :class:`Client` it yields. See the README for the safety boundary: the
 library sends a zero Twist on teardown while the socket is open, and cannot
-stop a robot after the network is gone."""
+stop a robot after the network is gone.
 
-from . import lag as lag
-from ._action import ActionGoal as ActionGoal
-from ._client import Client as Client
-from ._connect import Endpoint as Endpoint
-from ._connect import connect as connect
-from ._connect import parse_target as parse_target
-from ._errors import ActionGoalError as ActionGoalError
-from ._errors import ConnectError as ConnectError
-from ._errors import DecodeError as DecodeError
-from ._errors import NotConnected as NotConnected
-from ._errors import NotSupportedError as NotSupportedError
-from ._errors import ProtocolMismatchError as ProtocolMismatchError
-from ._errors import RosBridgeError as RosBridgeError
-from ._errors import SchemaError as SchemaError
-from ._errors import ServiceError as ServiceError
-from ._errors import ServiceTimeout as ServiceTimeout
-from ._options import BreakerPolicy as BreakerPolicy
-from ._options import ClientOptions as ClientOptions
-from ._options import ReconnectPolicy as ReconnectPolicy
-from ._signals import SignalScope as SignalScope
-from ._signals import cancel_on_signals as cancel_on_signals
-from ._types import DEFAULT_PORTS as DEFAULT_PORTS
-from ._types import ActionOutcome as ActionOutcome
-from ._types import Compression as Compression
-from ._types import Dispatch as Dispatch
-from ._types import GoalState as GoalState
-from ._types import Message as Message
-from ._types import Priority as Priority
-from ._types import ServerInfo as ServerInfo
-from ._types import ServiceInfo as ServiceInfo
-from ._types import Status as Status
-from ._types import SubscriptionState as SubscriptionState
-from ._types import SubscriptionStats as SubscriptionStats
-from ._types import TopicInfo as TopicInfo
-from .codec import FieldDef as FieldDef
-from .flow import Batches as Batches
-from .flow import Subscription as Subscription
-from .flow._breaker import BreakerState as BreakerState
-from .flow._breaker import CircuitBreaker as CircuitBreaker
-from .flow._lag import LagStats as LagStats
-from .flow._throttle import DEFAULT_PRESETS as DEFAULT_PRESETS
-from .flow._throttle import Bucket as Bucket
-from .flow._throttle import ThrottleMode as ThrottleMode
+``import ros_mobile_bridge`` is light: each name below loads its module on
+first use (PEP 562), so a program that only needs, say, the errors or the
+options does not pay for numpy, websockets and the codec at start-up."""
+
+import importlib as _importlib
+import typing as _typing
 
 from ._version import __version__ as __version__
+
+if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
+    from . import lag as lag
+    from ._action import ActionGoal as ActionGoal
+    from ._client import Client as Client
+    from ._connect import Endpoint as Endpoint
+    from ._connect import connect as connect
+    from ._connect import parse_target as parse_target
+    from ._errors import ActionGoalError as ActionGoalError
+    from ._errors import ConnectError as ConnectError
+    from ._errors import DecodeError as DecodeError
+    from ._errors import NotConnected as NotConnected
+    from ._errors import NotSupportedError as NotSupportedError
+    from ._errors import ProtocolMismatchError as ProtocolMismatchError
+    from ._errors import RosBridgeError as RosBridgeError
+    from ._errors import SchemaError as SchemaError
+    from ._errors import ServiceError as ServiceError
+    from ._errors import ServiceTimeout as ServiceTimeout
+    from ._options import BreakerPolicy as BreakerPolicy
+    from ._options import ClientOptions as ClientOptions
+    from ._options import ReconnectPolicy as ReconnectPolicy
+    from ._signals import SignalScope as SignalScope
+    from ._signals import cancel_on_signals as cancel_on_signals
+    from ._types import DEFAULT_PORTS as DEFAULT_PORTS
+    from ._types import ActionOutcome as ActionOutcome
+    from ._types import Compression as Compression
+    from ._types import Dispatch as Dispatch
+    from ._types import GoalState as GoalState
+    from ._types import Message as Message
+    from ._types import Priority as Priority
+    from ._types import ServerInfo as ServerInfo
+    from ._types import ServiceInfo as ServiceInfo
+    from ._types import Status as Status
+    from ._types import SubscriptionState as SubscriptionState
+    from ._types import SubscriptionStats as SubscriptionStats
+    from ._types import TopicInfo as TopicInfo
+    from .codec import FieldDef as FieldDef
+    from .flow import Batches as Batches
+    from .flow import Subscription as Subscription
+    from .flow._breaker import BreakerState as BreakerState
+    from .flow._breaker import CircuitBreaker as CircuitBreaker
+    from .flow._lag import LagStats as LagStats
+    from .flow._throttle import DEFAULT_PRESETS as DEFAULT_PRESETS
+    from .flow._throttle import Bucket as Bucket
+    from .flow._throttle import ThrottleMode as ThrottleMode
+
+_LAZY: "dict[str, tuple[str, str]]" = {
+    "lag": ("", "lag"),
+    "ActionGoal": ("._action", "ActionGoal"),
+    "Client": ("._client", "Client"),
+    "Endpoint": ("._connect", "Endpoint"),
+    "connect": ("._connect", "connect"),
+    "parse_target": ("._connect", "parse_target"),
+    "ActionGoalError": ("._errors", "ActionGoalError"),
+    "ConnectError": ("._errors", "ConnectError"),
+    "DecodeError": ("._errors", "DecodeError"),
+    "NotConnected": ("._errors", "NotConnected"),
+    "NotSupportedError": ("._errors", "NotSupportedError"),
+    "ProtocolMismatchError": ("._errors", "ProtocolMismatchError"),
+    "RosBridgeError": ("._errors", "RosBridgeError"),
+    "SchemaError": ("._errors", "SchemaError"),
+    "ServiceError": ("._errors", "ServiceError"),
+    "ServiceTimeout": ("._errors", "ServiceTimeout"),
+    "BreakerPolicy": ("._options", "BreakerPolicy"),
+    "ClientOptions": ("._options", "ClientOptions"),
+    "ReconnectPolicy": ("._options", "ReconnectPolicy"),
+    "SignalScope": ("._signals", "SignalScope"),
+    "cancel_on_signals": ("._signals", "cancel_on_signals"),
+    "DEFAULT_PORTS": ("._types", "DEFAULT_PORTS"),
+    "ActionOutcome": ("._types", "ActionOutcome"),
+    "Compression": ("._types", "Compression"),
+    "Dispatch": ("._types", "Dispatch"),
+    "GoalState": ("._types", "GoalState"),
+    "Message": ("._types", "Message"),
+    "Priority": ("._types", "Priority"),
+    "ServerInfo": ("._types", "ServerInfo"),
+    "ServiceInfo": ("._types", "ServiceInfo"),
+    "Status": ("._types", "Status"),
+    "SubscriptionState": ("._types", "SubscriptionState"),
+    "SubscriptionStats": ("._types", "SubscriptionStats"),
+    "TopicInfo": ("._types", "TopicInfo"),
+    "FieldDef": (".codec", "FieldDef"),
+    "Batches": (".flow", "Batches"),
+    "Subscription": (".flow", "Subscription"),
+    "BreakerState": (".flow._breaker", "BreakerState"),
+    "CircuitBreaker": (".flow._breaker", "CircuitBreaker"),
+    "LagStats": (".flow._lag", "LagStats"),
+    "DEFAULT_PRESETS": (".flow._throttle", "DEFAULT_PRESETS"),
+    "Bucket": (".flow._throttle", "Bucket"),
+    "ThrottleMode": (".flow._throttle", "ThrottleMode"),
+}
+"""Public name -> (private module relative to this package, its name there);
+``("", name)`` is a public submodule. Kept equal to the ``TYPE_CHECKING``
+imports above by ``tests/test_exports.py``."""
+
+
+if not _typing.TYPE_CHECKING:  # hidden from type checkers: a misspelt name stays an error there
+
+    def __getattr__(name: str) -> _typing.Any:
+        try:
+            module, attr = _LAZY[name]
+        except KeyError:
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+        if module:
+            value = getattr(_importlib.import_module(module, __name__), attr)
+        else:
+            value = _importlib.import_module(f".{attr}", __name__)
+        globals()[name] = value  # loaded once: later lookups do not come here
+        return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "DEFAULT_PORTS",
