@@ -11,6 +11,19 @@ import pytest
 from peers.zenoh_router import ZenohRouter
 
 
+_ROS_FIXTURES = frozenset({"ros_peer_env", "ros_graph", "rosbridge", "rosbridge_factory"})
+"""The fixtures of tests/peers/ros_fixtures.py: the ROS 2 Jazzy peer environment."""
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Mark every test that needs the ROS 2 peer environment (its wheels are
+    for CPython 3.11 only) as ``ros``: the other Python versions run
+    ``-m "not ros"`` (scripts/test)."""
+    for item in items:
+        if _ROS_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.ros)
+
+
 @pytest.fixture(params=["asyncio", "trio"])
 def anyio_backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)

@@ -589,6 +589,7 @@ def _register(registry: CodecRegistry, name: str, path: Path) -> None:
         registry.add_schema(f"{name}_Request" if kind == "srv" else name, "ros2idl", idl)
 
 
+@pytest.mark.ros
 def test_every_official_hash_in_the_peer_env() -> None:
     share = _peer_share()
     if share is None:
