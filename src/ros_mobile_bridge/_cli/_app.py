@@ -221,6 +221,12 @@ def _resolve(verb: Verb, ns: argparse.Namespace, parser: argparse.ArgumentParser
     ``$RMB_URL``."""
     pos: list[str] = list(ns.args)
     low, high = verb.bounds
+    if len(pos) < low:
+        missing = [a.rstrip("?*+") for a in verb.args][len(pos) : low]
+        parser.error(f"missing {' '.join(missing)}")
+    if verb.run is not None and not ns.url and pos and len(pos) == low and "://" in pos[0]:
+        missing = [a.rstrip("?*+") for a in verb.args][len(pos) - 1 : low]
+        parser.error(f"missing {' '.join(missing)} (after the address {pos[0]})")
     if verb.run is not None and not ns.url:
         if pos and (
             len(pos) > high

@@ -8,8 +8,9 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
+from .._action import ActionGoal
 from .._client import Client
-from .._errors import SchemaError
+from .._errors import RosBridgeError, SchemaError
 from ..codec import FieldDef
 from ._app import Verb
 from ._common import missing_line, open_robot, out, warn
@@ -238,11 +239,29 @@ async def _action_send(ns: argparse.Namespace) -> int:
             tg.start_soon(feedback)
             try:
                 outcome = await handle.result()
+            except anyio.get_cancelled_exc_class():
+                await _cancel_goal(handle)  # Ctrl-C (or another signal)
+                raise
             finally:
                 tg.cancel_scope.cancel()
     out(f"Result:\n{_indented(outcome.result)}")
     out(f"Goal finished with status: {outcome.status.upper()}")
     return 0 if outcome.status == "succeeded" else 1
+
+
+async def _cancel_goal(handle: ActionGoal) -> None:
+    """Cancel the goal and say how it ended, shielded, within 3 s."""
+    import anyio
+
+    with anyio.CancelScope(shield=True), anyio.move_on_after(3.0):
+        warn("canceling the goal")
+        try:
+            await handle.cancel()
+            outcome = await handle.result()
+        except RosBridgeError as exc:
+            warn(f"the goal did not end cleanly: {exc}")
+        else:
+            out(f"Goal finished with status: {outcome.status.upper()}")
 
 
 def _indented(value: Any) -> str:
