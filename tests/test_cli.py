@@ -13,6 +13,7 @@ import re
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -459,7 +460,7 @@ def test_rosbridge_action_send_prints_feedback_and_the_result(rosbridge: RosBrid
     assert result.stdout.count("Feedback:") >= 1
     assert result.stdout.rstrip().endswith("Goal finished with status: SUCCEEDED")
     tail = result.stdout.split("Result:\n")[1].split("Goal finished")[0]
-    assert yaml.safe_load(tail.replace("\n    ", "\n")) == {"sequence": [0, 1, 1, 2, 3, 5]}
+    assert yaml.safe_load(textwrap.dedent(tail)) == {"sequence": [0, 1, 1, 2, 3, 5]}
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
