@@ -482,3 +482,12 @@ def test_rosbridge_action_send_ctrl_c_cancels_the_goal(rosbridge: RosBridge, bac
     assert proc.returncode == 130, err
     assert "Traceback" not in err
     assert "Goal finished with status: CANCELED" in out, out + err
+
+
+def test_ros2_spellings_are_aliases(robot: DemoRobot) -> None:
+    listed = rmb("topic", "list", "-t", url=robot.url)
+    assert "/odom  [nav_msgs/msg/Odometry]" in listed.stdout.splitlines()
+    called = rmb("service", "call", "/set_led", "{data: false}", url=robot.url)
+    assert json.loads(called.stdout) == {"success": True, "message": "led off"}
+    info = rmb("topic", "info", "/battery", url=robot.url)
+    assert info.stdout.startswith("Type: sensor_msgs/msg/BatteryState\n")
