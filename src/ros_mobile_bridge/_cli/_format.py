@@ -16,6 +16,7 @@ __all__ = [
     "check_fields",
     "dump_flow",
     "dump_yaml",
+    "finite_or_none",
     "json_line",
     "parse_yaml_mapping",
     "parse_yaml_value",
@@ -74,20 +75,22 @@ def plain(
     return value
 
 
-def _finite_or_none(value: Any) -> Any:
+def finite_or_none(value: Any) -> Any:
+    """``value`` (made by :func:`plain`) with NaN and the infinities, which
+    JSON cannot spell, replaced by ``None``."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
-        return {k: _finite_or_none(v) for k, v in value.items()}
+        return {k: finite_or_none(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_finite_or_none(v) for v in value]
+        return [finite_or_none(v) for v in value]
     return value
 
 
 def json_line(record: Mapping[str, Any]) -> str:
     """``record`` (made by :func:`plain`) as one line of strict JSON: NaN and
     the infinities, which JSON cannot spell, become ``null``."""
-    return json.dumps(_finite_or_none(record), separators=(", ", ": "), allow_nan=False)
+    return json.dumps(finite_or_none(record), separators=(", ", ": "), allow_nan=False)
 
 
 def _yaml() -> Any:

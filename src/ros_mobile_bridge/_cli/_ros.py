@@ -17,7 +17,9 @@ from ._common import missing_line, open_robot, out, warn
 from ._format import (
     UsageError,
     check_fields,
+    dump_flow,
     dump_yaml,
+    finite_or_none,
     parse_yaml_mapping,
     parse_yaml_value,
     plain,
@@ -50,18 +52,12 @@ async def _call(ns: argparse.Namespace) -> int:
         if svc is not None and svc.type:
             check_fields(robot, _part(svc.type, "Request"), request, "the request")
         reply = await robot.call_service(ns.service, request, timeout=ns.call_timeout)
-    out(json.dumps(_json_safe(plain(reply)), indent=2))
+    out(json.dumps(finite_or_none(plain(reply)), indent=2))
     return 0
 
 
 def _part(service_type: str, which: str) -> str:
     return f"{service_type}_{which}"
-
-
-def _json_safe(value: Any) -> Any:
-    from ._format import _finite_or_none
-
-    return _finite_or_none(value)
 
 
 def _build_call(p: argparse.ArgumentParser) -> None:
@@ -86,8 +82,6 @@ async def _param_list(ns: argparse.Namespace) -> int:
 
 
 def _flow(value: Any) -> str:
-    from ._format import dump_flow
-
     return dump_flow(plain(value))
 
 
@@ -147,7 +141,7 @@ async def _params(ns: argparse.Namespace) -> int:
         else:
             result = await robot.list_parameters()
             bad = []
-    out(json.dumps(_json_safe(plain(result)), indent=2, sort_keys=True))
+    out(json.dumps(finite_or_none(plain(result)), indent=2, sort_keys=True))
     if bad:
         warn(f"{'not set' if wanted else 'not found'}: {', '.join(bad)}")
         return 1

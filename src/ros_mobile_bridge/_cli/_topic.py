@@ -311,7 +311,8 @@ async def _pub(ns: argparse.Namespace) -> int:
                 "follows then)."
             )
         sent = 0
-        start = anyio.current_time()
+        period = 1.0 / rate
+        next_at = anyio.current_time()
         while True:
             await robot.publish(
                 ns.topic,
@@ -325,7 +326,9 @@ async def _pub(ns: argparse.Namespace) -> int:
                 out(f"publishing #{sent}: {shown}")
             if times and sent >= times:
                 break
-            await anyio.sleep_until(start + sent / rate)
+            # on the rate's grid; after a stall, on from now (no burst to catch up)
+            next_at = max(next_at + period, anyio.current_time())
+            await anyio.sleep_until(next_at)
     return 0
 
 
