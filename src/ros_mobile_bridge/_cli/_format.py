@@ -55,23 +55,25 @@ def plain(
         if truncate is not None and len(value) > truncate:
             return value[:truncate] + _ELLIPSIS
         return value
-    if isinstance(value, bytes | bytearray | memoryview):
-        value = list(bytes(value))
-    elif not isinstance(value, list | tuple | bool | int | float) and callable(
-        getattr(value, "tolist", None)
-    ):
-        value = value.tolist()  # numpy arrays and scalars
-    if isinstance(value, list | tuple):
+    is_numpy = getattr(value, "ndim", 0) > 0 and callable(getattr(value, "tolist", None))
+    if isinstance(value, list | tuple | bytes | bytearray | memoryview) or is_numpy:
+        length = len(value)
         if no_arr:
-            return f"<array: {len(value)} items>"
-        items = list(value)
-        cut = truncate is not None and len(items) > truncate
-        if cut:
-            items = items[:truncate]
+            return f"<array: {length} items>"
+        cut = truncate is not None and length > truncate
+        part = value[:truncate] if cut else value  # cut first: an image is large
+        if isinstance(part, bytes | bytearray | memoryview):
+            items: list[Any] = list(bytes(part))
+        elif is_numpy:
+            items = part.tolist()
+        else:
+            items = list(part)
         out = [plain(v, truncate=truncate, no_str=no_str) for v in items]
         if cut:
             out.append(_ELLIPSIS)
         return out
+    if not isinstance(value, bool | int | float) and callable(getattr(value, "tolist", None)):
+        return value.tolist()  # a numpy scalar
     return value
 
 
