@@ -135,6 +135,7 @@ def test_rmb_pub_no_velocity_check_sends_what_it_is_told(robot: DemoRobot) -> No
         "std_msgs/msg/String",
         '{"data": "go"}',
         "--no-velocity-check",
+        "--once",
     )
     assert pub.returncode == 0, pub.stderr
     assert pub.stdout.count("publishing #") == 1

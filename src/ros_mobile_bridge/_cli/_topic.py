@@ -1,0 +1,387 @@
+"""``rmb`` topic verbs, shaped like ``ros2 topic``: ``topics`` (``topic
+list``), ``echo``, ``hz``, ``bw``, ``info`` and ``pub``."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+from collections import deque
+from collections.abc import Mapping
+from typing import Any
+
+import anyio
+
+from .._client import Client
+from .._types import Message, Priority
+from ._app import Verb
+from ._common import missing_line, notice_if_missing, open_robot, out, warn
+from ._format import (
+    UsageError,
+    check_fields,
+    dump_flow,
+    dump_yaml,
+    json_line,
+    parse_yaml_mapping,
+    plain,
+    select_field,
+)
+
+__all__ = ["VERBS"]
+
+_VELOCITY_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
+
+
+# -- list --------------------------------------------------------------------------------
+
+
+async def _topics(ns: argparse.Namespace) -> int:
+    async with open_robot(ns) as robot:
+        for topic in robot.topics:
+            out(f"{topic.name}  [{topic.schema_name}]" if ns.show_types else topic.name)
+    return 0
+
+
+def _build_topics(p: argparse.ArgumentParser) -> None:
+    p.add_argument("-t", "--show-types", action="store_true", help="print each topic's type")
+
+
+# -- echo --------------------------------------------------------------------------------
+
+
+def _print_message(msg: Message, ns: argparse.Namespace) -> None:
+    if msg.decode_error:
+        if ns.json:
+            record = {"topic": msg.topic, "schema": msg.schema_name, "data": None}
+            out(json_line({**record, "decode_error": msg.decode_error}))
+        else:
+            out(f"# not decoded ({msg.decode_error}): {msg.byte_size} bytes\n---")
+        return
+    value: Any = msg.data
+    if ns.field:
+        value = select_field(value, ns.field)
+    if ns.json:
+        data = plain(value, no_arr=ns.no_arr, no_str=ns.no_str)
+        out(
+            json_line(
+                {
+                    "topic": msg.topic,
+                    "schema": msg.schema_name,
+                    "log_time_ns": msg.log_time_ns,
+                    "receive_time_ns": msg.receive_time_ns,
+                    "data": data,
+                }
+            )
+        )
+        return
+    truncate = None if ns.full or ns.truncate_length <= 0 else ns.truncate_length
+    data = plain(value, truncate=truncate, no_arr=ns.no_arr, no_str=ns.no_str)
+    out(dump_yaml(data) + "---")
+
+
+async def _echo(ns: argparse.Namespace) -> int:
+    limit = 1 if ns.once else ns.count
+    if limit < 0:
+        raise UsageError(f"--count must be 0 (until stopped) or more, got {limit}")
+    seen = [0]
+    async with (
+        open_robot(ns) as robot,
+        robot.subscribe(ns.topic, max_hz=ns.max_hz) as sub,
+        anyio.create_task_group() as tg,
+    ):
+        tg.start_soon(notice_if_missing, robot, ns.topic, seen)
+        async for msg in sub:
+            seen[0] += 1
+            _print_message(msg, ns)
+            if limit and seen[0] >= limit:
+                break
+        tg.cancel_scope.cancel()
+    return 0
+
+
+def _build_echo(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--once", action="store_true", help="print one message and exit")
+    p.add_argument(
+        "-n", "--count", type=int, default=0, help="exit after N messages (default: until stopped)"
+    )
+    p.add_argument("--field", metavar="A.B", help="print only this field (a.b.c; numbers index)")
+    p.add_argument("--no-arr", action="store_true", help="print array fields as their length")
+    p.add_argument("--no-str", action="store_true", help="print string fields as their length")
+    p.add_argument(
+        "--truncate-length",
+        type=int,
+        default=128,
+        metavar="N",
+        help="cut arrays and strings after N items (default 128, 0: never)",
+    )
+    p.add_argument("--full", action="store_true", help="never cut (same as --truncate-length 0)")
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object per line (full arrays; NaN and infinities as null)",
+    )
+    p.add_argument("--max-hz", type=float, default=None, help="deliver at most this rate")
+
+
+# -- hz and bw -----------------------------------------------------------------------------
+
+
+def _hz_lines(stamps: deque[int]) -> list[str] | None:
+    if len(stamps) < 2:
+        return None
+    gaps = [(b - a) / 1e9 for a, b in zip(stamps, list(stamps)[1:], strict=False)]
+    span = (stamps[-1] - stamps[0]) / 1e9
+    if span <= 0:
+        return None
+    std = statistics.pstdev(gaps)
+    return [
+        f"average rate: {(len(stamps) - 1) / span:.3f}",
+        f"\tmin: {min(gaps):.3f}s max: {max(gaps):.3f}s std dev: {std:.5f}s window: {len(stamps)}",
+    ]
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("MB", 1e6), ("KB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.2f} {unit}"
+    return f"{n:.0f} B"
+
+
+def _bw_lines(samples: deque[tuple[int, int]]) -> list[str] | None:
+    if len(samples) < 2:
+        return None
+    span = (samples[-1][0] - samples[0][0]) / 1e9
+    if span <= 0:
+        return None
+    sizes = [s for _, s in samples]
+    rate = sum(sizes[1:]) / span
+    return [
+        f"{_size(rate)}/s from {len(sizes)} messages",
+        f"\tMessage size mean: {_size(statistics.fmean(sizes))} min: {_size(min(sizes))} "
+        f"max: {_size(max(sizes))}",
+    ]
+
+
+async def _measure(ns: argparse.Namespace, *, bandwidth: bool) -> int:
+    if ns.window < 2:
+        raise UsageError(f"--window must be 2 or more, got {ns.window}")
+    samples: deque[Any] = deque(maxlen=ns.window)
+    seen = [0]
+
+    async def report() -> None:
+        shown = 0
+        while True:
+            await anyio.sleep(1.0)
+            if seen[0] == shown:
+                if shown:
+                    out("no new messages")
+                continue
+            shown = seen[0]
+            lines = _bw_lines(samples) if bandwidth else _hz_lines(samples)
+            if lines:
+                out("\n".join(lines))
+
+    async with (
+        open_robot(ns) as robot,
+        robot.subscribe(ns.topic, adaptive=False, buffer=4096) as sub,
+    ):
+        if bandwidth:
+            out(f"Subscribed to [{ns.topic}]")
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(notice_if_missing, robot, ns.topic, seen)
+            tg.start_soon(report)
+            async for msg in sub:
+                seen[0] += 1
+                samples.append(
+                    (msg.receive_time_ns, msg.byte_size) if bandwidth else msg.receive_time_ns
+                )
+    return 0
+
+
+async def _hz(ns: argparse.Namespace) -> int:
+    return await _measure(ns, bandwidth=False)
+
+
+async def _bw(ns: argparse.Namespace) -> int:
+    return await _measure(ns, bandwidth=True)
+
+
+def _window(default: int) -> Any:
+    def build(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            "-w",
+            "--window",
+            type=int,
+            default=default,
+            metavar="N",
+            help=f"measure over the last N messages (default {default})",
+        )
+
+    return build
+
+
+# -- info ----------------------------------------------------------------------------------
+
+
+async def _known_topic(robot: Client, topic: str, wait: float = 1.0) -> bool:
+    """Whether the robot lists ``topic``, giving discovery ``wait`` seconds."""
+    with anyio.move_on_after(wait):
+        async for topics in robot.watch_topics():
+            if any(t.name == topic for t in topics):
+                return True
+    return False
+
+
+async def _count(robot: Client, service: str, topic: str, key: str) -> str:
+    from .._errors import RosBridgeError
+
+    try:
+        reply = await robot.call_service(service, {"topic": topic}, timeout=5)
+    except RosBridgeError:
+        return "unknown"
+    names = reply.get(key) if isinstance(reply, Mapping) else None
+    return str(len(names)) if isinstance(names, list) else "unknown"
+
+
+async def _info(ns: argparse.Namespace) -> int:
+    async with open_robot(ns) as robot:
+        if ns.topic is None:
+            info = robot.server_info
+            sub = f", subprotocol {info.subprotocol}" if info.subprotocol else ""
+            out(f"server: {info.name}")
+            out(f"url: {ns.url}")
+            out(f"protocol: {robot.protocol}{sub}")
+            out(f"capabilities: {', '.join(info.capabilities) or '(none listed)'}")
+            if info.supported_encodings:
+                out(f"encodings: {', '.join(info.supported_encodings)}")
+            if info.session_id:
+                out(f"session: {info.session_id}")
+            for key, value in sorted(info.metadata.items()):
+                out(f"metadata: {key}={value}")
+            out(f"topics: {len(robot.topics)}")
+            out(f"services: {len(robot.services)}")
+            return 0
+        if not await _known_topic(robot, ns.topic):
+            warn(missing_line("topic", ns.topic, [t.name for t in robot.topics]))
+            return 1
+        topic = next(t for t in robot.topics if t.name == ns.topic)
+        out(f"Type: {topic.schema_name}")
+        if topic.encoding:
+            out(f"Encoding: {topic.encoding}")
+        if robot.protocol == "rosbridge":
+            pubs = await _count(robot, "/rosapi/publishers", ns.topic, "publishers")
+            subs = await _count(robot, "/rosapi/subscribers", ns.topic, "subscribers")
+        else:
+            pubs = subs = f"unknown ({robot.protocol} does not report it)"
+        out(f"Publisher count: {pubs}")
+        out(f"Subscription count: {subs}")
+    return 0
+
+
+# -- pub -------------------------------------------------------------------------------------
+
+
+def _moving(value: Any) -> bool:
+    if isinstance(value, Mapping):
+        return any(_moving(v) for k, v in value.items() if k != "header")
+    if isinstance(value, list):
+        return any(_moving(v) for v in value)
+    return isinstance(value, int | float) and not isinstance(value, bool) and value != 0
+
+
+async def _pub(ns: argparse.Namespace) -> int:
+    data = parse_yaml_mapping(ns.data or "", "the message")
+    rate = ns.rate
+    if not (rate > 0) or math.isinf(rate):
+        raise UsageError(f"-r/--rate must be a positive number of Hz, got {rate!r}")
+    times = 1 if ns.once else ns.times
+    if times < 0:
+        raise UsageError(f"-t/--times must be 0 (until stopped) or more, got {times}")
+    if ns.print_nth < 0:
+        raise UsageError(f"-p/--print must be 0 (never) or more, got {ns.print_nth}")
+    velocity = ns.topic.endswith("cmd_vel") or ns.type in _VELOCITY_TYPES
+    priority: Priority = "control" if ns.control else "data"
+    shown = dump_flow(data)
+    async with open_robot(ns) as robot:
+        check_fields(robot, ns.type, data, "the message")
+        if times == 1 and velocity and _moving(data):
+            warn(
+                f"note: one command to {ns.topic}, and the teardown's zero Twist right behind "
+                "it: the robot will not move. Use -r 10 to drive until Ctrl-C (the zero Twist "
+                "follows then)."
+            )
+        sent = 0
+        period = 1.0 / rate
+        next_at = anyio.current_time()
+        while True:
+            await robot.publish(
+                ns.topic,
+                ns.type,
+                data,
+                priority=priority,
+                check_velocity=not ns.no_velocity_check,
+            )
+            sent += 1
+            if ns.print_nth and sent % ns.print_nth == 0:
+                out(f"publishing #{sent}: {shown}")
+            if times and sent >= times:
+                break
+            # on the rate's grid; after a stall, on from now (no burst to catch up)
+            next_at = max(next_at + period, anyio.current_time())
+            await anyio.sleep_until(next_at)
+    return 0
+
+
+def _build_pub(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "-r", "--rate", type=float, default=1.0, metavar="HZ", help="publishing rate (default 1)"
+    )
+    p.add_argument("-1", "--once", action="store_true", help="publish one message and exit")
+    p.add_argument(
+        "-t",
+        "--times",
+        type=int,
+        default=0,
+        metavar="N",
+        help="publish N messages and exit (default 0: until stopped)",
+    )
+    p.add_argument("-n", dest="times", type=int, help=argparse.SUPPRESS)  # rmb 0.1's spelling
+    p.add_argument(
+        "-p",
+        "--print",
+        dest="print_nth",
+        type=int,
+        default=1,
+        metavar="N",
+        help="print every Nth message sent (default 1, 0: none)",
+    )
+    p.add_argument("--control", action="store_true", help="control priority (ahead of data)")
+    p.add_argument(
+        "--no-velocity-check",
+        action="store_true",
+        help="allow a type other than Twist/TwistStamped on a velocity topic (*cmd_vel)",
+    )
+
+
+VERBS = [
+    Verb(("topics",), "list topics (-t: with types)", build=_build_topics, run=_topics),
+    Verb(("topic", "list"), "list topics (-t: with types)", build=_build_topics, run=_topics),
+    Verb(("echo",), "print a topic's messages as YAML (or --json)", ("TOPIC",), _build_echo, _echo),
+    Verb(("topic", "echo"), "same as echo", ("TOPIC",), _build_echo, _echo, hidden=True),
+    Verb(("hz",), "print a topic's message rate every second", ("TOPIC",), _window(10000), _hz),
+    Verb(("topic", "hz"), "same as hz", ("TOPIC",), _window(10000), _hz, hidden=True),
+    Verb(("bw",), "print a topic's bandwidth every second", ("TOPIC",), _window(100), _bw),
+    Verb(("topic", "bw"), "same as bw", ("TOPIC",), _window(100), _bw, hidden=True),
+    Verb(("info",), "the server (protocol, capabilities), or a topic", ("TOPIC?",), None, _info),
+    Verb(("topic", "info"), "a topic's type and counts", ("TOPIC",), None, _info, hidden=True),
+    Verb(
+        ("pub",),
+        "publish a message (YAML) at 1 Hz until stopped (-r, --once, -t)",
+        ("TOPIC", "TYPE", "DATA?"),
+        _build_pub,
+        _pub,
+    ),
+    Verb(
+        ("topic", "pub"), "same as pub", ("TOPIC", "TYPE", "DATA?"), _build_pub, _pub, hidden=True
+    ),
+]
