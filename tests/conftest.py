@@ -10,7 +10,6 @@ import pytest
 
 from peers.zenoh_router import ZenohRouter
 
-
 _ROS_FIXTURES = frozenset({"ros_peer_env", "ros_graph", "rosbridge", "rosbridge_factory"})
 """The fixtures of tests/peers/ros_fixtures.py: the ROS 2 Jazzy peer environment."""
 
