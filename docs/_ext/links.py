@@ -65,4 +65,6 @@ def _rewrite(text: str, page: str, docs_prefix: str, repo_url: str | None) -> st
 
 def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
     docs_prefix = posixpath.relpath(config["docs_dir"], posixpath.dirname(config.config_file_path))
-    return _rewrite(markdown, page.file.src_uri, docs_prefix.replace("\\", "/"), config.get("repo_url"))
+    return _rewrite(
+        markdown, page.file.src_uri, docs_prefix.replace("\\", "/"), config.get("repo_url")
+    )
