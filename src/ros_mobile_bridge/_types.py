@@ -132,8 +132,10 @@ class SubscriptionStats:
     """Counters of one subscription since it was opened.
 
     Every frame routed to the subscription is ``received``; each one then ends
-    in exactly one of ``delivered``, ``dropped_throttle`` (the ``max_hz`` cap),
-    ``dropped_conflated`` (superseded under ``dispatch="latest"``),
+    in exactly one of ``delivered``, ``dropped_throttle`` (replaced by a
+    newer frame within the effective interval: the ``max_hz`` cap or the
+    adaptive throttle's), ``dropped_conflated`` (superseded under
+    ``dispatch="latest"``),
     ``dropped_overflow`` (the consumer fell behind; oldest dropped),
     ``dropped_breaker`` (the circuit breaker was tripped), or is still
     queued. ``decode_failures`` counts delivered messages whose payload
