@@ -31,7 +31,6 @@ DOCUMENTED = frozenset(
         "DecodeError",
         "Endpoint",
         "FieldDef",
-        "LagStats",
         "Message",
         "NotConnected",
         "NotSupportedError",
