@@ -102,16 +102,30 @@ def test_snippets_are_included_not_shown(site: Path) -> None:
     assert "bench_rosbridge.py" in _page(site, "benchmarks")  # bench/README.md
 
 
-def _links_hook() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("docs_links", ROOT / "docs/_ext/links.py")
+def _extension(name: str) -> ModuleType:
+    """A module of docs/_ext/ (the build's hook and griffe extension)."""
+    spec = importlib.util.spec_from_file_location(f"docs_{name}", ROOT / f"docs/_ext/{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
+def test_sphinx_roles_become_markdown() -> None:
+    convert = _extension("griffe_roles").roles_to_markdown
+    assert convert("see :class:`~ros_mobile_bridge.Client`.") == (
+        "see [`Client`][ros_mobile_bridge.Client]."
+    )
+    assert convert(":func:`connect`") == "[`connect()`][ros_mobile_bridge.connect]"
+    assert convert(":meth:`retry` or :attr:`on_latency`") == "`retry()` or `on_latency`"
+    titled = ":meth:`Client.send_action_goal\n    <ros_mobile_bridge.Client.send_action_goal>`"
+    assert convert(titled) == "`Client.send_action_goal()`"
+    assert convert("States::\n\n    closed") == "States:\n\n    closed"
+    assert convert("a ``literal`` stays") == "a ``literal`` stays"
+
+
 def test_links_out_of_docs_are_rewritten_for_the_site() -> None:
-    rewrite = _links_hook()._rewrite
+    rewrite = _extension("links")._rewrite
     text = (
         "[method](../bench/README.md#zenoh) and [bench](../bench) and "
         "[policy](../SECURITY.md) and [page](zenoh.md) and [web](https://example.org)\n"

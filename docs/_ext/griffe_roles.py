@@ -1,5 +1,5 @@
-"""griffe extension (mkdocstrings): the Sphinx roles in the library's docstrings
-as Markdown.
+"""griffe extension (mkdocstrings): the reST in the library's docstrings as
+Markdown.
 
 The docstrings name other objects with reST roles (``:class:`Client```,
 ``:meth:`retry```), which Markdown would show as they are. This rewrites each
@@ -55,6 +55,7 @@ DOCUMENTED = frozenset(
 """Public names rendered by docs/reference/*.md: a role naming one becomes a link."""
 
 _TITLED = re.compile(r"(?P<shown>.+?)\s*<(?P<target>[^<>]+)>")
+_LITERAL = re.compile(r"(?<=\S)::\n\n")
 _ROLE = re.compile(r":(?:py:)?(?P<kind>class|func|meth|attr|data|exc|mod|obj):`(?P<target>[^`]+)`")
 
 
@@ -75,8 +76,10 @@ def _markdown(match: re.Match[str]) -> str:
 
 
 def roles_to_markdown(text: str) -> str:
-    """``text`` with every Sphinx role replaced (see the module docstring)."""
-    return _ROLE.sub(_markdown, text)
+    """``text`` with every Sphinx role replaced (see the module docstring),
+    and reST's ``::`` before a literal block shown as ``:`` (the indented
+    block after it is already a code block in Markdown)."""
+    return _LITERAL.sub(":\n\n", _ROLE.sub(_markdown, text))
 
 
 class SphinxRoles(griffe.Extension):
