@@ -8,6 +8,8 @@ stop a robot after the network is gone."""
 
 from . import lag as lag
 from ._action import ActionGoal as ActionGoal
+from ._background import ClientHandle as ClientHandle
+from ._background import open_client as open_client
 from ._client import Client as Client
 from ._connect import Endpoint as Endpoint
 from ._connect import connect as connect
@@ -27,6 +29,10 @@ from ._options import ClientOptions as ClientOptions
 from ._options import ReconnectPolicy as ReconnectPolicy
 from ._signals import SignalScope as SignalScope
 from ._signals import cancel_on_signals as cancel_on_signals
+from ._sync import SyncActionGoal as SyncActionGoal
+from ._sync import SyncClient as SyncClient
+from ._sync import SyncSubscription as SyncSubscription
+from ._sync import connect_sync as connect_sync
 from ._types import DEFAULT_PORTS as DEFAULT_PORTS
 from ._types import ActionOutcome as ActionOutcome
 from ._types import Compression as Compression
@@ -64,6 +70,7 @@ __all__ = [
     "Bucket",
     "CircuitBreaker",
     "Client",
+    "ClientHandle",
     "ClientOptions",
     "Compression",
     "ConnectError",
@@ -90,11 +97,16 @@ __all__ = [
     "Subscription",
     "SubscriptionState",
     "SubscriptionStats",
+    "SyncActionGoal",
+    "SyncClient",
+    "SyncSubscription",
     "ThrottleMode",
     "TopicInfo",
     "__version__",
     "cancel_on_signals",
     "connect",
+    "connect_sync",
     "lag",
+    "open_client",
     "parse_target",
 ]
