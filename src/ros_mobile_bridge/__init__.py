@@ -46,6 +46,7 @@ from ._types import Status as Status
 from ._types import SubscriptionState as SubscriptionState
 from ._types import SubscriptionStats as SubscriptionStats
 from ._types import TopicInfo as TopicInfo
+from ._version import __version__ as __version__
 from .codec import FieldDef as FieldDef
 from .flow import Batches as Batches
 from .flow import Subscription as Subscription
@@ -55,8 +56,6 @@ from .flow._lag import LagStats as LagStats
 from .flow._throttle import DEFAULT_PRESETS as DEFAULT_PRESETS
 from .flow._throttle import Bucket as Bucket
 from .flow._throttle import ThrottleMode as ThrottleMode
-
-from ._version import __version__ as __version__
 
 __all__ = [
     "DEFAULT_PORTS",

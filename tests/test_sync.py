@@ -1,0 +1,263 @@
+"""``connect_sync``: the blocking client, from plain (not async) test functions,
+against the demo robot (the official Foxglove SDK server), with the worker
+thread's event loop on asyncio and on trio."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+import ros_mobile_bridge as rmb
+from ros_mobile_bridge.demo import DemoRobot
+
+pytestmark = pytest.mark.peer
+
+ROOT = Path(__file__).resolve().parent.parent
+TWIST = "geometry_msgs/msg/Twist"
+
+
+@pytest.fixture(scope="module")
+def robot() -> Iterator[DemoRobot]:
+    with DemoRobot(rate_hz=50.0) as bot:
+        yield bot
+
+
+@pytest.fixture(params=["asyncio", "trio"])
+def backend(request: pytest.FixtureRequest) -> str:
+    return str(request.param)
+
+
+def options() -> rmb.ClientOptions:
+    return rmb.ClientOptions(connect_timeout=5.0, teardown_timeout=2.0, reconnect=None)
+
+
+def sync_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name.startswith("rmb-sync-")]
+
+
+def commands_since(robot: DemoRobot, before: int) -> list[tuple[float, float]]:
+    return [(c.linear_x, c.angular_z) for c in robot.received_cmd_vel()[before:]]
+
+
+def test_messages_arrive_publish_reaches_the_robot_and_close_sends_zero_twist_last(
+    robot: DemoRobot, backend: str
+) -> None:
+    before = len(robot.received_cmd_vel())
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+        assert client.status == "connected"
+        assert client.protocol == "foxglove-ws"
+        assert client.worker_thread.name == f"rmb-sync-{backend}"
+        assert client.wait_for_topic("/odom", timeout=5).schema_name == "nav_msgs/msg/Odometry"
+        with client.subscribe("/odom", timeout=5) as sub:
+            first = sub.get()
+            rest = [next(sub), next(sub)]
+            assert sub.state == "active"
+            assert sub.stats.delivered == 3
+        received = [first, *rest]
+        assert [m.topic for m in received] == ["/odom"] * 3
+        assert [m.schema_name for m in received] == ["nav_msgs/msg/Odometry"] * 3
+        stamps = [m.receive_time_ns for m in received]
+        assert stamps == sorted(stamps) and len(set(stamps)) == 3
+        assert "pose" in received[0].data
+
+        client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.3}}, priority="control")
+        client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.2}, "angular": {"z": 0.1}})
+        assert client.call_service("/set_led", {"data": True}) == {
+            "success": True,
+            "message": "led on",
+        }
+        assert client.set_parameters({"max_speed": 0.75}) == {"max_speed": 0.75}
+        assert client.get_parameters(["max_speed"]) == {"max_speed": 0.75}
+        assert client.list_parameters()["robot_name"] == "rmb-demo-robot"
+        assert client.schema_template(TWIST)["linear"] == {"x": 0.0, "y": 0.0, "z": 0.0}
+        assert [f.name for f in client.schema_definition(TWIST)] == ["linear", "angular"]
+        assert client.run(lambda c: c.call_service("/set_led", {"data": False})) == {
+            "success": True,
+            "message": "led off",
+        }
+        thread = client.worker_thread
+    assert client.closed and client.status == "closed"
+    assert commands_since(robot, before) == [(0.3, 0.0), (0.2, 0.1), (0.0, 0.0)]
+    assert not thread.is_alive()
+    assert thread not in threading.enumerate()
+    assert sync_threads() == []
+
+
+def test_close_without_with_is_idempotent_and_later_calls_raise_not_connected(
+    robot: DemoRobot, backend: str
+) -> None:
+    before = len(robot.received_cmd_vel())
+    client = rmb.connect_sync(robot.url, backend=backend, options=options())
+    client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.1}}, priority="control")
+    client.close()
+    client.close()
+    assert commands_since(robot, before) == [(0.1, 0.0), (0.0, 0.0)]
+    assert not client.worker_thread.is_alive()
+    with pytest.raises(rmb.NotConnected, match="closed"):
+        client.publish("/cmd_vel", TWIST, {})
+    with pytest.raises(rmb.NotConnected, match="closed"):
+        client.subscribe("/odom")
+
+
+def test_an_exception_inside_with_still_sends_the_zero_twist(
+    robot: DemoRobot, backend: str
+) -> None:
+    before = len(robot.received_cmd_vel())
+    with (
+        pytest.raises(ZeroDivisionError),
+        rmb.connect_sync(robot.url, backend=backend, options=options()) as client,
+    ):
+        client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.4}}, priority="control")
+        with client.subscribe("/odom", timeout=5) as sub:
+            sub.get()
+            _ = 1 / 0
+    assert commands_since(robot, before) == [(0.4, 0.0), (0.0, 0.0)]
+    assert client.status == "closed"
+    assert sync_threads() == []
+
+
+def test_keyboard_interrupt_in_a_blocking_receive_cancels_it_and_tears_down(
+    robot: DemoRobot, backend: str
+) -> None:
+    """Ctrl-C while the main thread waits for a message (no timeout) on a
+    topic that never comes: the wait ends with KeyboardInterrupt, leaving the
+    ``with`` blocks unsubscribes and sends the zero Twist."""
+    assert threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    main = threading.main_thread().ident
+    assert main is not None
+    before = len(robot.received_cmd_vel())
+    timer = threading.Timer(0.5, signal.pthread_kill, (main, signal.SIGINT))
+    try:
+        with (
+            pytest.raises(KeyboardInterrupt),
+            rmb.connect_sync(robot.url, backend=backend, options=options()) as client,
+        ):
+            client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.5}}, priority="control")
+            with client.subscribe("/never_published") as sub:
+                timer.start()
+                sub.get()  # waits until interrupted
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
+    assert commands_since(robot, before) == [(0.5, 0.0), (0.0, 0.0)]
+    assert client.status == "closed"
+    assert not client.worker_thread.is_alive()
+
+
+def test_a_receive_timeout_raises_timeout_error_and_loses_nothing(
+    robot: DemoRobot, backend: str
+) -> None:
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+        with client.subscribe("/never_published", timeout=0.2) as quiet:
+            with pytest.raises(TimeoutError, match="receive on /never_published"):
+                quiet.get()
+            with pytest.raises(TimeoutError):
+                next(iter(quiet))
+            with pytest.raises(TimeoutError):
+                quiet.get(timeout=0.1)  # a timeout per call wins
+            assert quiet.state == "pending"
+        with client.subscribe("/status") as status:
+            got = status.get(timeout=5)  # 2 Hz: one comes
+            assert got.topic == "/status" and "mode" in got.data
+            with pytest.raises(TimeoutError):
+                client.wait_for_topic("/never_published", timeout=0.2)
+        # after a timed-out call the client still works
+        assert client.call_service("/set_led", {"data": True})["success"] is True
+
+
+def test_iteration_ends_when_the_subscription_is_closed(robot: DemoRobot, backend: str) -> None:
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+        sub = client.subscribe("/odom", timeout=5)
+        with sub:
+            assert sub.get().topic == "/odom"
+        assert list(sub) == []
+        with pytest.raises(rmb.NotConnected, match="ended"):
+            sub.get()
+
+
+def test_a_dead_worker_loop_makes_calls_raise_not_connected(robot: DemoRobot, backend: str) -> None:
+    """The loop stops under a waiting call (no timeout): the wait ends with
+    NotConnected, and so does every later call; close() still returns."""
+    client = rmb.connect_sync(robot.url, backend=backend, options=options())
+    try:
+        with client.subscribe("/never_published") as sub:
+            killer = threading.Timer(0.3, client._worker.stop, (5.0,))
+            killer.start()
+            with pytest.raises(rmb.NotConnected, match=r"closed while it was running|stopped"):
+                sub.get()
+            killer.join()
+        assert not client.worker_thread.is_alive()
+        with pytest.raises(rmb.NotConnected, match="worker thread has stopped"):
+            client.publish("/cmd_vel", TWIST, {})
+        with pytest.raises(rmb.NotConnected, match="worker thread has stopped"):
+            client.call_service("/set_led", {"data": True})
+    finally:
+        client.close()
+    assert sync_threads() == []
+
+
+def test_connect_errors_and_bad_arguments_raise_at_once_and_leave_no_thread(
+    backend: str,
+) -> None:
+    quick = rmb.ClientOptions(connect_timeout=2.0, reconnect=None)
+    with pytest.raises(rmb.ConnectError):
+        rmb.connect_sync("127.0.0.1:1", backend=backend, options=quick)
+    with pytest.raises(ValueError, match="invalid port"):
+        rmb.connect_sync("127.0.0.1:http", backend=backend)
+    with pytest.raises(ValueError, match="backend"):
+        rmb.connect_sync("127.0.0.1", backend="curio")  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="no_such_option"):
+        rmb.connect_sync("127.0.0.1", no_such_option=1)
+    with pytest.raises(TypeError, match="options"):
+        rmb.connect_sync("127.0.0.1", options={"teardown_timeout": 1})  # type: ignore[arg-type]
+    assert sync_threads() == []
+
+
+def test_bad_arguments_to_methods_raise_at_once(robot: DemoRobot, backend: str) -> None:
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+        with pytest.raises(ValueError, match="priority"):
+            client.publish("/cmd_vel", TWIST, {}, priority="urgent")  # type: ignore[arg-type]
+        with pytest.raises(rmb.SchemaError):
+            client.publish("/cmd_vel", "std_msgs/msg/String", {"data": "go"})
+        with pytest.raises(ValueError, match="compression"):
+            client.subscribe("/odom", compression="zip")  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="timeout"):
+            client.subscribe("/odom", timeout=0)
+        with pytest.raises(rmb.ServiceError):
+            client.call_service("/no_such_service", {})
+        with pytest.raises(RuntimeError, match="enter"):
+            client.subscribe("/odom").get()
+        assert client.connected
+
+
+def test_a_client_left_open_is_closed_at_interpreter_exit(robot: DemoRobot) -> None:
+    """A script that never closes its client: the atexit hook runs the
+    teardown, so the robot still gets the zero Twist last."""
+    before = len(robot.received_cmd_vel())
+    script = textwrap.dedent(
+        f"""
+        import ros_mobile_bridge as rmb
+        robot = rmb.connect_sync({robot.url!r})
+        robot.publish("/cmd_vel", {TWIST!r}, {{"linear": {{"x": 0.25}}}}, priority="control")
+        print("published", flush=True)
+        """
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "published"
+    assert commands_since(robot, before) == [(0.25, 0.0), (0.0, 0.0)]
