@@ -4,6 +4,7 @@ thread's event loop on asyncio and on trio."""
 
 from __future__ import annotations
 
+import asyncio
 import signal
 import subprocess
 import sys
@@ -12,7 +13,10 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+import anyio
 import pytest
+import sniffio
+import trio
 
 import ros_mobile_bridge as rmb
 from ros_mobile_bridge.demo import DemoRobot
@@ -150,6 +154,49 @@ def test_keyboard_interrupt_in_a_blocking_receive_cancels_it_and_tears_down(
     assert commands_since(robot, before) == [(0.5, 0.0), (0.0, 0.0)]
     assert client.status == "closed"
     assert not client.worker_thread.is_alive()
+
+
+async def _count_tasks(_client: rmb.Client) -> int:
+    """The tasks alive in the worker's event loop (this one included)."""
+    if sniffio.current_async_library() == "asyncio":
+        return len(asyncio.all_tasks())
+    count, stack = 0, [trio.lowlevel.current_root_task()]
+    while stack:
+        task = stack.pop()
+        count += 1
+        for nursery in task.child_nurseries:
+            stack.extend(nursery.child_tasks)
+    return count
+
+
+def test_keyboard_interrupt_cancels_the_interrupted_call_in_the_loop(
+    robot: DemoRobot, backend: str
+) -> None:
+    """The wait that Ctrl-C interrupted does not linger in the worker: its
+    task ends, and the client goes on working."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    main = threading.main_thread().ident
+    assert main is not None
+    timer = threading.Timer(0.5, signal.pthread_kill, (main, signal.SIGINT))
+    try:
+        with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+            with client.subscribe("/never_published") as sub:
+                baseline = client.run(_count_tasks)
+                timer.start()
+                with pytest.raises(KeyboardInterrupt):
+                    sub.get()
+
+                async def settled(c: rmb.Client) -> int:
+                    with anyio.move_on_after(5):
+                        while await _count_tasks(c) > baseline:
+                            await anyio.sleep(0.01)
+                    return await _count_tasks(c)
+
+                assert client.run(settled) == baseline
+            assert client.call_service("/set_led", {"data": True})["success"] is True
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_a_receive_timeout_raises_timeout_error_and_loses_nothing(

@@ -24,10 +24,9 @@ import weakref
 from collections.abc import Awaitable, Callable, Iterator, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager
 from types import TracebackType
-from typing import Any, Final, Generic, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, Final, Generic, Literal, TypeVar
 
 import anyio
-from anyio.from_thread import BlockingPortal
 
 from ._action import ActionGoal
 from ._client import Client
@@ -50,6 +49,9 @@ from ._types import (
 )
 from .codec import FieldDef
 from .flow import Subscription
+
+if TYPE_CHECKING:
+    from anyio.from_thread import BlockingPortal
 
 __all__ = ["SyncActionGoal", "SyncClient", "SyncSubscription", "connect_sync"]
 
@@ -118,6 +120,8 @@ class _Worker:
                     future.set_exception(self._gone())
 
     async def _serve(self) -> None:
+        from anyio.from_thread import BlockingPortal  # imported when first used
+
         async with BlockingPortal() as portal:
             self._ready.set_result(portal)
             await portal.sleep_until_stopped()
