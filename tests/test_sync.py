@@ -64,6 +64,11 @@ def test_messages_arrive_publish_reaches_the_robot_and_close_sends_zero_twist_la
             rest = [next(sub), next(sub)]
             assert sub.state == "active"
             assert sub.stats.delivered == 3
+            batch = sub.get_batch(max_size=4)
+            assert 1 <= len(batch) <= 4 and {m.topic for m in batch} == {"/odom"}
+            assert sub.stats.delivered == 3 + len(batch)
+            with pytest.raises(ValueError, match="max_size"):
+                sub.get_batch(max_size=0)
         received = [first, *rest]
         assert [m.topic for m in received] == ["/odom"] * 3
         assert [m.schema_name for m in received] == ["nav_msgs/msg/Odometry"] * 3
@@ -218,6 +223,59 @@ def test_a_receive_timeout_raises_timeout_error_and_loses_nothing(
                 client.wait_for_topic("/never_published", timeout=0.2)
         # after a timed-out call the client still works
         assert client.call_service("/set_led", {"data": True})["success"] is True
+
+
+def test_timed_out_receives_lose_no_message(robot: DemoRobot, backend: str) -> None:
+    """Receives that time out while /status (2 Hz) is quiet take nothing
+    from the queue: every message decoded is one that a get() returned."""
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+        with client.subscribe("/status") as sub:
+            got: list[rmb.Message] = []
+            timeouts = 0
+            for _ in range(400):
+                try:
+                    got.append(sub.get(timeout=0.02))
+                except TimeoutError:
+                    timeouts += 1
+                if len(got) == 3:
+                    break
+            assert len(got) == 3 and timeouts > 0
+            assert sub.stats.delivered == 3
+
+
+def test_several_threads_share_one_client(robot: DemoRobot, backend: str) -> None:
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+        replies: list[object] = []
+        errors: list[BaseException] = []
+
+        def worker(flag: bool) -> None:
+            try:
+                for _ in range(5):
+                    replies.append(client.call_service("/set_led", {"data": flag}, timeout=5))
+            except BaseException as exc:
+                errors.append(exc)
+
+        threads = [threading.Thread(target=worker, args=(i % 2 == 0,)) for i in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30)
+        assert errors == []
+        assert len(replies) == 20
+        assert all(isinstance(r, dict) and r["success"] is True for r in replies)
+
+
+def test_a_blocking_call_from_the_worker_loop_raises_instead_of_deadlocking(
+    robot: DemoRobot, backend: str
+) -> None:
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+
+        async def reenter(_c: rmb.Client) -> object:
+            return client.call_service("/set_led", {"data": True})
+
+        with pytest.raises(RuntimeError, match="own event loop"):
+            client.run(reenter, timeout=5)
+        assert client.connected
 
 
 def test_iteration_ends_when_the_subscription_is_closed(robot: DemoRobot, backend: str) -> None:

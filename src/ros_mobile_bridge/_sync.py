@@ -700,6 +700,23 @@ class SyncSubscription:
         except StopAsyncIteration:
             raise NotConnected(f"the subscription to {self.topic} has ended") from None
 
+    def get_batch(self, max_size: int = 256, timeout: float | None = None) -> list[Message]:
+        """Every message already waiting (at least one, at most ``max_size``),
+        in order, for one hand-over between threads instead of one per
+        message: :meth:`Subscription.batches`' step. Waits, times out and
+        ends as :meth:`get` does."""
+        sub = self._require()
+        batches = sub.batches(max_size)  # checks max_size at once
+        limit = self._timeout if timeout is None else _check_timeout(timeout)
+        if not self._held.open:
+            raise NotConnected(f"the subscription to {self.topic} has ended")
+        try:
+            return self._owner._worker.run_bounded(
+                batches.__anext__, (), limit, f"receive on {self.topic}"
+            )
+        except StopAsyncIteration:
+            raise NotConnected(f"the subscription to {self.topic} has ended") from None
+
     def __iter__(self) -> Iterator[Message]:
         return self
 
