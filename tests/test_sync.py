@@ -5,7 +5,9 @@ thread's event loop on asyncio and on trio."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import signal
+import socket
 import subprocess
 import sys
 import textwrap
@@ -202,6 +204,42 @@ def test_keyboard_interrupt_cancels_the_interrupted_call_in_the_loop(
     finally:
         timer.cancel()
         signal.signal(signal.SIGINT, previous)
+
+
+def test_keyboard_interrupt_while_connecting_abandons_the_connection(backend: str) -> None:
+    """Ctrl-C while connect_sync waits for a server that never answers the
+    handshake: KeyboardInterrupt, the connection attempt is cancelled (the
+    server sees it close long before the connect timeout), no thread left."""
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    closed = threading.Event()
+
+    def silent() -> None:
+        conn, _ = server.accept()
+        with conn:
+            conn.settimeout(30)
+            with contextlib.suppress(OSError):
+                while conn.recv(4096):
+                    pass
+        closed.set()
+
+    acceptor = threading.Thread(target=silent, daemon=True)
+    acceptor.start()
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    main = threading.main_thread().ident
+    assert main is not None
+    timer = threading.Timer(0.5, signal.pthread_kill, (main, signal.SIGINT))
+    slow = rmb.ClientOptions(connect_timeout=60.0, reconnect=None)
+    try:
+        timer.start()
+        with pytest.raises(KeyboardInterrupt):
+            rmb.connect_sync(f"127.0.0.1:{port}", backend=backend, options=slow)
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
+        server.close()
+    assert closed.wait(10)
+    assert sync_threads() == []
 
 
 def test_a_receive_timeout_raises_timeout_error_and_loses_nothing(
