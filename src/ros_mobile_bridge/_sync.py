@@ -349,9 +349,9 @@ class SyncClient:
     never waits forever. Once the worker thread has stopped, or after
     :meth:`close`, they raise ``NotConnected``.
 
-    Use one SyncClient from one thread at a time, or from several threads
-    that each make their own calls: calls are serialised by the worker's
-    event loop, not by a lock."""
+    Several threads may call one SyncClient at once: each call is its own
+    task in the worker's event loop (a :class:`SyncSubscription` is meant
+    for one consuming thread)."""
 
     def __init__(
         self, worker: _Worker, held: _Held[Client], client: Client, teardown_timeout: float
@@ -385,9 +385,10 @@ class SyncClient:
         client's teardown (control frames flushed, the zero Twist to every
         velocity topic this client published to and to
         ``options.stop_topics``, the socket closed), stop the event loop and
-        join the worker thread. ``timeout`` bounds the whole close (default
-        ``options.teardown_timeout`` + 5 s); past it the thread is left to
-        end on its own and a warning is logged. Idempotent; safe to call
+        join the worker thread. ``timeout`` bounds the wait for all that
+        (default ``options.teardown_timeout`` + 5 s), except that joining
+        the thread may take up to 5 s of its own; past it the thread is left
+        to end on its own and a warning is logged. Idempotent; safe to call
         from any thread but the worker's."""
         with self._close_lock:
             if self._closed:
