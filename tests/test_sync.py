@@ -364,6 +364,13 @@ def test_connect_errors_and_bad_arguments_raise_at_once_and_leave_no_thread(
     assert sync_threads() == []
 
 
+def test_a_trio_worker_without_trio_installed_says_so(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(sys.modules, "trio", None)  # import trio now fails
+    with pytest.raises(ImportError, match="pip install trio"):
+        rmb.connect_sync("127.0.0.1", backend="trio")
+    assert sync_threads() == []
+
+
 def test_bad_arguments_to_methods_raise_at_once(robot: DemoRobot, backend: str) -> None:
     with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
         with pytest.raises(ValueError, match="priority"):

@@ -319,6 +319,14 @@ def connect_sync(
     client still open at interpreter exit is closed by an ``atexit`` hook."""
     if backend not in ("asyncio", "trio"):
         raise ValueError(f"backend must be 'asyncio' or 'trio', got {backend!r}")
+    if backend == "trio":
+        try:
+            import trio  # noqa: F401  (the worker's loop needs it; say so before starting one)
+        except ImportError:
+            raise ImportError(
+                "connect_sync(backend='trio') needs trio: pip install trio "
+                "(or ros-mobile-bridge's [trio] extra)"
+            ) from None
     if backend_options is not None and not isinstance(backend_options, Mapping):
         raise TypeError("backend_options must be a mapping or None")
     if options is not None and not isinstance(options, ClientOptions):
