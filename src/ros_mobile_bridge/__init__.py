@@ -18,6 +18,8 @@ from ._version import __version__ as __version__
 if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from . import lag as lag
     from ._action import ActionGoal as ActionGoal
+    from ._background import ClientHandle as ClientHandle
+    from ._background import open_client as open_client
     from ._client import Client as Client
     from ._connect import Endpoint as Endpoint
     from ._connect import connect as connect
@@ -37,6 +39,10 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._options import ReconnectPolicy as ReconnectPolicy
     from ._signals import SignalScope as SignalScope
     from ._signals import cancel_on_signals as cancel_on_signals
+    from ._sync import SyncActionGoal as SyncActionGoal
+    from ._sync import SyncClient as SyncClient
+    from ._sync import SyncSubscription as SyncSubscription
+    from ._sync import connect_sync as connect_sync
     from ._types import DEFAULT_PORTS as DEFAULT_PORTS
     from ._types import ActionOutcome as ActionOutcome
     from ._types import Compression as Compression
@@ -104,6 +110,12 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "DEFAULT_PRESETS": (".flow._throttle", "DEFAULT_PRESETS"),
     "Bucket": (".flow._throttle", "Bucket"),
     "ThrottleMode": (".flow._throttle", "ThrottleMode"),
+    "ClientHandle": ("._background", "ClientHandle"),
+    "open_client": ("._background", "open_client"),
+    "SyncActionGoal": ("._sync", "SyncActionGoal"),
+    "SyncClient": ("._sync", "SyncClient"),
+    "SyncSubscription": ("._sync", "SyncSubscription"),
+    "connect_sync": ("._sync", "connect_sync"),
 }
 """Public name -> (private module relative to this package, its name there);
 ``("", name)`` is a public submodule. Kept equal to the ``TYPE_CHECKING``
@@ -141,6 +153,7 @@ __all__ = [
     "Bucket",
     "CircuitBreaker",
     "Client",
+    "ClientHandle",
     "ClientOptions",
     "Compression",
     "ConnectError",
@@ -167,11 +180,16 @@ __all__ = [
     "Subscription",
     "SubscriptionState",
     "SubscriptionStats",
+    "SyncActionGoal",
+    "SyncClient",
+    "SyncSubscription",
     "ThrottleMode",
     "TopicInfo",
     "__version__",
     "cancel_on_signals",
     "connect",
+    "connect_sync",
     "lag",
+    "open_client",
     "parse_target",
 ]

@@ -1,0 +1,889 @@
+"""``connect_sync()``: the client for code that is not async.
+
+One worker thread runs an event loop (asyncio or trio) with an anyio
+:class:`~anyio.from_thread.BlockingPortal`; the async :class:`Client` lives
+there, and every blocking method hands one coroutine to the loop and waits
+for its result. An ``async with`` the worker holds (the connection, a
+subscription, an action goal) is entered and left by one task of the
+worker, so anyio's cancel scopes stay in the task that opened them.
+
+Nothing here waits forever: each blocking wait ends with the call's result,
+its error, the caller's ``timeout`` (``TimeoutError``), or ``NotConnected``
+when the worker thread has stopped (every call still waiting is failed as
+the thread ends)."""
+
+from __future__ import annotations
+
+import atexit
+import concurrent.futures
+import contextlib
+import logging
+import threading
+import time
+import weakref
+from collections.abc import Awaitable, Callable, Iterator, Mapping, Sequence
+from contextlib import AbstractAsyncContextManager
+from types import TracebackType
+from typing import TYPE_CHECKING, Any, Final, Generic, Literal, TypeVar
+
+import anyio
+
+from ._action import ActionGoal
+from ._client import Client
+from ._connect import ProtocolArg, connect
+from ._errors import NotConnected
+from ._options import ClientOptions
+from ._types import (
+    ActionOutcome,
+    Compression,
+    Dispatch,
+    GoalState,
+    Message,
+    Priority,
+    ServerInfo,
+    ServiceInfo,
+    Status,
+    SubscriptionState,
+    SubscriptionStats,
+    TopicInfo,
+)
+from .codec import FieldDef
+from .flow import Subscription
+
+if TYPE_CHECKING:
+    from anyio.from_thread import BlockingPortal
+
+__all__ = ["SyncActionGoal", "SyncClient", "SyncSubscription", "connect_sync"]
+
+T = TypeVar("T")
+SyncBackend = Literal["asyncio", "trio"]
+
+_log = logging.getLogger("ros_mobile_bridge.sync")
+
+#: Added to ``options.teardown_timeout`` for the whole close: the teardown's
+#: own deadline, then closing the socket, then stopping the loop.
+_CLOSE_SLACK_S: Final = 5.0
+#: How long ``close()`` waits for the worker thread to end after its loop
+#: was told to stop.
+_JOIN_S: Final = 5.0
+
+
+class _Worker:
+    """One event loop in one daemon thread, reached through a blocking portal.
+
+    :meth:`start` hands a coroutine function to the loop and returns a
+    ``concurrent.futures.Future``; every future still waiting when the
+    thread ends is failed with ``NotConnected``, so no caller waits on a
+    dead loop."""
+
+    def __init__(
+        self, backend: SyncBackend, backend_options: Mapping[str, Any] | None, name: str
+    ) -> None:
+        self._backend = backend
+        self._backend_options = dict(backend_options) if backend_options else None
+        self._ready: concurrent.futures.Future[BlockingPortal] = concurrent.futures.Future()
+        self._lock = threading.Lock()
+        self._pending: set[concurrent.futures.Future[Any]] = set()
+        self._ended = False
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._main, name=name, daemon=True)
+        self._thread.start()
+        try:
+            self._portal = self._ready.result()
+        except BaseException:
+            self._thread.join(_JOIN_S)
+            raise
+
+    @property
+    def thread(self) -> threading.Thread:
+        return self._thread
+
+    @property
+    def alive(self) -> bool:
+        return not self._ended
+
+    def _main(self) -> None:
+        try:
+            anyio.run(self._serve, backend=self._backend, backend_options=self._backend_options)
+        except BaseException as exc:  # the thread's end is reported to every waiter
+            self._error = exc
+            if not self._ready.done():
+                self._ready.set_exception(exc)
+            else:
+                _log.error("the sync client's event loop failed: %r", exc)
+        finally:
+            with self._lock:
+                self._ended = True
+                pending, self._pending = self._pending, set()
+            for future in pending:
+                with contextlib.suppress(concurrent.futures.InvalidStateError):
+                    future.set_exception(self._gone())
+
+    async def _serve(self) -> None:
+        from anyio.from_thread import BlockingPortal  # imported when first used
+
+        async with BlockingPortal() as portal:
+            self._ready.set_result(portal)
+            await portal.sleep_until_stopped()
+
+    def _gone(self) -> NotConnected:
+        why = f": {self._error!r}" if self._error is not None else ""
+        return NotConnected(f"the sync client's worker thread has stopped{why}")
+
+    def _check_caller(self) -> None:
+        if threading.get_ident() == self._thread.ident:
+            raise RuntimeError(
+                "a blocking method of the sync client was called from its own event loop "
+                "(inside SyncClient.run): await the async Client there instead"
+            )
+
+    def start(self, fn: Callable[..., Awaitable[T]], *args: Any) -> concurrent.futures.Future[T]:
+        """Start ``fn(*args)`` in the loop; ``NotConnected`` if it has stopped."""
+        self._check_caller()
+        try:
+            future: concurrent.futures.Future[T] = self._portal.start_task_soon(fn, *args)
+        except RuntimeError as exc:  # the portal stopped, or its loop is gone
+            raise self._gone() from exc
+        with self._lock:
+            if self._ended:
+                future.cancel()
+                raise self._gone()
+            self._pending.add(future)
+        future.add_done_callback(self._forget)
+        return future
+
+    def _forget(self, future: concurrent.futures.Future[Any]) -> None:
+        with self._lock:
+            self._pending.discard(future)
+
+    def wait(self, future: concurrent.futures.Future[T], what: str) -> T:
+        """The result of ``future``. A ``KeyboardInterrupt`` (or any exception)
+        raised in this thread while waiting cancels the call in the loop
+        and propagates."""
+        try:
+            return future.result()
+        except concurrent.futures.CancelledError:
+            raise NotConnected(f"{what}: the sync client closed while it was running") from None
+        except BaseException:
+            future.cancel()  # a no-op once it finished; else cancels the task's scope
+            raise
+
+    def run(self, fn: Callable[..., Awaitable[T]], *args: Any, what: str = "call") -> T:
+        """Run ``fn(*args)`` in the loop and wait for its result."""
+        return self.wait(self.start(fn, *args), what)
+
+    def run_bounded(
+        self,
+        fn: Callable[..., Awaitable[T]],
+        args: tuple[Any, ...],
+        timeout: float | None,
+        what: str,
+    ) -> T:
+        """:meth:`run`, cancelled in the loop after ``timeout`` seconds
+        (``TimeoutError``); None: no bound of its own."""
+        if timeout is None:
+            return self.run(fn, *args, what=what)
+        limit = _check_timeout(timeout)
+
+        async def bounded() -> T:
+            with anyio.move_on_after(limit):
+                return await fn(*args)
+            raise TimeoutError(f"{what}: no result within {limit:.3g} s")
+
+        return self.run(bounded, what=what)
+
+    def stop(self, join_timeout: float) -> bool:
+        """Stop the loop (cancelling what still runs there) and join the
+        thread within ``join_timeout``. Returns whether the thread ended."""
+        if threading.get_ident() == self._thread.ident:
+            return False
+        if not self._ended:
+            try:
+                stopping = self._portal.start_task_soon(self._portal.stop, True)
+            except RuntimeError:
+                pass  # already stopping or stopped
+            else:
+                with contextlib.suppress(BaseException):
+                    stopping.result(timeout=join_timeout)
+        self._thread.join(join_timeout)
+        return not self._thread.is_alive()
+
+
+class _Held(Generic[T]):
+    """An async context manager held open by one task of the worker: entered,
+    then left when :meth:`exit` is called, both in that task."""
+
+    def __init__(self, worker: _Worker, cm: AbstractAsyncContextManager[T], what: str) -> None:
+        self._worker = worker
+        self._cm = cm
+        self._what = what
+        self._release: anyio.Event | None = None
+        self._owner: concurrent.futures.Future[None] | None = None
+        self._left = False
+
+    async def _hold(self, entered: concurrent.futures.Future[T]) -> None:
+        self._release = anyio.Event()
+        async with self._cm as value:
+            entered.set_result(value)
+            await self._release.wait()
+
+    def enter(self) -> T:
+        entered: concurrent.futures.Future[T] = concurrent.futures.Future()
+        owner = self._owner = self._worker.start(self._hold, entered)
+        try:
+            both: list[concurrent.futures.Future[Any]] = [entered, owner]
+            concurrent.futures.wait(both, return_when=concurrent.futures.FIRST_COMPLETED)
+        except BaseException:  # KeyboardInterrupt while entering: abandon it
+            owner.cancel()
+            raise
+        if entered.done():
+            return entered.result()
+        self._left = True
+        self._worker.wait(owner, self._what)  # raises why it failed
+        raise NotConnected(f"{self._what} ended before it was entered")  # pragma: no cover
+
+    @property
+    def open(self) -> bool:
+        return self._owner is not None and not self._left
+
+    def exit(self, timeout: float) -> None:
+        """Leave the block: the task's ``__aexit__`` runs; wait up to
+        ``timeout`` for it. Idempotent."""
+        owner = self._owner
+        if owner is None or self._left:
+            return
+        self._left = True
+        release = self._release
+        if not owner.done() and release is not None:
+            with contextlib.suppress(NotConnected):
+                self._worker.run(_set_event, release, what=self._what)
+        try:
+            owner.result(timeout=timeout)
+        except concurrent.futures.TimeoutError:
+            owner.cancel()
+            raise TimeoutError(
+                f"{self._what} did not finish closing within {timeout:.3g} s"
+            ) from None
+        except concurrent.futures.CancelledError:
+            pass  # cancelled by the loop stopping: its __aexit__ ran then
+
+
+async def _set_event(event: anyio.Event) -> None:
+    event.set()
+
+
+# Sync clients still open at interpreter exit are closed (teardown included)
+# by this hook; the daemon worker threads would otherwise just stop.
+_open_clients: set[SyncClient] = set()
+
+
+@atexit.register
+def _close_at_exit() -> None:
+    for client in list(_open_clients):
+        with contextlib.suppress(Exception):
+            client.close()
+
+
+def connect_sync(
+    target: str,
+    *,
+    protocol: ProtocolArg = "auto",
+    port: int | None = None,
+    secure: bool | None = None,
+    options: ClientOptions | None = None,
+    backend: SyncBackend = "asyncio",
+    backend_options: Mapping[str, Any] | None = None,
+    **connect_kwargs: Any,
+) -> SyncClient:
+    """Connect from code that is not async (scripts, notebooks, test
+    harnesses); returns a :class:`SyncClient`, connected, whose methods
+    block::
+
+        with rmb.connect_sync("robot.local") as robot:
+            robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", {"linear": {"x": 0.2}})
+            with robot.subscribe("/odom", timeout=5) as sub:
+                msg = sub.get()
+        # the block's end sent the zero Twist and stopped the worker thread
+
+    The arguments are :func:`~ros_mobile_bridge.connect`'s (any further
+    keyword is passed to it as given), plus ``backend`` (``"asyncio"`` or
+    ``"trio"``) and ``backend_options`` (:func:`anyio.run`'s) for the event
+    loop of the worker thread the client runs in. It raises what
+    ``connect()`` raises (``ValueError``, ``ConnectError``, ...), with the
+    worker already stopped.
+
+    Use it as a context manager, or call :meth:`SyncClient.close`: both run
+    the async teardown (the zero Twist to every velocity topic published
+    to) and join the thread. A ``KeyboardInterrupt`` in a blocking call
+    cancels that call; leaving the ``with`` block then closes as usual. A
+    client still open at interpreter exit is closed by an ``atexit`` hook."""
+    if backend not in ("asyncio", "trio"):
+        raise ValueError(f"backend must be 'asyncio' or 'trio', got {backend!r}")
+    if backend == "trio":
+        try:
+            import trio  # noqa: F401  (the worker's loop needs it; say so before starting one)
+        except ImportError:
+            raise ImportError(
+                "connect_sync(backend='trio') needs trio: pip install trio "
+                "(or ros-mobile-bridge's [trio] extra)"
+            ) from None
+    if backend_options is not None and not isinstance(backend_options, Mapping):
+        raise TypeError("backend_options must be a mapping or None")
+    if options is not None and not isinstance(options, ClientOptions):
+        raise TypeError("options must be a ClientOptions")
+    # bad keywords raise TypeError here, before any thread starts
+    cm = connect(
+        target, protocol=protocol, port=port, secure=secure, options=options, **connect_kwargs
+    )
+    teardown = (options or ClientOptions()).teardown_timeout
+    worker = _Worker(backend, backend_options, name=f"rmb-sync-{backend}")
+    held = _Held(worker, cm, "the connection")
+    try:
+        client = held.enter()
+    except BaseException:
+        worker.stop(_JOIN_S)
+        raise
+    return SyncClient(worker, held, client, teardown)
+
+
+class SyncClient:
+    """A connected client whose methods block: :func:`connect_sync` returns it.
+
+    It mirrors :class:`~ros_mobile_bridge.Client`; each method runs the
+    async one in the worker thread's event loop and returns its result or
+    raises its error. Methods that talk to the robot take an optional
+    ``timeout`` (seconds; ``TimeoutError`` when it passes, the call is then
+    cancelled); without one they wait as the async method does, which
+    never waits forever. Once the worker thread has stopped, or after
+    :meth:`close`, they raise ``NotConnected``.
+
+    Several threads may call one SyncClient at once: each call is its own
+    task in the worker's event loop (a :class:`SyncSubscription` is meant
+    for one consuming thread)."""
+
+    def __init__(
+        self, worker: _Worker, held: _Held[Client], client: Client, teardown_timeout: float
+    ) -> None:
+        self._worker = worker
+        self._held = held
+        self._client = client
+        self._teardown_timeout = teardown_timeout
+        self._children: weakref.WeakSet[SyncSubscription | SyncActionGoal] = weakref.WeakSet()
+        self._closed = False
+        self._close_lock = threading.Lock()
+        _open_clients.add(self)
+
+    # -- lifecycle ----------------------------------------------------------
+    def __enter__(self) -> SyncClient:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return f"<SyncClient {self._client.protocol} {self.status} ({self._worker.thread.name})>"
+
+    def close(self, timeout: float | None = None) -> None:
+        """Close: leave the open subscriptions and action goals, run the
+        client's teardown (control frames flushed, the zero Twist to every
+        velocity topic this client published to and to
+        ``options.stop_topics``, the socket closed), stop the event loop and
+        join the worker thread. ``timeout`` bounds the wait for all that
+        (default ``options.teardown_timeout`` + 5 s), except that joining
+        the thread may take up to 5 s of its own; past it the thread is left
+        to end on its own and a warning is logged. Idempotent; safe to call
+        from any thread but the worker's."""
+        with self._close_lock:
+            if self._closed:
+                return
+            self._closed = True
+        _open_clients.discard(self)
+        budget = self._teardown_timeout + _CLOSE_SLACK_S if timeout is None else timeout
+        deadline = _now() + budget
+        try:
+            for child in list(self._children):
+                with contextlib.suppress(Exception):
+                    child._leave(max(0.0, deadline - _now()))
+            try:
+                self._held.exit(max(0.0, deadline - _now()))
+            except TimeoutError as exc:
+                _log.warning("close: %s", exc)
+            except NotConnected:
+                pass  # the worker had stopped: nothing left to tear down
+        finally:
+            if not self._worker.stop(max(_JOIN_S, deadline - _now())):
+                _log.warning(
+                    "close: the worker thread %s did not end in time", self._worker.thread.name
+                )
+
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` was called."""
+        return self._closed
+
+    @property
+    def status(self) -> Status:
+        """The client's status (:attr:`Client.status`); ``"closed"`` after close."""
+        return self._client.status
+
+    @property
+    def last_error(self) -> BaseException | None:
+        """Why the connection was lost, or None."""
+        return self._client.last_error
+
+    @property
+    def connected(self) -> bool:
+        """True while the connection is up."""
+        return self._client.connected
+
+    @property
+    def protocol(self) -> str:
+        """The transport in use: ``"foxglove-ws"``, ``"rosbridge"`` or ``"zenoh"``."""
+        return self._client.protocol
+
+    @property
+    def server_info(self) -> ServerInfo:
+        """What the server said about itself."""
+        return self._client.server_info
+
+    @property
+    def topics(self) -> list[TopicInfo]:
+        """The topics the server offers now (a snapshot)."""
+        return list(self._client.topics)
+
+    @property
+    def services(self) -> list[ServiceInfo]:
+        """The services the server offers now (a snapshot)."""
+        return list(self._client.services)
+
+    @property
+    def worker_thread(self) -> threading.Thread:
+        """The thread whose event loop runs the async client."""
+        return self._worker.thread
+
+    def _call(
+        self, fn: Callable[..., Awaitable[T]], *args: Any, timeout: float | None, what: str
+    ) -> T:
+        if self._closed:
+            raise NotConnected(f"{what}: the client is closed")
+        return self._worker.run_bounded(fn, args, timeout, what)
+
+    def run(self, fn: Callable[[Client], Awaitable[T]], *, timeout: float | None = None) -> T:
+        """Run ``await fn(client)`` in the worker's event loop with the async
+        :class:`~ros_mobile_bridge.Client`, and return its result: the way to
+        reach what has no blocking method here (``watch_topics()``,
+        ``subscribe(...).batches()``, several calls at once in a task group).
+        ``fn`` must not keep the client for use outside the loop."""
+        return self._call(fn, self._client, timeout=timeout, what="run")
+
+    def wait_for_topic(self, topic: str, *, timeout: float) -> TopicInfo:
+        """Return the topic's info once the server offers ``topic``;
+        ``TimeoutError`` if it did not within ``timeout`` seconds."""
+
+        async def wait(client: Client) -> TopicInfo:
+            async for topics in client.watch_topics():
+                for info in topics:
+                    if info.name == topic:
+                        return info
+            raise NotConnected(f"the client closed before {topic} appeared")
+
+        return self._call(wait, self._client, timeout=timeout, what=f"wait_for_topic({topic})")
+
+    # -- publishing ---------------------------------------------------------
+    def publish(
+        self,
+        topic: str,
+        schema: str,
+        data: Mapping[str, Any],
+        *,
+        priority: Priority = "data",
+        check_velocity: bool = True,
+        timeout: float | None = None,
+    ) -> None:
+        """:meth:`Client.publish`, blocking: a data frame returns once queued,
+        a control frame once written to the socket (``NotConnected`` when it
+        was not)."""
+        self._call(
+            _publish,
+            self._client,
+            topic,
+            schema,
+            data,
+            priority,
+            check_velocity,
+            timeout=timeout,
+            what=f"publish to {topic}",
+        )
+
+    def publish_zero_twist(
+        self, topic: str = "/cmd_vel", schema: str | None = None, *, timeout: float | None = None
+    ) -> None:
+        """:meth:`Client.publish_zero_twist`, blocking."""
+        self._call(
+            self._client.publish_zero_twist,
+            topic,
+            schema,
+            timeout=timeout,
+            what=f"zero Twist to {topic}",
+        )
+
+    def advertise(
+        self, topic: str, schema: str, *, latch: bool = False, timeout: float | None = None
+    ) -> None:
+        """:meth:`Client.advertise`, blocking."""
+        self._call(
+            _advertise, self._client, topic, schema, latch, timeout=timeout, what="advertise"
+        )
+
+    def unadvertise(self, topic: str, *, timeout: float | None = None) -> None:
+        """:meth:`Client.unadvertise`, blocking."""
+        self._call(self._client.unadvertise, topic, timeout=timeout, what="unadvertise")
+
+    # -- services and parameters -------------------------------------------
+    def call_service(
+        self, name: str, request: Mapping[str, Any] | None = None, *, timeout: float | None = None
+    ) -> Any:
+        """:meth:`Client.call_service`, blocking; ``timeout`` is the call's
+        own (``ServiceTimeout``, default ``options.service_timeout``)."""
+        return self._call(
+            _call_service, self._client, name, request, timeout, timeout=None, what=name
+        )
+
+    def get_parameters(
+        self, names: Sequence[str], *, timeout: float | None = None
+    ) -> dict[str, Any]:
+        """:meth:`Client.get_parameters`, blocking."""
+        return self._call(
+            _get_parameters, self._client, names, timeout, timeout=None, what="get_parameters"
+        )
+
+    def set_parameters(
+        self, values: Mapping[str, Any], *, timeout: float | None = None
+    ) -> dict[str, Any]:
+        """:meth:`Client.set_parameters`, blocking."""
+        return self._call(
+            _set_parameters, self._client, values, timeout, timeout=None, what="set_parameters"
+        )
+
+    def list_parameters(self, *, timeout: float | None = None) -> dict[str, Any]:
+        """:meth:`Client.list_parameters`, blocking."""
+        return self._call(
+            _list_parameters, self._client, timeout, timeout=None, what="list_parameters"
+        )
+
+    # -- schemas ------------------------------------------------------------
+    def schema_template(self, name: str) -> dict[str, Any]:
+        """:meth:`Client.schema_template`."""
+        return self._call(
+            _sync_call, self._client.schema_template, (name,), timeout=None, what="schema_template"
+        )
+
+    def schema_definition(self, name: str) -> list[FieldDef]:
+        """:meth:`Client.schema_definition`."""
+        return self._call(
+            _sync_call,
+            self._client.schema_definition,
+            (name,),
+            timeout=None,
+            what="schema_definition",
+        )
+
+    def register_type(
+        self, name: str, definition: str | bytes, *, encoding: str = "ros2msg"
+    ) -> None:
+        """:meth:`Client.register_type`."""
+
+        def register() -> None:
+            self._client.register_type(name, definition, encoding=encoding)
+
+        self._call(_sync_call, register, (), timeout=None, what="register_type")
+
+    # -- subscriptions and actions -------------------------------------------
+    def subscribe(
+        self,
+        topic: str,
+        *,
+        max_hz: float | None = None,
+        adaptive: bool = True,
+        dispatch: Dispatch = "all",
+        schema: str | None = None,
+        buffer: int | None = None,
+        compression: Compression | None = None,
+        timeout: float | None = None,
+    ) -> SyncSubscription:
+        """:meth:`Client.subscribe`, as a (plain) context manager yielding a
+        :class:`SyncSubscription`: ``for msg in sub`` or ``sub.get()``.
+        ``timeout`` is the default wait for each message (None: until one
+        comes or the subscription ends). Arguments are checked here, at
+        once; the subscription starts when the block is entered."""
+        if self._closed:
+            raise NotConnected("subscribe: the client is closed")
+        if timeout is not None:
+            _check_timeout(timeout)
+        client = self._client
+
+        def make() -> AbstractAsyncContextManager[Subscription]:
+            # in the loop: a subscription's throttle belongs to the loop's lag monitor
+            return client.subscribe(
+                topic,
+                max_hz=max_hz,
+                adaptive=adaptive,
+                dispatch=dispatch,
+                schema=schema,
+                buffer=buffer,
+                compression=compression,
+            )
+
+        ctx = self._worker.run(_sync_call, make, (), what=f"subscribe to {topic}")
+        held = _Held(self._worker, ctx, f"the subscription to {topic}")
+        return SyncSubscription(self, held, topic, timeout)
+
+    def send_action_goal(
+        self, action: str, action_type: str, goal: Mapping[str, Any]
+    ) -> SyncActionGoal:
+        """:meth:`Client.send_action_goal`, as a (plain) context manager
+        yielding a :class:`SyncActionGoal`; the goal is sent when the block
+        is entered, and leaving it before the goal ended cancels it."""
+        if self._closed:
+            raise NotConnected("send_action_goal: the client is closed")
+        cm = self._client.send_action_goal(action, action_type, goal)
+        return SyncActionGoal(self, _Held(self._worker, cm, f"the goal to {action}"), action)
+
+
+class SyncSubscription:
+    """A subscription of a :class:`SyncClient`: ``for msg in sub`` blocks
+    for each :class:`~ros_mobile_bridge.Message`; :meth:`get` takes one with
+    a timeout. Iteration ends when the subscription or the client closes;
+    a lost connection raises ``NotConnected``."""
+
+    def __init__(
+        self, owner: SyncClient, held: _Held[Subscription], topic: str, timeout: float | None
+    ) -> None:
+        self._owner = owner
+        self._held = held
+        self._sub: Subscription | None = None
+        self.topic = topic
+        self._timeout = timeout
+
+    def __enter__(self) -> SyncSubscription:
+        if self._sub is not None:
+            raise RuntimeError("a SyncSubscription can be entered once")
+        self._sub = self._held.enter()
+        self._owner._children.add(self)
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Unsubscribe (idempotent)."""
+        self._leave(self._owner._teardown_timeout + _CLOSE_SLACK_S)
+
+    def _leave(self, timeout: float) -> None:
+        self._owner._children.discard(self)
+        with contextlib.suppress(NotConnected):
+            self._held.exit(timeout)
+
+    def _require(self) -> Subscription:
+        if self._sub is None:
+            raise RuntimeError("enter the subscription first: with robot.subscribe(...) as sub")
+        return self._sub
+
+    def get(self, timeout: float | None = None) -> Message:
+        """The next message. ``timeout`` (default: the one given to
+        ``subscribe``) bounds the wait: ``TimeoutError`` when no message came
+        (nothing is lost; call again). ``NotConnected`` once the subscription
+        has ended (after the queued messages), or the connection's error."""
+        try:
+            return self._next(timeout)
+        except StopAsyncIteration:
+            raise NotConnected(f"the subscription to {self.topic} has ended") from None
+
+    def get_batch(self, max_size: int = 256, timeout: float | None = None) -> list[Message]:
+        """Every message already waiting (at least one, at most ``max_size``),
+        in order, for one hand-over between threads instead of one per
+        message: :meth:`Subscription.batches`' step. Waits, times out and
+        ends as :meth:`get` does."""
+        sub = self._require()
+        batches = sub.batches(max_size)  # checks max_size at once
+        limit = self._timeout if timeout is None else _check_timeout(timeout)
+        if not self._held.open:
+            raise NotConnected(f"the subscription to {self.topic} has ended")
+        try:
+            return self._owner._worker.run_bounded(
+                batches.__anext__, (), limit, f"receive on {self.topic}"
+            )
+        except StopAsyncIteration:
+            raise NotConnected(f"the subscription to {self.topic} has ended") from None
+
+    def __iter__(self) -> Iterator[Message]:
+        return self
+
+    def __next__(self) -> Message:
+        try:
+            return self._next(None)
+        except StopAsyncIteration:
+            raise StopIteration from None
+
+    def _next(self, timeout: float | None) -> Message:
+        sub = self._require()
+        limit = self._timeout if timeout is None else _check_timeout(timeout)
+        if not self._held.open:
+            raise StopAsyncIteration
+        return self._owner._worker.run_bounded(sub.__anext__, (), limit, f"receive on {self.topic}")
+
+    def wait_active(self, timeout: float | None = None) -> None:
+        """Return once the topic is carried (``state == "active"``);
+        ``TimeoutError`` after ``timeout`` seconds."""
+        sub = self._require()
+        self._owner._worker.run_bounded(sub.wait_active, (), timeout, "wait_active")
+
+    @property
+    def state(self) -> SubscriptionState:
+        """``"pending"`` or ``"active"``."""
+        return self._require().state
+
+    @property
+    def stats(self) -> SubscriptionStats:
+        """A snapshot of the subscription's counters."""
+        return self._require().stats
+
+
+class SyncActionGoal:
+    """An action goal of a :class:`SyncClient`, with blocking waits."""
+
+    def __init__(self, owner: SyncClient, held: _Held[ActionGoal], action: str) -> None:
+        self._owner = owner
+        self._held = held
+        self._goal: ActionGoal | None = None
+        self._feedback: Any = None
+        self.action = action
+
+    def __enter__(self) -> SyncActionGoal:
+        if self._goal is not None:
+            raise RuntimeError("a SyncActionGoal can be entered once")
+        self._goal = self._held.enter()
+        self._owner._children.add(self)
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self._leave(self._owner._teardown_timeout + _CLOSE_SLACK_S)
+
+    def _leave(self, timeout: float) -> None:
+        self._owner._children.discard(self)
+        with contextlib.suppress(NotConnected):
+            self._held.exit(timeout)
+
+    def _require(self) -> ActionGoal:
+        if self._goal is None:
+            raise RuntimeError("enter the goal first: with robot.send_action_goal(...) as goal")
+        return self._goal
+
+    def _wait(self, fn: Callable[..., Awaitable[T]], timeout: float | None, what: str) -> T:
+        return self._owner._worker.run_bounded(fn, (), timeout, what)
+
+    @property
+    def state(self) -> GoalState:
+        """The goal's state (:attr:`ActionGoal.state`)."""
+        return self._require().state
+
+    @property
+    def done(self) -> bool:
+        """True once the goal reached a terminal state."""
+        return self._require().done
+
+    def accepted(self, timeout: float | None = None) -> None:
+        """:meth:`ActionGoal.accepted`, blocking."""
+        self._wait(self._require().accepted, timeout, "accepted")
+
+    def result(self, timeout: float | None = None) -> ActionOutcome:
+        """:meth:`ActionGoal.result`, blocking."""
+        return self._wait(self._require().result, timeout, "result")
+
+    def cancel(self, timeout: float | None = None) -> None:
+        """:meth:`ActionGoal.cancel`, blocking."""
+        self._wait(self._require().cancel, timeout, "cancel")
+
+    def next_feedback(self, timeout: float | None = None) -> Any:
+        """The newest feedback not yet seen (waits for one); ``StopIteration``
+        is never raised: ``NotConnected`` once the goal has ended."""
+        goal = self._require()
+
+        async def step() -> Any:
+            if self._feedback is None:  # made in the loop: it holds anyio events
+                self._feedback = goal.feedback
+            try:
+                return await self._feedback.__anext__()
+            except StopAsyncIteration:
+                raise NotConnected(f"the goal to {self.action} has ended") from None
+
+        return self._wait(step, timeout, "feedback")
+
+
+# -- coroutines run in the worker's loop ---------------------------------------
+async def _sync_call(fn: Callable[..., T], args: tuple[Any, ...]) -> T:
+    return fn(*args)
+
+
+async def _publish(
+    client: Client,
+    topic: str,
+    schema: str,
+    data: Mapping[str, Any],
+    priority: Priority,
+    check_velocity: bool,
+) -> None:
+    await client.publish(topic, schema, data, priority=priority, check_velocity=check_velocity)
+
+
+async def _advertise(client: Client, topic: str, schema: str, latch: bool) -> None:
+    await client.advertise(topic, schema, latch=latch)
+
+
+async def _call_service(
+    client: Client, name: str, request: Mapping[str, Any] | None, timeout: float | None
+) -> Any:
+    return await client.call_service(name, request, timeout=timeout)
+
+
+async def _get_parameters(
+    client: Client, names: Sequence[str], timeout: float | None
+) -> dict[str, Any]:
+    return await client.get_parameters(names, timeout=timeout)
+
+
+async def _set_parameters(
+    client: Client, values: Mapping[str, Any], timeout: float | None
+) -> dict[str, Any]:
+    return await client.set_parameters(values, timeout=timeout)
+
+
+async def _list_parameters(client: Client, timeout: float | None) -> dict[str, Any]:
+    return await client.list_parameters(timeout=timeout)
+
+
+def _check_timeout(timeout: object) -> float:
+    if isinstance(timeout, bool) or not isinstance(timeout, int | float):
+        raise TypeError(f"timeout must be a number of seconds, not {type(timeout).__name__}")
+    if not timeout > 0:
+        raise ValueError(f"timeout must be positive, got {timeout!r}")
+    return float(timeout)
+
+
+def _now() -> float:
+    return time.monotonic()
