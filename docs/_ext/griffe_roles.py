@@ -45,10 +45,15 @@ DOCUMENTED = frozenset(
         "SignalScope",
         "Subscription",
         "SubscriptionStats",
+        "SyncActionGoal",
+        "SyncClient",
+        "SyncSubscription",
         "ThrottleMode",
         "TopicInfo",
         "cancel_on_signals",
         "connect",
+        "connect_sync",
+        "open_client",
         "parse_target",
     }
 )
