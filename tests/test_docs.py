@@ -56,6 +56,7 @@ def _page(site: Path, name: str) -> str:
 def test_site_builds_strict_with_every_page(site: Path) -> None:
     for name in (
         "getting-started",
+        "sync-and-notebooks",
         "concepts",
         "transports/foxglove",
         "transports/rosbridge",
