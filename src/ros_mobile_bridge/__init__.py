@@ -25,6 +25,9 @@ from ._errors import ServiceTimeout as ServiceTimeout
 from ._options import BreakerPolicy as BreakerPolicy
 from ._options import ClientOptions as ClientOptions
 from ._options import ReconnectPolicy as ReconnectPolicy
+from ._serve import ServeStats as ServeStats
+from ._serve import ServiceRequest as ServiceRequest
+from ._serve import ServiceRequests as ServiceRequests
 from ._signals import SignalScope as SignalScope
 from ._signals import cancel_on_signals as cancel_on_signals
 from ._types import DEFAULT_PORTS as DEFAULT_PORTS
@@ -81,9 +84,12 @@ __all__ = [
     "ReconnectPolicy",
     "RosBridgeError",
     "SchemaError",
+    "ServeStats",
     "ServerInfo",
     "ServiceError",
     "ServiceInfo",
+    "ServiceRequest",
+    "ServiceRequests",
     "ServiceTimeout",
     "SignalScope",
     "Status",
