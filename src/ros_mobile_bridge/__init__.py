@@ -25,6 +25,8 @@ from ._errors import ServiceTimeout as ServiceTimeout
 from ._options import BreakerPolicy as BreakerPolicy
 from ._options import ClientOptions as ClientOptions
 from ._options import ReconnectPolicy as ReconnectPolicy
+from ._record import Recording as Recording
+from ._record import RecordStats as RecordStats
 from ._serve import ServeStats as ServeStats
 from ._serve import ServiceRequest as ServiceRequest
 from ._serve import ServiceRequests as ServiceRequests
@@ -43,6 +45,7 @@ from ._types import Status as Status
 from ._types import SubscriptionState as SubscriptionState
 from ._types import SubscriptionStats as SubscriptionStats
 from ._types import TopicInfo as TopicInfo
+from ._version import __version__ as __version__
 from .codec import FieldDef as FieldDef
 from .flow import Batches as Batches
 from .flow import Subscription as Subscription
@@ -52,8 +55,6 @@ from .flow._lag import LagStats as LagStats
 from .flow._throttle import DEFAULT_PRESETS as DEFAULT_PRESETS
 from .flow._throttle import Bucket as Bucket
 from .flow._throttle import ThrottleMode as ThrottleMode
-
-from ._version import __version__ as __version__
 
 __all__ = [
     "DEFAULT_PORTS",
@@ -82,6 +83,8 @@ __all__ = [
     "Priority",
     "ProtocolMismatchError",
     "ReconnectPolicy",
+    "RecordStats",
+    "Recording",
     "RosBridgeError",
     "SchemaError",
     "ServeStats",

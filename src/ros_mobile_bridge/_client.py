@@ -15,7 +15,7 @@ import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from functools import partial
-from typing import Any, Final, TypeVar
+from typing import TYPE_CHECKING, Any, Final, TypeVar
 
 import anyio
 import anyio.abc
@@ -61,6 +61,11 @@ from .flow import (
     participate,
     resolve_presets,
 )
+
+if TYPE_CHECKING:
+    import os
+
+    from ._record import Recording
 
 __all__ = ["Client"]
 
@@ -1024,6 +1029,43 @@ class Client:
         elif not _is_velocity_type(_check_schema(schema)):
             raise ValueError(f"schema must be Twist or TwistStamped, got {schema!r}")
         await self.publish(topic, schema, self._zero(schema), priority="control")
+
+    # -- recording ----------------------------------------------------------
+    def record(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        topics: Sequence[str] | None = None,
+        max_hz: float | None = None,
+        adaptive: bool = True,
+        compression: Compression | None = None,
+    ) -> AbstractAsyncContextManager[Recording]:
+        """Record what this client receives to the MCAP file ``path``; an
+        async context manager yielding a :class:`~ros_mobile_bridge.Recording`
+        (``rec.stats``)::
+
+            async with robot.record("run.mcap", topics=["/odom", "/scan"]) as rec:
+                await anyio.sleep(10)
+            print(rec.stats.messages)
+
+        ``topics`` None records every topic the server offers, and those it
+        offers later. Each topic is an ordinary subscription (``max_hz``, the
+        adaptive throttle unless ``adaptive=False``, and the circuit breaker
+        apply as to any other); the
+        file holds ROS 2 CDR messages with their full ``ros2msg`` schemas,
+        from any transport (rosbridge's JSON is encoded to CDR with the
+        connection's codec; ``compression="cbor-raw"`` has the bridge send
+        CDR instead). Leaving the block finishes the file (summary and
+        indexes), on every exit path, cancellation included. Needs the
+        ``mcap`` package (the ``[record]`` extra). Arguments are checked
+        here, at once (``ValueError`` / ``TypeError``); the file is created
+        on entering (``OSError``). See docs/recording.md."""
+        from ._record import check_record_args, open_recording
+
+        checked, wanted = check_record_args(path, topics, max_hz, compression)
+        if not isinstance(adaptive, bool):
+            raise TypeError("adaptive must be a bool")
+        return open_recording(self, checked, wanted, max_hz, adaptive, compression)
 
     # -- services -----------------------------------------------------------
     async def call_service(
