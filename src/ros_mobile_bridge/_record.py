@@ -33,7 +33,7 @@ from typing import IO, TYPE_CHECKING, Any, Final
 import anyio
 import anyio.abc
 
-from ._errors import DecodeError, RosBridgeError
+from ._errors import ConnectError, DecodeError, NotConnected, RosBridgeError
 from ._types import Compression
 from ._version import __version__
 
@@ -234,13 +234,20 @@ class Recording:
         subscription = self._client.subscribe(
             topic, max_hz=max_hz, adaptive=adaptive, compression=compression
         )
-        async with subscription as sub:
-            while True:
-                try:
-                    frame = await sub._next_frame()
-                except StopAsyncIteration:
-                    return
-                self._write(frame)
+        try:
+            async with subscription as sub:
+                while True:
+                    try:
+                        frame = await sub._next_frame()
+                    except StopAsyncIteration:
+                        return
+                    try:
+                        self._write(frame)
+                    except (DecodeError, ValueError, TypeError) as exc:
+                        self._skip(frame, str(exc))
+        except (ConnectError, NotConnected) as exc:
+            # the client's status says so; the file keeps what came before
+            self._log.warning("record: %s stopped: %s", topic, exc)
 
     async def _follow_graph(
         self,
