@@ -11,6 +11,7 @@ the caller's failure."""
 from __future__ import annotations
 
 import itertools
+import json
 import logging
 from typing import Any
 
@@ -21,6 +22,7 @@ import ros_mobile_bridge as rmb
 from _util import wait_until
 from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph
+from ros_mobile_bridge.wire import rosbridge as rb
 
 pytest_plugins = ["peers.ros_fixtures"]
 pytestmark = pytest.mark.peer
@@ -327,3 +329,46 @@ async def test_served_again_after_a_reconnect(rosbridge_factory: Any, ros_graph:
             reply = await ros_call(ros_graph, name, TRIGGER, {})
             tg.cancel_scope.cancel()
     assert reply == {"response": {"success": True, "message": "still here"}}
+
+
+# -- the wire engine (sans-IO) -------------------------------------------------------
+
+
+def test_the_engine_reads_a_forwarded_call_and_builds_the_ops() -> None:
+    engine = rb.RosbridgeEngine()
+    frame = '{"op":"call_service","id":"service_request:/a:1","service":"/a","args":{"data":true}}'
+    assert engine.receive_text(frame) == [
+        rb.ServiceRequest("service_request:/a:1", "/a", {"data": True})
+    ]
+    no_args = engine.receive_text('{"op":"call_service","id":"q","service":"/a"}')
+    assert no_args == [rb.ServiceRequest("q", "/a", {})]
+    for bad in (
+        '{"op":"call_service","service":"/a"}',  # no id: cannot be answered
+        '{"op":"call_service","id":"q","service":"/a","args":[1]}',
+        '{"op":"call_service","id":"q"}',
+    ):
+        (event,) = engine.receive_text(bad)
+        assert isinstance(event, rb.ProtocolViolation)
+    assert json.loads(rb.RosbridgeEngine.advertise_service("/a", SETBOOL, id="x")) == {
+        "op": "advertise_service",
+        "id": "x",
+        "service": "/a",
+        "type": SETBOOL,
+    }
+    assert json.loads(rb.RosbridgeEngine.unadvertise_service("/a", id="x")) == {
+        "op": "unadvertise_service",
+        "id": "x",
+        "service": "/a",
+    }
+    ok = rb.RosbridgeEngine.service_response("/a", b'{"success":true}', id="q", result=True)
+    assert json.loads(ok) == {
+        "op": "service_response",
+        "id": "q",
+        "service": "/a",
+        "result": True,
+        "values": {"success": True},
+    }
+    failed = rb.RosbridgeEngine.service_response("/a", json.dumps("no"), id="q", result=False)
+    assert json.loads(failed)["values"] == "no"
+    with pytest.raises(TypeError):
+        rb.RosbridgeEngine.service_response("/a", "{}", id="q", result=1)  # type: ignore[arg-type]

@@ -1167,12 +1167,12 @@ class Client:
                 finally:
                     tg.cancel_scope.cancel()
         finally:
+            self._served.pop(name, None)
             with (
                 anyio.CancelScope(shield=True),
                 anyio.move_on_after(self._options.teardown_timeout),
             ):
                 await served._close("the service stopped serving")
-                self._served.pop(name, None)
                 if self.connected:
                     try:
                         await self._backend.unadvertise_service(name)

@@ -287,15 +287,15 @@ class ServiceRequests:
         while True:
             now = anyio.current_time()
             waiting = [r for r in (*self._queue, *self._open) if r._outcome is None]
-            for request in waiting:
-                if request.deadline <= now:
-                    await self._auto_fail(request, f"no answer within {self.timeout:g} s")
-            nearest = min(
-                (r.deadline for r in waiting if r._outcome is None and r.deadline > now),
-                default=math.inf,
-            )
+            expired = [r for r in waiting if r.deadline <= now]
+            for request in expired:
+                await self._auto_fail(request, f"no answer within {self.timeout:g} s")
+            if expired:
+                continue  # requests may have come meanwhile: look again
+            # no await from here to the wait: an arrival sets this very event
             self._changed = anyio.Event()
-            with anyio.move_on_after(nearest - anyio.current_time()):
+            nearest = min((r.deadline for r in waiting), default=math.inf)
+            with anyio.move_on_after(nearest - now):
                 await self._changed.wait()
 
     async def _close(self, reason: str) -> None:
