@@ -37,6 +37,11 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._options import BreakerPolicy as BreakerPolicy
     from ._options import ClientOptions as ClientOptions
     from ._options import ReconnectPolicy as ReconnectPolicy
+    from ._record import Recording as Recording
+    from ._record import RecordStats as RecordStats
+    from ._serve import ServeStats as ServeStats
+    from ._serve import ServiceRequest as ServiceRequest
+    from ._serve import ServiceRequests as ServiceRequests
     from ._signals import SignalScope as SignalScope
     from ._signals import cancel_on_signals as cancel_on_signals
     from ._sync import SyncActionGoal as SyncActionGoal
@@ -116,6 +121,11 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "SyncClient": ("._sync", "SyncClient"),
     "SyncSubscription": ("._sync", "SyncSubscription"),
     "connect_sync": ("._sync", "connect_sync"),
+    "Recording": ("._record", "Recording"),
+    "RecordStats": ("._record", "RecordStats"),
+    "ServeStats": ("._serve", "ServeStats"),
+    "ServiceRequest": ("._serve", "ServiceRequest"),
+    "ServiceRequests": ("._serve", "ServiceRequests"),
 }
 """Public name -> (private module relative to this package, its name there);
 ``("", name)`` is a public submodule. Kept equal to the ``TYPE_CHECKING``
@@ -169,11 +179,16 @@ __all__ = [
     "Priority",
     "ProtocolMismatchError",
     "ReconnectPolicy",
+    "RecordStats",
+    "Recording",
     "RosBridgeError",
     "SchemaError",
+    "ServeStats",
     "ServerInfo",
     "ServiceError",
     "ServiceInfo",
+    "ServiceRequest",
+    "ServiceRequests",
     "ServiceTimeout",
     "SignalScope",
     "Status",

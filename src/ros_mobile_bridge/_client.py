@@ -13,9 +13,9 @@ import math
 import random
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
-from contextlib import asynccontextmanager
+from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from functools import partial
-from typing import Any, Final, TypeVar
+from typing import TYPE_CHECKING, Any, Final, TypeVar
 
 import anyio
 import anyio.abc
@@ -27,11 +27,13 @@ from ._errors import (
     DecodeError,
     NotConnected,
     NotSupportedError,
+    RosBridgeError,
     SchemaError,
     ServiceTimeout,
 )
 from ._limits import truncate_for_log
 from ._options import ClientOptions
+from ._serve import DEFAULT_SERVE_BUFFER, DEFAULT_SERVE_TIMEOUT, ServiceRequests
 from ._types import (
     Compression,
     Dispatch,
@@ -59,6 +61,11 @@ from .flow import (
     participate,
     resolve_presets,
 )
+
+if TYPE_CHECKING:
+    import os
+
+    from ._record import Recording
 
 __all__ = ["Client"]
 
@@ -175,6 +182,7 @@ class Client:
         self._publish_checked: set[tuple[str, str, bool]] = set()
         self._publish_checked_for: tuple[Backend, list[TopicInfo]] | None = None
         self._rejections: dict[str, int] = {}
+        self._served: dict[str, ServiceRequests] = {}
 
     # -- lifecycle ----------------------------------------------------------
     @property
@@ -290,6 +298,8 @@ class Client:
         for subs in self._subs.values():
             for sub in subs:
                 sub._fail(NotConnected(f"disconnected: {error}"))
+        for served in self._served.values():
+            served._fail(NotConnected(f"disconnected: {error}"))
 
     async def _reconnect(self, error: ConnectError) -> bool:
         """Re-open the connection and restore its state. Returns False (with
@@ -342,6 +352,14 @@ class Client:
             await self._sync_topic(topic)
         if self._watched_parameters:
             await backend.subscribe_parameters(sorted(self._watched_parameters))
+        for name, served in list(self._served.items()):
+            try:
+                await backend.advertise_service(name, served.service_type, served, confirm=False)
+            except (ConnectError, NotConnected):
+                raise
+            except RosBridgeError as exc:  # refused now: that serve() block ends in error
+                self._log.error("could not serve %s again after the reconnect: %s", name, exc)
+                served._fail(exc)
 
     async def _next_connection(self, lost: Backend) -> bool:
         """Wait until a connection other than ``lost`` is up (the reader
@@ -414,6 +432,8 @@ class Client:
             for subs in self._subs.values():
                 for sub in subs:
                     sub.close()
+            for served in self._served.values():
+                served._fail(NotConnected("the client is closed"))
             self._topics.close()
             self._services.close()
             self._parameters.close()
@@ -1010,6 +1030,43 @@ class Client:
             raise ValueError(f"schema must be Twist or TwistStamped, got {schema!r}")
         await self.publish(topic, schema, self._zero(schema), priority="control")
 
+    # -- recording ----------------------------------------------------------
+    def record(
+        self,
+        path: str | os.PathLike[str],
+        *,
+        topics: Sequence[str] | None = None,
+        max_hz: float | None = None,
+        adaptive: bool = True,
+        compression: Compression | None = None,
+    ) -> AbstractAsyncContextManager[Recording]:
+        """Record what this client receives to the MCAP file ``path``; an
+        async context manager yielding a :class:`~ros_mobile_bridge.Recording`
+        (``rec.stats``)::
+
+            async with robot.record("run.mcap", topics=["/odom", "/scan"]) as rec:
+                await anyio.sleep(10)
+            print(rec.stats.messages)
+
+        ``topics`` None records every topic the server offers, and those it
+        offers later. Each topic is an ordinary subscription (``max_hz``, the
+        adaptive throttle unless ``adaptive=False``, and the circuit breaker
+        apply as to any other); the
+        file holds ROS 2 CDR messages with their full ``ros2msg`` schemas,
+        from any transport (rosbridge's JSON is encoded to CDR with the
+        connection's codec; ``compression="cbor-raw"`` has the bridge send
+        CDR instead). Leaving the block finishes the file (summary and
+        indexes), on every exit path, cancellation included. Needs the
+        ``mcap`` package (the ``[record]`` extra). Arguments are checked
+        here, at once (``ValueError`` / ``TypeError``); the file is created
+        on entering (``OSError``). See docs/recording.md."""
+        from ._record import check_record_args, open_recording
+
+        checked, wanted = check_record_args(path, topics, max_hz, compression)
+        if not isinstance(adaptive, bool):
+            raise TypeError("adaptive must be a bool")
+        return open_recording(self, checked, wanted, max_hz, adaptive, compression)
+
     # -- services -----------------------------------------------------------
     async def call_service(
         self, name: str, request: Mapping[str, Any] | None = None, *, timeout: float | None = None
@@ -1033,6 +1090,94 @@ class Client:
             timeout,
             slack=backend.wire_timeout_slack,
         )
+
+    def serve(
+        self,
+        name: str,
+        service_type: str,
+        *,
+        timeout: float = DEFAULT_SERVE_TIMEOUT,
+        buffer: int = DEFAULT_SERVE_BUFFER,
+    ) -> AbstractAsyncContextManager[ServiceRequests]:
+        """Offer service ``name`` of type ``service_type``
+        (``"pkg/srv/Name"``) to the ROS graph through the bridge; an async
+        context manager yielding :class:`~ros_mobile_bridge.ServiceRequests`::
+
+            async with robot.serve("/add", "example_interfaces/srv/AddTwoInts") as requests:
+                async for req in requests:
+                    await req.reply({"sum": req.args["a"] + req.args["b"]})
+
+        Every call is answered exactly once: by ``req.reply(values)`` or
+        ``req.fail(message)``, else with ``result: false`` and a reason when
+        ``timeout`` seconds pass, when the loop moves on to the next request,
+        or when the block ends; a call arriving while ``buffer`` unread ones
+        wait is refused at once (``stats.overflowed``). Leaving the block
+        unadvertises the service (shielded, within
+        ``options.teardown_timeout``). After a reconnect it is advertised
+        again; calls that were in flight on the lost connection are lost.
+
+        rosbridge only: ``NotSupportedError`` over Foxglove (its protocol has
+        no way to offer a service) and Zenoh. Arguments are checked here, at
+        once (``ValueError`` / ``TypeError``); entering raises
+        ``SchemaError`` when the bridge does not know the type,
+        ``ServiceError`` when another client serves the name, ``ValueError``
+        when this client serves it already."""
+        _check_name("service name", name)
+        _check_schema(service_type)
+        if service_type.count("/") == 2 and service_type.split("/")[1] != "srv":
+            raise ValueError(
+                f"service_type must be a service type like 'pkg/srv/Name', got {service_type!r}"
+            )
+        limit = _check_timeout(timeout)
+        if limit is None:
+            raise TypeError("timeout must be a number of seconds")
+        if isinstance(buffer, bool) or not isinstance(buffer, int):
+            raise TypeError("buffer must be an int")
+        if buffer < 1:
+            raise ValueError(f"buffer must be at least 1, got {buffer}")
+        return self._serve(name, service_type, limit, buffer)
+
+    @asynccontextmanager
+    async def _serve(
+        self, name: str, service_type: str, timeout: float, buffer: int
+    ) -> AsyncIterator[ServiceRequests]:
+        self._require_connected()
+        if name in self._served:
+            raise ValueError(f"{name} is served by this client already")
+        served = ServiceRequests(
+            name,
+            service_type,
+            timeout=timeout,
+            buffer=buffer,
+            current=lambda: self._backend if self.connected else None,
+            teardown_timeout=self._options.teardown_timeout,
+            logger=self._log,
+        )
+        self._served[name] = served
+        try:
+            await self._backend.advertise_service(name, service_type, served)
+        except BaseException:
+            self._served.pop(name, None)
+            raise
+        try:
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(served._expire, name=f"rmb-serve-{name}")
+                try:
+                    yield served
+                finally:
+                    tg.cancel_scope.cancel()
+        finally:
+            self._served.pop(name, None)
+            with (
+                anyio.CancelScope(shield=True),
+                anyio.move_on_after(self._options.teardown_timeout),
+            ):
+                await served._close("the service stopped serving")
+                if self.connected:
+                    try:
+                        await self._backend.unadvertise_service(name)
+                    except RosBridgeError as exc:
+                        self._log.debug("unadvertising %s failed: %s", name, exc)
 
     async def _request(
         self,

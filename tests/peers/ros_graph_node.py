@@ -37,6 +37,9 @@ JSON line on stdout, ``{"ok": true, "result": ...}`` or ``{"ok": false,
 - ``stop`` {topic}: destroy a publisher started by ``publish``/``image``;
 - ``count`` {topic}: how many messages were published on a topic so far;
 - ``param`` {name}: the current value of an ``rmb_params`` parameter;
+- ``call`` {service, type, args={}, timeout=5}: call a service from this ROS
+  node (a real ROS client); answers ``{"response": {...}}``, or
+  ``{"timeout": true}`` when no response came within ``timeout`` seconds;
 - ``ping``: answers "pong";
 - ``quit``: answers, then exits. End of input also exits.
 """
@@ -296,6 +299,23 @@ class Graph:
             goal_handle.succeed()
         return Fibonacci.Result(sequence=sequence)
 
+    def call(self, service: str, typename: str, args: dict[str, Any], timeout: float) -> Any:
+        pkg, _, name = typename.split("/")
+        cls = getattr(importlib.import_module(f"{pkg}.srv"), name)
+        client = self.node.create_client(cls, service, callback_group=self.reentrant)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                return {"timeout": True, "available": False}
+            future = client.call_async(fill(cls.Request(), args))
+            done = threading.Event()
+            future.add_done_callback(lambda _f: done.set())
+            if not done.wait(timeout):
+                future.cancel()
+                return {"timeout": True, "available": True}
+            return {"response": to_jsonable(future.result())}
+        finally:
+            self.node.destroy_client(client)
+
     # commands
 
     def command(self, request: dict[str, Any]) -> Any:
@@ -332,6 +352,13 @@ class Graph:
         if cmd == "count":
             with self.lock:
                 return self.published.get(topic, 0)
+        if cmd == "call":
+            return self.call(
+                str(request["service"]),
+                str(request["type"]),
+                request.get("args", {}),
+                float(request.get("timeout", 5.0)),
+            )
         if cmd == "param":
             return self.params.get_parameter(str(request["name"])).value
         raise ValueError(f"unknown command {cmd!r}")

@@ -4,6 +4,7 @@ from ._base import Advertisement as Advertisement
 from ._base import Backend as Backend
 from ._base import BackendEvents as BackendEvents
 from ._base import GoalEvents as GoalEvents
+from ._base import ServiceHandler as ServiceHandler
 from ._base import SubscribeHints as SubscribeHints
 from ._base import open_websocket as open_websocket
 from ._foxglove import FoxgloveBackend as FoxgloveBackend

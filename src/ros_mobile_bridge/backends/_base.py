@@ -23,6 +23,7 @@ __all__ = [
     "Backend",
     "BackendEvents",
     "GoalEvents",
+    "ServiceHandler",
     "SubscribeHints",
     "open_websocket",
     "socket_frame",
@@ -132,6 +133,14 @@ class GoalEvents(Protocol):
         """The goal is lost (refused by the server, or the connection went)."""
 
 
+class ServiceHandler(Protocol):
+    """Where a backend hands the calls to a service this client serves."""
+
+    async def on_service_request(self, backend: Backend, request_id: str, args: Any) -> None:
+        """A call arrived on ``backend`` (runs in the reader task: it may send
+        an answer, and must not wait for anything else)."""
+
+
 class BackendEvents(Protocol):
     """Callbacks the backend's reader makes into the client. All run in the
     reader task and must not block."""
@@ -219,6 +228,25 @@ class Backend(Protocol):
         """Call ``name`` and return the decoded response. ``timeout`` is
         forwarded where the protocol carries one; the client owns the
         deadline. Raises ``ServiceError`` on failure."""
+
+    async def advertise_service(
+        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
+    ) -> None:
+        """Serve ``name`` (type ``pkg/srv/Name``): calls go to ``handler``.
+        With ``confirm``, returns once the server accepted it (this needs the
+        reader running) and raises ``SchemaError`` (unknown type) or
+        ``ServiceError`` when it refused; without, returns once sent (a
+        refusal is logged: restoring after a reconnect, before the new
+        connection's reader runs). ``NotSupportedError`` where the protocol
+        cannot serve."""
+
+    async def unadvertise_service(self, name: str) -> None:
+        """Stop serving ``name`` (a no-op when not served)."""
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        """Answer the call ``request_id`` to ``name``: ``values`` is the
+        response (``result`` True) or the reason text (False). ``DecodeError``
+        when the response does not fit the type."""
 
     async def send_action_goal(
         self, action: str, action_type: str, goal: Any, events: GoalEvents

@@ -35,6 +35,7 @@ from ._base import (
     Advertisements,
     BackendEvents,
     GoalEvents,
+    ServiceHandler,
     SubscribeHints,
     open_websocket,
     socket_frame,
@@ -533,6 +534,18 @@ class FoxgloveBackend:
             return decode(response.payload)
         except DecodeError as exc:
             raise ServiceError(name, f"the response does not decode: {exc}") from exc
+
+    # -- serving -------------------------------------------------------------
+    async def advertise_service(
+        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
+    ) -> None:
+        raise NotSupportedError("the Foxglove protocol lets a client call services, not offer them")
+
+    async def unadvertise_service(self, name: str) -> None:
+        return None
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        raise NotSupportedError("the Foxglove protocol lets a client call services, not offer them")
 
     # -- actions --------------------------------------------------------------
     async def send_action_goal(

@@ -43,6 +43,7 @@ from ._base import (
     Advertisements,
     BackendEvents,
     GoalEvents,
+    ServiceHandler,
     SubscribeHints,
     open_websocket,
     socket_frame,
@@ -154,6 +155,19 @@ class _Publisher(Advertisement):
     error: str | None = None
 
 
+@dataclass(slots=True)
+class _Served:
+    """A service this connection serves (``advertise_service``)."""
+
+    type: str
+    handler: ServiceHandler
+    id: str
+    error: str | None = None
+
+
+_FAILED_ANSWERS_KEPT: Final = 256
+
+
 class RosbridgeBackend:
     """One rosbridge v2 connection (see :class:`~.Backend`)."""
 
@@ -193,6 +207,8 @@ class RosbridgeBackend:
         self._foreign: str | None = None  # why the server looks like Foxglove
         self._over_limit: set[str] = set()  # graph limits exceeded at the last poll
         self._deferred: list[tuple[str, str]] = []  # rejections before run()
+        self._served: dict[str, _Served] = {}
+        self._failed_answers: dict[str, str] = {}  # request id -> service, answered false
 
     # -- helpers ---------------------------------------------------------------
     def _next_id(self, kind: str) -> str:
@@ -367,6 +383,14 @@ class RosbridgeBackend:
         if isinstance(event, rb.ServiceResponse):
             if event.id is None or not self._calls.resolve(event.id, event):
                 self._log.debug("a service_response nobody waits for (id %r)", event.id)
+        elif isinstance(event, rb.ServiceRequest):
+            served = self._served.get(event.service)
+            if served is None:  # not (or no longer) ours: never leave it waiting
+                await self.respond_service(
+                    event.service, event.id, "this client does not serve it", False
+                )
+            else:
+                await served.handler.on_service_request(self, event.id, event.args)
         elif isinstance(event, rb.ActionFeedback):
             goal = self._goals.get(event.id or "")
             if goal is not None:
@@ -397,6 +421,27 @@ class RosbridgeBackend:
             if pub.id == key and error:
                 pub.error = event.msg
                 return
+        for name, served in self._served.items():
+            if served.id == key and error:
+                served.error = event.msg
+                self._log.error("the bridge refused to serve %s: %s", name, event.msg)
+                return
+        if error and key.startswith("service_request:"):
+            service = self._failed_answers.pop(key, None)
+            if service is not None:
+                # rosbridge_server_rs: "ROS services cannot carry an error
+                # response; request will time out"
+                self._log.info(
+                    "%s: answered %s with result false; the bridge says: %s",
+                    service,
+                    key,
+                    truncate_for_log(event.msg),
+                )
+            else:
+                self._log.warning(
+                    "the bridge refused the answer to %s: %s", key, truncate_for_log(event.msg)
+                )
+            return
         topic = self._sub_topics.get(key)
         if topic is not None and error:
             wire = self._subs.get(topic)
@@ -707,6 +752,76 @@ class RosbridgeBackend:
     # -- services ------------------------------------------------------------------
     async def call_service(self, name: str, request: Any, timeout: float) -> Any:
         return await self._call(name, dict(request) if request is not None else {}, timeout)
+
+    # -- serving -------------------------------------------------------------------------
+    async def advertise_service(
+        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
+    ) -> None:
+        if name in self._served:
+            raise ValueError(f"{name} is served by this client already")
+        served = _Served(service_type, handler, self._next_id(f"advertise_service:{name}"))
+        self._served[name] = served
+        try:
+            await self._ws.send(self._engine.advertise_service(name, service_type, id=served.id))
+            if not confirm:
+                return  # a refusal is logged when it arrives
+            await self._confirm_served(name, served)
+            if served.error is not None:
+                text = served.error
+                if "another client" in text:
+                    raise ServiceError(name, f"the bridge refused to serve it: {text}")
+                raise SchemaError(f"the bridge refused to serve {name} as {service_type}: {text}")
+        except BaseException:
+            self._served.pop(name, None)
+            raise
+
+    async def _confirm_served(self, name: str, served: _Served) -> None:
+        """Wait until the bridge refused ``name`` (``served.error``) or the
+        graph shows it served with its type. rosbridge_server_rs may report
+        a refusal after answering requests sent later, so a round trip is no
+        proof; the graph is. ``ServiceError`` when neither came within the
+        backend's own deadline."""
+        with anyio.move_on_after(_INTERNAL_TIMEOUT):
+            while served.error is None:
+                try:
+                    answer = await self._rosapi("/rosapi/service_type", {"service": name})
+                except ServiceError:
+                    answer = None
+                found = answer.get("type") if isinstance(answer, dict) else None
+                if served.error is None and isinstance(found, str) and found:
+                    if same_type_name(found, served.type):
+                        return
+                    served.error = f"the graph has {name} as {found}"
+                    return
+                await anyio.sleep(0.05)
+            return
+        raise ServiceError(
+            name, f"the bridge did not confirm serving it in {_INTERNAL_TIMEOUT:g} s"
+        )
+
+    async def unadvertise_service(self, name: str) -> None:
+        served = self._served.pop(name, None)
+        if served is not None and not self._ws.closed:
+            await self._ws.send(self._engine.unadvertise_service(name, id=served.id))
+            await self._round_trip()  # served no more once this returns
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        if result:
+            served = self._served.get(name)
+            body: str | bytes
+            if served is not None:
+                response = CodecRegistry.service_type_names(served.type)[1]
+                if self.codecs.has_schema(response):
+                    self.codecs.encoder(response, "cdr")(values)  # DecodeError naming the field
+                body = self.codecs.encoder(response, "json")(values)
+            else:
+                body = json.dumps(values)
+        else:
+            body = json.dumps(str(values))
+            if len(self._failed_answers) >= _FAILED_ANSWERS_KEPT:
+                del self._failed_answers[next(iter(self._failed_answers))]
+            self._failed_answers[request_id] = name
+        await self._ws.send(self._engine.service_response(name, body, id=request_id, result=result))
 
     # -- actions ---------------------------------------------------------------------
     async def send_action_goal(

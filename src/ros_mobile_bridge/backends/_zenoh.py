@@ -66,7 +66,14 @@ from ..transport._zenoh import (
     ZenohSession,
 )
 from ..wire import rmw_zenoh as rz
-from ._base import Advertisement, Advertisements, BackendEvents, GoalEvents, SubscribeHints
+from ._base import (
+    Advertisement,
+    Advertisements,
+    BackendEvents,
+    GoalEvents,
+    ServiceHandler,
+    SubscribeHints,
+)
 
 __all__ = ["ZenohBackend", "open_zenoh"]
 
@@ -695,6 +702,18 @@ class ZenohBackend:
         if srv_type is None:
             raise ServiceError(name, "no server offers this service on this domain")
         return await self._request(name, srv_type, request, timeout)
+
+    # -- serving -------------------------------------------------------------
+    async def advertise_service(
+        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
+    ) -> None:
+        raise NotSupportedError("serving a service over Zenoh is not implemented (rosbridge can)")
+
+    async def unadvertise_service(self, name: str) -> None:
+        return None
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        raise NotSupportedError("serving a service over Zenoh is not implemented (rosbridge can)")
 
     # -- actions ----------------------------------------------------------------------------
     async def send_action_goal(

@@ -505,6 +505,25 @@ class CodecRegistry:
             _SHARED.put(shared_key, decode)
             return decode
 
+    def ros2msg_text(self, schema_name: str) -> str:
+        """The ``.msg`` text of ``schema_name`` with the definition of every
+        type it uses appended in the concatenated form (an ``=`` * 80 line,
+        then ``MSG: pkg/Type`` and its text): what an MCAP file's ``ros2msg``
+        schema and rosbag2 carry. Generated from the definition this registry
+        decodes and encodes with. :class:`SchemaError` when it has none."""
+        with self._lock:
+            key, msgdef = self._find_ros(schema_name)
+            gen = self._prepare(key, msgdef)
+            text, _digest = gen.store.generate_msgdef(key, ros_version=2)
+        return text
+
+    def jsonschema(self, schema_name: str) -> dict[str, Any] | bool | None:
+        """The JSON schema registered for ``schema_name`` (a channel with
+        ``jsonschema`` encoding), or None."""
+        with self._lock:
+            entry = self._own.get(canonical_name(schema_name))
+        return entry.schema if isinstance(entry, _JsonSchema) else None
+
     def encoder(
         self, schema_name: str, message_encoding: str
     ) -> Callable[[Mapping[str, Any]], bytes]:

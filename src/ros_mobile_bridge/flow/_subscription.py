@@ -396,6 +396,18 @@ class Subscription:
             self._since_yield = _YIELD_EVERY  # yield before the next big decode
         return message
 
+    async def _next_frame(self) -> RawFrame:
+        """The next frame, not decoded (the recorder writes CDR payloads as
+        they came). It passed the same filters (throttle, breaker, buffer)
+        and counts as delivered; raises like ``__anext__``."""
+        frame = self._queue.take()
+        if frame is None:
+            frame = await self._wait()
+        else:
+            await anyio.lowlevel.checkpoint()
+        self._queue.delivered += 1
+        return frame
+
     async def _wait(self) -> RawFrame:
         """The next frame once one arrives; ``StopAsyncIteration`` once the
         subscription is closed and drained (the connection's error instead,

@@ -51,6 +51,7 @@ __all__ = [
     "Publish",
     "PublishKind",
     "RosbridgeEngine",
+    "ServiceRequest",
     "ServiceResponse",
     "Status",
     "decode_cbor_msg",
@@ -132,6 +133,17 @@ class ServiceResponse:
 
 
 @dataclass(frozen=True, slots=True)
+class ServiceRequest:
+    """The server forwards a call to a service this client advertised
+    (``advertise_service``): answer it with
+    :meth:`RosbridgeEngine.service_response` and the same ``id``."""
+
+    id: str
+    service: str
+    args: Any
+
+
+@dataclass(frozen=True, slots=True)
 class ActionFeedback:
     id: str | None
     action: str
@@ -183,6 +195,7 @@ class ProtocolViolation:
 Event = (
     Publish
     | ServiceResponse
+    | ServiceRequest
     | ActionFeedback
     | ActionResult
     | Status
@@ -572,6 +585,8 @@ class RosbridgeEngine:
                 return [self._service_response(obj)]
             if op == "status":
                 return [self._status(obj)]
+            if op == "call_service":
+                return [self._service_request(obj)]
             if op == "fragment":
                 return self._fragment(obj)
             if op == "action_feedback":
@@ -599,6 +614,18 @@ class RosbridgeEngine:
         if not isinstance(result, bool):
             raise _FieldError("'result' is not a bool")
         return ServiceResponse(_opt_id(obj), _str(obj, "service", ""), result, obj.get("values"))
+
+    @staticmethod
+    def _service_request(obj: dict[str, Any]) -> ServiceRequest:
+        request_id = obj.get("id")
+        if not isinstance(request_id, str) or not request_id:
+            raise _FieldError("a forwarded call without a string 'id' cannot be answered")
+        args = obj.get("args", {})
+        if args is None:
+            args = {}
+        if not isinstance(args, dict):
+            raise _FieldError("'args' is not an object")
+        return ServiceRequest(request_id, _str(obj, "service"), args)
 
     @staticmethod
     def _status(obj: dict[str, Any]) -> Status:
@@ -814,6 +841,48 @@ class RosbridgeEngine:
                 raise ValueError(f"timeout must be positive and finite, got {timeout!r}")
             obj["timeout"] = timeout
         return _json(obj)
+
+    @staticmethod
+    def advertise_service(service: str, type: str, *, id: str) -> str:
+        """``advertise_service``: this client serves ``service`` of ``type``
+        (``pkg/srv/Name``); the server then forwards calls as ``call_service``
+        ops (:class:`ServiceRequest`)."""
+        return _json(
+            {
+                "op": "advertise_service",
+                "id": _check_str("id", id),
+                "service": _check_str("service", service),
+                "type": _check_str("type", type),
+            }
+        )
+
+    @staticmethod
+    def unadvertise_service(service: str, *, id: str) -> str:
+        return _json(
+            {
+                "op": "unadvertise_service",
+                "id": _check_str("id", id),
+                "service": _check_str("service", service),
+            }
+        )
+
+    @staticmethod
+    def service_response(service: str, values_json: str | bytes, *, id: str, result: bool) -> str:
+        """``service_response`` to the forwarded call ``id``. ``values_json``
+        is the response already encoded as JSON (``result`` True), or the
+        reason as a JSON string (``result`` False)."""
+        if not isinstance(result, bool):
+            raise TypeError("result must be a bool")
+        body = values_json.decode() if isinstance(values_json, bytes) else values_json
+        head = _json(
+            {
+                "op": "service_response",
+                "id": _check_str("id", id),
+                "service": _check_str("service", service),
+                "result": result,
+            }
+        )
+        return f'{head[:-1]},"values":{body}}}'
 
     @staticmethod
     def send_action_goal(

@@ -1,0 +1,317 @@
+"""Serving a service: the objects :meth:`Client.serve` hands out.
+
+The backend's reader hands each forwarded call to :class:`ServiceRequests`
+(``on_service_request``), which queues it (bounded) for the consumer's
+``async for``. Every request is answered exactly once: by the consumer
+(:meth:`ServiceRequest.reply` / :meth:`ServiceRequest.fail`), or with
+``result: false`` and a reason when the queue is full, when its deadline
+passes, when the consumer moves on to the next request without answering, or
+when the ``serve()`` block ends. A request is never left waiting on the
+server's side because of this client."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any, Final, Literal
+
+import anyio
+
+from ._errors import ConnectError, DecodeError, NotConnected, RosBridgeError, ServiceError
+from .backends import Backend
+
+__all__ = ["ServeStats", "ServiceRequest", "ServiceRequests"]
+
+DEFAULT_SERVE_TIMEOUT: Final = 10.0
+DEFAULT_SERVE_BUFFER: Final = 16
+
+Outcome = Literal["replied", "failed", "unanswered", "overflowed", "lost"]
+
+
+@dataclass(frozen=True, slots=True)
+class ServeStats:
+    """Counters of one ``serve()`` block (a snapshot).
+
+    ``received``: calls that arrived. Each ends in exactly one of:
+    ``replied`` (:meth:`ServiceRequest.reply`), ``failed``
+    (:meth:`ServiceRequest.fail`), ``unanswered`` (answered ``result: false``
+    by the library: its deadline passed, the consumer moved on, or the block
+    ended), ``overflowed`` (answered ``result: false`` on arrival: ``buffer``
+    unread requests were already queued), ``lost`` (the connection that
+    carried it went away before it was answered; the bridge dropped it).
+    ``pending`` are the ones not answered yet."""
+
+    received: int = 0
+    replied: int = 0
+    failed: int = 0
+    unanswered: int = 0
+    overflowed: int = 0
+    lost: int = 0
+
+    @property
+    def pending(self) -> int:
+        return self.received - (
+            self.replied + self.failed + self.unanswered + self.overflowed + self.lost
+        )
+
+
+class ServiceRequest:
+    """One call to a service this client serves. ``args`` is the decoded
+    request (a dict), ``id`` the server's id for the call, ``service`` the
+    service name, ``deadline`` the ``anyio.current_time()`` after which the
+    library answers it ``result: false``.
+
+    Answer it once, with :meth:`reply` or :meth:`fail`."""
+
+    __slots__ = ("_backend", "_outcome", "_owner", "args", "deadline", "id", "service")
+
+    def __init__(
+        self,
+        owner: ServiceRequests,
+        backend: Backend,
+        request_id: str,
+        args: dict[str, Any],
+        deadline: float,
+    ) -> None:
+        self._owner = owner
+        self._backend = backend
+        self._outcome: Outcome | None = None
+        self.id = request_id
+        self.service = owner.name
+        self.args = args
+        self.deadline = deadline
+
+    def __repr__(self) -> str:
+        return f"ServiceRequest({self.service!r}, id={self.id!r}, args={self.args!r})"
+
+    @property
+    def answered(self) -> bool:
+        """Whether this request has been answered (by anyone)."""
+        return self._outcome is not None
+
+    @property
+    def outcome(self) -> Outcome | None:
+        """How it was answered (a :class:`ServeStats` counter name), or None."""
+        return self._outcome
+
+    async def reply(self, values: Mapping[str, Any] | None = None) -> None:
+        """Answer with the response ``values`` (a dict; missing fields are
+        zero when the type is known). Raises ``TypeError`` for a value that
+        is not a mapping, ``ValueError`` when it does not fit the response
+        type (the request stays unanswered then), ``ServiceError`` when the
+        request was answered already (by the library at its deadline, for
+        instance) and ``NotConnected`` when the connection that carried it
+        is gone (the caller gets no answer)."""
+        if values is None:
+            values = {}
+        if not isinstance(values, Mapping):
+            raise TypeError(f"values must be a mapping (dict), not {type(values).__name__}")
+        await self._owner._answer(self, "replied", dict(values), True)
+
+    async def fail(self, message: str = "the service failed") -> None:
+        """Answer with ``result: false`` and ``message``. The rosbridge
+        protocol carries it; a ROS 2 service cannot: a ROS caller behind
+        rosbridge_server_rs gets no answer and fails at its own timeout (see
+        docs/serving.md). Raises like :meth:`reply`."""
+        if not isinstance(message, str):
+            raise TypeError(f"message must be a str, not {type(message).__name__}")
+        await self._owner._answer(self, "failed", message, False)
+
+
+class ServiceRequests:
+    """The requests to one served service, in arrival order: ``async for req
+    in requests``. Yielded by :meth:`Client.serve`.
+
+    Moving on to the next request answers the previous one ``result: false``
+    if the loop body did not. The iteration raises ``NotConnected`` when the
+    connection is lost for good, and ends when the ``serve()`` block ends."""
+
+    def __init__(
+        self,
+        name: str,
+        service_type: str,
+        *,
+        timeout: float,
+        buffer: int,
+        current: Callable[[], Backend | None],
+        teardown_timeout: float,
+        logger: logging.Logger,
+    ) -> None:
+        self.name = name
+        self.service_type = service_type
+        self.timeout = timeout
+        self.buffer = buffer
+        self._current = current
+        self._teardown_timeout = teardown_timeout
+        self._log = logger
+        self._queue: deque[ServiceRequest] = deque()
+        self._open: list[ServiceRequest] = []  # taken by the consumer, not answered
+        self._taken: ServiceRequest | None = None
+        self._wake = anyio.Event()
+        self._changed = anyio.Event()
+        self._closed = False
+        self._error: RosBridgeError | None = None
+        self._counts: dict[str, int] = dict.fromkeys(
+            ("received", "replied", "failed", "unanswered", "overflowed", "lost"), 0
+        )
+
+    @property
+    def stats(self) -> ServeStats:
+        """The counters so far (see :class:`ServeStats`)."""
+        return ServeStats(**self._counts)
+
+    # -- from the backend's reader ------------------------------------------------
+    async def on_service_request(self, backend: Backend, request_id: str, args: Any) -> None:
+        """Queue a forwarded call; answer ``result: false`` at once when
+        serving ended or ``buffer`` requests already wait."""
+        self._counts["received"] += 1
+        if self._closed:
+            self._counts["unanswered"] += 1
+            await backend.respond_service(
+                self.name, request_id, "the service is shutting down", False
+            )
+            return
+        if len(self._queue) >= self.buffer:
+            self._counts["overflowed"] += 1
+            self._log.warning(
+                "%s: %d requests already wait to be read; a call was refused",
+                self.name,
+                self.buffer,
+            )
+            await backend.respond_service(
+                self.name,
+                request_id,
+                f"the service is busy: {self.buffer} requests already wait",
+                False,
+            )
+            return
+        deadline = anyio.current_time() + self.timeout
+        self._queue.append(ServiceRequest(self, backend, request_id, args, deadline))
+        self._wake.set()
+        self._changed.set()
+
+    # -- the consumer --------------------------------------------------------------
+    def __aiter__(self) -> ServiceRequests:
+        return self
+
+    async def __anext__(self) -> ServiceRequest:
+        previous, self._taken = self._taken, None
+        if previous is not None and not previous.answered:
+            await self._auto_fail(previous, "the handler moved on without answering")
+        while True:
+            while self._queue:
+                request = self._queue.popleft()
+                if request.answered:
+                    continue  # expired while queued
+                if request._backend is not self._current():
+                    self._settle(request, "lost")
+                    continue
+                self._taken = request
+                self._open.append(request)
+                return request
+            if self._error is not None:
+                raise self._error
+            if self._closed:
+                raise StopAsyncIteration
+            self._wake = anyio.Event()
+            await self._wake.wait()
+
+    # -- answering -----------------------------------------------------------------
+    def _settle(self, request: ServiceRequest, outcome: Outcome) -> None:
+        request._outcome = outcome
+        self._counts[outcome] += 1
+        if request in self._open:
+            self._open.remove(request)
+        self._changed.set()
+
+    async def _answer(
+        self, request: ServiceRequest, outcome: Outcome, values: Any, result: bool
+    ) -> None:
+        if request._outcome is not None:
+            raise ServiceError(
+                self.name, f"request {request.id} was answered already ({request._outcome})"
+            )
+        backend = request._backend
+        if backend is not self._current():
+            self._settle(request, "lost")
+            raise NotConnected(
+                f"the connection that carried request {request.id} to {self.name} is gone;"
+                " the caller got no answer"
+            )
+        request._outcome = outcome  # claimed: the deadline cannot answer it too
+        try:
+            await backend.respond_service(self.name, request.id, values, result)
+        except DecodeError as exc:
+            request._outcome = None  # still the caller's to answer
+            raise ValueError(f"{self.name}: {exc}") from exc
+        except ConnectError as exc:
+            request._outcome = None
+            self._settle(request, "lost")
+            raise NotConnected(
+                f"disconnected: {exc} (the answer to {request.id} was not sent)"
+            ) from exc
+        except BaseException:
+            request._outcome = None
+            self._settle(request, "lost")
+            raise
+        request._outcome = None
+        self._settle(request, outcome)
+
+    async def _auto_fail(self, request: ServiceRequest, reason: str) -> None:
+        """Answer ``result: false`` with ``reason`` on the consumer's behalf
+        (never raises; a lost connection counts the request as lost)."""
+        if request._outcome is not None:
+            return
+        backend = request._backend
+        if backend is not self._current():
+            self._settle(request, "lost")
+            return
+        self._log.info("%s: request %s answered result false: %s", self.name, request.id, reason)
+        request._outcome = "unanswered"
+        try:
+            await backend.respond_service(self.name, request.id, reason, False)
+        except RosBridgeError as exc:
+            request._outcome = None
+            self._settle(request, "lost")
+            self._log.debug("%s: could not answer %s: %s", self.name, request.id, exc)
+            return
+        request._outcome = None
+        self._settle(request, "unanswered")
+
+    async def _expire(self) -> None:
+        """Answer every request whose deadline passed (a task in the
+        ``serve()`` block's task group)."""
+        while True:
+            now = anyio.current_time()
+            waiting = [r for r in (*self._queue, *self._open) if r._outcome is None]
+            expired = [r for r in waiting if r.deadline <= now]
+            for request in expired:
+                await self._auto_fail(request, f"no answer within {self.timeout:g} s")
+            if expired:
+                continue  # requests may have come meanwhile: look again
+            # no await from here to the wait: an arrival sets this very event
+            self._changed = anyio.Event()
+            nearest = min((r.deadline for r in waiting), default=math.inf)
+            with anyio.move_on_after(nearest - now):
+                await self._changed.wait()
+
+    async def _close(self, reason: str) -> None:
+        """End serving: answer every request not answered yet (shielded,
+        within the teardown deadline) and end the iteration."""
+        self._closed = True
+        self._wake.set()
+        with anyio.CancelScope(shield=True), anyio.move_on_after(self._teardown_timeout):
+            for request in [*self._open, *self._queue]:
+                await self._auto_fail(request, reason)
+        for request in [*self._open, *self._queue]:
+            if request._outcome is None:
+                self._settle(request, "lost")
+        self._queue.clear()
+
+    def _fail(self, error: RosBridgeError) -> None:
+        """The connection is lost for good: the iteration raises ``error``."""
+        self._error = error
+        self._wake.set()

@@ -1,0 +1,314 @@
+"""Recording to MCAP (``Client.record``) against real peers: the demo robot
+(the official Foxglove SDK server, CDR and JSON channels) and
+rosbridge_server_rs on a real ROS 2 graph (JSON messages encoded to CDR by
+the library, and cbor-raw CDR). Files are read back with ``mcap``'s own
+reader and ``mcap_ros2``'s decoder; every recorded message must equal what a
+parallel subscription of the same client received over the same window."""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import contextlib
+import itertools
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import anyio
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+import ros_mobile_bridge as rmb
+from _util import wait_until
+from peers.rosbridge import RosBridge, RosGraph
+from ros_mobile_bridge._record_cli import add_parser, run
+from ros_mobile_bridge.demo import DemoRobot
+
+pytest_plugins = ["peers.ros_fixtures"]
+
+_unique = itertools.count()
+
+
+def options(**kw: Any) -> rmb.ClientOptions:
+    base: dict[str, Any] = {
+        "connect_timeout": 10.0,
+        "discovery_interval": 0.25,
+        "teardown_timeout": 3.0,
+        "reconnect": None,
+    }
+    base.update(kw)
+    return rmb.ClientOptions(**base)
+
+
+@pytest.fixture
+def demo() -> Iterator[DemoRobot]:
+    with DemoRobot(rate_hz=50.0, camera_hz=10.0) as robot:
+        yield robot
+
+
+def plain(value: Any) -> Any:
+    """A decoded message (ours: dicts and numpy arrays; mcap_ros2's: objects
+    with slots) as plain lists, dicts and scalars."""
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, bytes | bytearray | memoryview):
+        return list(bytes(value))
+    if isinstance(value, list | tuple):
+        return [plain(v) for v in value]
+    slots = getattr(type(value), "__slots__", None)
+    if slots:
+        return {name: plain(getattr(value, name)) for name in slots}
+    return value
+
+
+def read_back(path: Path) -> tuple[dict[str, list[Any]], dict[str, Any]]:
+    """Per topic, the JSON messages parsed (CDR ones as raw bytes), and each
+    topic's (message encoding, schema)."""
+    out: dict[str, list[Any]] = {}
+    schemas: dict[str, Any] = {}
+    with path.open("rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            schemas[channel.topic] = (channel.message_encoding, schema)
+            data = json.loads(message.data) if channel.message_encoding == "json" else message.data
+            out.setdefault(channel.topic, []).append(data)
+    return out, schemas
+
+
+def decode_all(path: Path) -> dict[str, list[tuple[int, Any]]]:
+    out: dict[str, list[tuple[int, Any]]] = {}
+    with path.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _schema, channel, message, decoded in reader.iter_decoded_messages(
+            log_time_order=False
+        ):
+            out.setdefault(channel.topic, []).append((message.log_time, plain(decoded)))
+    return out
+
+
+async def collect(sub: rmb.Subscription, into: list[rmb.Message]) -> None:
+    async for msg in sub:
+        into.append(msg)
+
+
+def same_window(
+    recorded: list[tuple[int, Any]], received: list[rmb.Message]
+) -> tuple[list[Any], list[Any]]:
+    """The parallel subscription's messages received within the recording's
+    first..last log time (the recorder logs the frame's receive time), and
+    the recorded ones, both as plain data."""
+    first, last = recorded[0][0], recorded[-1][0]
+    window = [plain(m.data) for m in received if first <= m.receive_time_ns <= last]
+    return window, [data for _t, data in recorded]
+
+
+def summary_count(path: Path) -> int:
+    with path.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and summary.statistics is not None
+    return int(summary.statistics.message_count)
+
+
+# -- arguments ------------------------------------------------------------------------
+
+
+async def test_bad_arguments_raise_at_once(demo: DemoRobot, tmp_path: Path) -> None:
+    async with rmb.connect(demo.url, options=options()) as robot:
+        with pytest.raises(TypeError):
+            robot.record(42)  # type: ignore[arg-type]
+        with pytest.raises(TypeError, match="sequence"):
+            robot.record(tmp_path / "x.mcap", topics="/odom")  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="absolute"):
+            robot.record(tmp_path / "x.mcap", topics=["odom"])
+        with pytest.raises(ValueError, match="at least one"):
+            robot.record(tmp_path / "x.mcap", topics=[])
+        with pytest.raises(ValueError, match="max_hz"):
+            robot.record(tmp_path / "x.mcap", max_hz=0)
+        with pytest.raises(ValueError, match="compression"):
+            robot.record(tmp_path / "x.mcap", compression="png")  # type: ignore[arg-type]
+        with pytest.raises(FileNotFoundError):
+            async with robot.record(tmp_path / "no" / "such" / "dir.mcap"):
+                pytest.fail("recorded into a missing directory")
+    assert not (tmp_path / "x.mcap").exists()
+
+
+# -- Foxglove (the demo robot) --------------------------------------------------------
+
+
+async def test_demo_topics_round_trip_through_mcap(demo: DemoRobot, tmp_path: Path) -> None:
+    path = tmp_path / "demo.mcap"
+    topics = ["/odom", "/battery", "/camera/image/compressed"]
+    received: dict[str, list[rmb.Message]] = {t: [] for t in topics}
+    async with (
+        rmb.connect(demo.url, options=options()) as robot,
+        contextlib.AsyncExitStack() as stack,
+        anyio.create_task_group() as tg,
+    ):
+        for topic in topics:
+            sub = await stack.enter_async_context(
+                robot.subscribe(topic, adaptive=False, buffer=10_000)
+            )
+            tg.start_soon(collect, sub, received[topic])
+        async with robot.record(path, topics=topics, adaptive=False) as rec:
+            await wait_until(lambda: all(rec.stats.messages.get(t, 0) >= 3 for t in topics), 10)
+        stats = rec.stats
+        await anyio.sleep(0.2)  # the parallel subscriptions see past the window
+        tg.cancel_scope.cancel()
+    decoded = decode_all(path)
+    assert set(decoded) == set(topics)
+    for topic in topics:
+        window, recorded = same_window(decoded[topic], received[topic])
+        assert len(recorded) == stats.messages[topic]
+        assert recorded == window, topic
+    assert summary_count(path) == stats.total
+    _messages, schemas = read_back(path)
+    encoding, schema = schemas["/odom"]
+    assert (encoding, schema.name, schema.encoding) == ("cdr", "nav_msgs/msg/Odometry", "ros2msg")
+    text = schema.data.decode()
+    assert "MSG: std_msgs/Header" in text and "MSG: geometry_msgs/PoseWithCovariance" in text
+
+
+async def test_every_topic_by_default_json_channels_with_their_schema(
+    demo: DemoRobot, tmp_path: Path
+) -> None:
+    path = tmp_path / "all.mcap"
+    async with rmb.connect(demo.url, options=options()) as robot:
+        async with robot.record(path) as rec:
+            await wait_until(lambda: len(rec.stats.messages) == 5, 10)
+        assert sorted(rec.topics) == sorted(t.name for t in robot.topics)
+    messages, schemas = read_back(path)
+    encoding, schema = schemas["/status"]
+    assert (encoding, schema.encoding) == ("json", "jsonschema")
+    assert json.loads(schema.data)["type"] == "object"
+    assert isinstance(messages["/status"][0], dict)
+    assert all(schemas[t][0] == "cdr" for t in messages if t != "/status")
+    assert summary_count(path) == rec.stats.total
+
+
+async def test_the_file_is_valid_after_cancellation(demo: DemoRobot, tmp_path: Path) -> None:
+    path = tmp_path / "cancelled.mcap"
+    async with rmb.connect(demo.url, options=options()) as robot:
+        with anyio.CancelScope() as scope:
+            async with robot.record(path, topics=["/odom", "/pose"]) as rec:
+                await wait_until(lambda: rec.stats.total >= 10, 10)
+                scope.cancel()
+                await anyio.sleep(5)
+                pytest.fail("not cancelled")
+        assert scope.cancelled_caught
+    assert summary_count(path) == rec.stats.total >= 10
+    decoded = decode_all(path)
+    assert sum(len(v) for v in decoded.values()) == rec.stats.total
+
+
+async def test_max_hz_applies_to_the_recording(demo: DemoRobot, tmp_path: Path) -> None:
+    path = tmp_path / "throttled.mcap"
+    received: list[rmb.Message] = []
+    async with rmb.connect(demo.url, options=options()) as robot, anyio.create_task_group() as tg:
+        async with robot.subscribe("/odom", adaptive=False, buffer=10_000) as sub:
+            tg.start_soon(collect, sub, received)
+            async with robot.record(path, topics=["/odom"], max_hz=5, adaptive=False) as rec:
+                await wait_until(lambda: rec.stats.total >= 4, 10)
+            tg.cancel_scope.cancel()
+    recorded = decode_all(path)["/odom"]
+    window, _ = same_window(recorded, received)
+    # 50 Hz arriving, at most 5 Hz recorded
+    assert len(recorded) * 4 < len(window)
+
+
+# -- rosbridge_server_rs ---------------------------------------------------------------
+
+
+@pytest.mark.peer
+@pytest.mark.parametrize("compression", [None, "cbor-raw"])
+async def test_rosbridge_topics_round_trip_through_mcap(
+    rosbridge: RosBridge, ros_graph: RosGraph, tmp_path: Path, compression: str | None
+) -> None:
+    image = f"/rmb_rec_image_{next(_unique)}"
+    await anyio.to_thread.run_sync(
+        lambda: ros_graph.command(
+            {"cmd": "image", "topic": image, "hz": 10, "width": 8, "height": 4}
+        )
+    )
+    try:
+        path = tmp_path / "ros.mcap"
+        topics = ["/chatter", "/odom", "/counter", image]
+        received: dict[str, list[rmb.Message]] = {t: [] for t in topics}
+        async with (
+            rmb.connect(rosbridge.url, protocol="rosbridge", options=options()) as robot,
+            contextlib.AsyncExitStack() as stack,
+            anyio.create_task_group() as tg,
+        ):
+            await wait_until(lambda: image in {t.name for t in robot.topics}, 15)
+            for topic in topics:
+                sub = await stack.enter_async_context(
+                    robot.subscribe(topic, adaptive=False, buffer=10_000)
+                )
+                tg.start_soon(collect, sub, received[topic])
+            async with robot.record(
+                path,
+                topics=topics,
+                adaptive=False,
+                compression=compression,  # type: ignore[arg-type]
+            ) as rec:
+                await wait_until(lambda: all(rec.stats.messages.get(t, 0) >= 3 for t in topics), 15)
+            stats = rec.stats
+            await anyio.sleep(0.3)
+            tg.cancel_scope.cancel()
+        assert stats.skipped == {}
+        decoded = decode_all(path)
+        for topic in topics:
+            window, recorded = same_window(decoded[topic], received[topic])
+            if topic == image and compression is None:
+                # rosbridge's JSON carries uint8[] as base64 text
+                for message in window:
+                    message["data"] = list(base64.b64decode(message["data"]))
+            assert len(recorded) == stats.messages[topic]
+            assert recorded == window, topic
+        # the image's uint8[] (base64 text in rosbridge's JSON) is bytes again
+        pixels = decoded[image][0][1]
+        assert (pixels["width"], pixels["height"], len(pixels["data"])) == (8, 4, 8 * 4 * 3)
+        assert summary_count(path) == stats.total
+        _messages, schemas = read_back(path)
+        assert schemas["/chatter"][1].name == "std_msgs/msg/String"
+        assert schemas["/chatter"][1].data.decode().strip() == "string data"
+    finally:
+        await anyio.to_thread.run_sync(lambda: ros_graph.command({"cmd": "stop", "topic": image}))
+
+
+# -- the command line ------------------------------------------------------------------
+
+
+async def test_the_record_command_writes_a_file_for_its_duration(
+    demo: DemoRobot, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    parser = argparse.ArgumentParser(prog="rmb")
+    add_parser(parser.add_subparsers(dest="command"))
+    path = tmp_path / "cli.mcap"
+    args = parser.parse_args(
+        ["record", demo.url, "/odom", "/battery", "-o", str(path), "--duration", "1"]
+    )
+    assert args.run_async is run
+    assert await run(args) == 0
+    decoded = decode_all(path)
+    assert set(decoded) == {"/odom", "/battery"}
+    total = sum(len(v) for v in decoded.values())
+    assert total == summary_count(path) > 0
+    err = capsys.readouterr().err
+    assert f"{total} messages" in err and "/odom:" in err
+
+
+def test_the_record_command_refuses_bad_numbers(capsys: pytest.CaptureFixture[str]) -> None:
+    parser = argparse.ArgumentParser(prog="rmb")
+    add_parser(parser.add_subparsers(dest="command"))
+    for bad in (["--duration", "0"], ["--max-hz", "-1"], ["--max-hz", "fast"]):
+        with pytest.raises(SystemExit) as caught:
+            parser.parse_args(["record", "localhost", "-o", "x.mcap", *bad])
+        assert caught.value.code == 2
+    with pytest.raises(SystemExit):
+        parser.parse_args(["record", "localhost"])  # -o is required
+    assert "required" in capsys.readouterr().err
