@@ -7,7 +7,6 @@ parallel subscription of the same client received over the same window."""
 
 from __future__ import annotations
 
-import argparse
 import base64
 import contextlib
 import itertools
@@ -25,7 +24,7 @@ from mcap_ros2.decoder import DecoderFactory
 import ros_mobile_bridge as rmb
 from _util import wait_until
 from peers.rosbridge import RosBridge, RosGraph
-from ros_mobile_bridge._record_cli import add_parser, run
+from ros_mobile_bridge._cli._app import parse
 from ros_mobile_bridge.demo import DemoRobot
 
 pytest_plugins = ["peers.ros_fixtures"]
@@ -286,14 +285,12 @@ async def test_rosbridge_topics_round_trip_through_mcap(
 async def test_the_record_command_writes_a_file_for_its_duration(
     demo: DemoRobot, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    parser = argparse.ArgumentParser(prog="rmb")
-    add_parser(parser.add_subparsers(dest="command"))
     path = tmp_path / "cli.mcap"
-    args = parser.parse_args(
+    verb, args = parse(
         ["record", demo.url, "/odom", "/battery", "-o", str(path), "--duration", "1"]
     )
-    assert args.run_async is run
-    assert await run(args) == 0
+    assert verb.path == ("record",) and verb.run is not None
+    assert await verb.run(args) == 0
     decoded = decode_all(path)
     assert set(decoded) == {"/odom", "/battery"}
     total = sum(len(v) for v in decoded.values())
@@ -303,12 +300,11 @@ async def test_the_record_command_writes_a_file_for_its_duration(
 
 
 def test_the_record_command_refuses_bad_numbers(capsys: pytest.CaptureFixture[str]) -> None:
-    parser = argparse.ArgumentParser(prog="rmb")
-    add_parser(parser.add_subparsers(dest="command"))
     for bad in (["--duration", "0"], ["--max-hz", "-1"], ["--max-hz", "fast"]):
         with pytest.raises(SystemExit) as caught:
-            parser.parse_args(["record", "localhost", "-o", "x.mcap", *bad])
+            parse(["record", "localhost:8765", "-o", "x.mcap", *bad])
         assert caught.value.code == 2
-    with pytest.raises(SystemExit):
-        parser.parse_args(["record", "localhost"])  # -o is required
+    with pytest.raises(SystemExit) as caught:
+        parse(["record", "localhost:8765"])  # -o is required
+    assert caught.value.code == 2
     assert "required" in capsys.readouterr().err

@@ -80,9 +80,9 @@ class Verb:
 
 
 def _verbs() -> list[Verb]:
-    from . import _demo, _ros, _topic
+    from . import _demo, _record, _ros, _topic
 
-    return [*_demo.VERBS, *_topic.VERBS, *_ros.VERBS]
+    return [*_demo.VERBS, *_topic.VERBS, *_ros.VERBS, *_record.VERBS]
 
 
 # -- parsing -------------------------------------------------------------------------------
