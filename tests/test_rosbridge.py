@@ -604,3 +604,42 @@ def test_command_line_against_the_bridge(rosbridge: RosBridge) -> None:
     )
     assert call.returncode == 0, call.stderr
     assert json.loads(call.stdout) == {"success": True, "message": "flag set to True"}
+
+
+# -- reconnect with a published topic ---------------------------------------------------
+
+
+async def test_reconnect_restores_a_published_topic_without_waiting_on_the_bridge(
+    rosbridge_factory: Any, ros_graph: RosGraph, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The restore runs before the new connection's reader: it must not wait
+    # for an answer only that reader could read (found in issue 11: each
+    # published topic's advertise waited out the internal call timeout, the
+    # status "reconnecting" meanwhile). With that timeout made an hour, such
+    # a wait would hang this test instead of slowing it.
+    from ros_mobile_bridge.backends import _rosbridge
+
+    monkeypatch.setattr(_rosbridge, "_INTERNAL_TIMEOUT", 3600.0)
+    bridge = rosbridge_factory()
+    port = bridge.port
+    topic = unique("/rmb_restore")
+    policy = rmb.ReconnectPolicy(initial_delay=0.1, max_delay=0.5)
+    await anyio.to_thread.run_sync(
+        lambda: ros_graph.command({"cmd": "record", "topic": topic, "type": "std_msgs/msg/String"})
+    )
+    async with rmb.connect(
+        bridge.url, protocol="rosbridge", options=options(reconnect=policy)
+    ) as robot:
+        await robot.publish(topic, "std_msgs/msg/String", {"data": "before"})
+        await wait_until(lambda: {"data": "before"} in ros_graph.received(topic), 10)
+        await anyio.to_thread.run_sync(bridge.stop)
+        await wait_until(lambda: robot.status == "reconnecting", 10)
+        await anyio.to_thread.run_sync(lambda: rosbridge_factory(port=port))
+        await wait_until(lambda: robot.status == "connected", 30, "the reconnect")
+        assert topic in robot._backend.publishing()  # restored
+        for n in range(40):  # until the graph hears one: the first may beat the advertise
+            await robot.publish(topic, "std_msgs/msg/String", {"data": f"after {n}"})
+            if any(m.get("data", "").startswith("after") for m in ros_graph.received(topic)):
+                break
+            await anyio.sleep(0.25)
+        assert any(m.get("data", "").startswith("after") for m in ros_graph.received(topic))

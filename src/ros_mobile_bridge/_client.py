@@ -347,7 +347,8 @@ class Client:
         self._backend = backend
         self.on_graph()
         for topic, schema in old.publishing().items():
-            await backend.advertise(topic, schema)
+            # unconfirmed: the new connection's reader starts after this
+            await backend.advertise(topic, schema, confirm=False)
         for topic in list(self._subs):
             await self._sync_topic(topic)
         if self._watched_parameters:

@@ -201,11 +201,16 @@ class Backend(Protocol):
     async def unsubscribe(self, topic: str) -> None:
         """No local subscriber wants ``topic`` any more."""
 
-    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
+    async def advertise(
+        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+    ) -> None:
         """Make ``topic`` publishable with type ``schema`` (waits for the
         bridge to be ready). A no-op when already advertised with it.
         ``latch``: the bridge keeps the last message for late subscribers
-        (``NotSupportedError`` where the protocol cannot)."""
+        (``NotSupportedError`` where the protocol cannot). ``confirm=False``:
+        do not wait for an answer only the reader could read (a reconnect
+        restores advertisements before the new connection's reader runs); a
+        refusal is logged when it arrives."""
 
     async def unadvertise(self, topic: str) -> None: ...
 

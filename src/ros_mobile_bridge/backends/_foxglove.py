@@ -434,7 +434,9 @@ class FoxgloveBackend:
             )
         raise NotSupportedError(f"the server accepts none of our encodings: {', '.join(supported)}")
 
-    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
+    async def advertise(
+        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+    ) -> None:
         if latch:
             raise NotSupportedError("the Foxglove protocol has no latched publishing")
         if await self._client_channels.reuse(topic, schema):

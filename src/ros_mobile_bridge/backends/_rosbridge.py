@@ -420,6 +420,8 @@ class RosbridgeBackend:
         for pub in self._pubs.values():
             if pub.id == key and error:
                 pub.error = event.msg
+                if pub.ready.is_set():  # nobody waits for it (restored unconfirmed)
+                    self._log.error("the bridge refused to advertise a topic: %s", event.msg)
                 return
         for name, served in self._served.items():
             if served.id == key and error:
@@ -704,7 +706,9 @@ class RosbridgeBackend:
     def advertised(self, topic: str) -> str | None:
         return self._pubs.ready_schema(topic)
 
-    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
+    async def advertise(
+        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+    ) -> None:
         if await self._pubs.reuse(topic, schema):
             return
         pub = _Publisher(
@@ -722,7 +726,8 @@ class RosbridgeBackend:
             await self._ws.send(
                 self._engine.advertise(topic, schema, id=pub.id, latch=latch, queue_size=100)
             )
-            await self._round_trip()  # a refusal arrives before this answer
+            if confirm:
+                await self._round_trip()  # a refusal arrives before this answer
             if pub.error is not None:
                 raise SchemaError(
                     f"the bridge refused to advertise {topic} as {schema}: {pub.error}"

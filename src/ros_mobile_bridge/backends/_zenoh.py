@@ -580,7 +580,9 @@ class ZenohBackend:
     def advertised(self, topic: str) -> str | None:
         return self._pubs.ready_schema(topic)
 
-    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
+    async def advertise(
+        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+    ) -> None:
         if await self._pubs.reuse(topic, schema):
             return
         if latch:
