@@ -37,6 +37,7 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._options import BreakerPolicy as BreakerPolicy
     from ._options import ClientOptions as ClientOptions
     from ._options import ReconnectPolicy as ReconnectPolicy
+    from ._options import RosbridgeAuth as RosbridgeAuth
     from ._signals import SignalScope as SignalScope
     from ._signals import cancel_on_signals as cancel_on_signals
     from ._sync import SyncActionGoal as SyncActionGoal
@@ -86,6 +87,7 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "BreakerPolicy": ("._options", "BreakerPolicy"),
     "ClientOptions": ("._options", "ClientOptions"),
     "ReconnectPolicy": ("._options", "ReconnectPolicy"),
+    "RosbridgeAuth": ("._options", "RosbridgeAuth"),
     "SignalScope": ("._signals", "SignalScope"),
     "cancel_on_signals": ("._signals", "cancel_on_signals"),
     "DEFAULT_PORTS": ("._types", "DEFAULT_PORTS"),
@@ -170,6 +172,7 @@ __all__ = [
     "ProtocolMismatchError",
     "ReconnectPolicy",
     "RosBridgeError",
+    "RosbridgeAuth",
     "SchemaError",
     "ServerInfo",
     "ServiceError",
