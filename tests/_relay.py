@@ -24,7 +24,6 @@ from websockets.http11 import Request, Response
 from websockets.sync.client import ClientConnection, connect
 from websockets.sync.server import ServerConnection, serve
 
-
 LOG = logging.getLogger("tests.relay")
 LOG.setLevel(logging.INFO)  # its debug log would print the headers it checks
 

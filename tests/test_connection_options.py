@@ -192,7 +192,7 @@ async def test_wss_with_a_context_that_does_not_trust_the_certificate_fails(
     tls_server: SdkServer,
 ) -> None:
     untrusting = ssl.create_default_context()  # the system CAs only
-    with pytest.raises(rmb.ConnectError, match="(?i)certificate"):
+    with pytest.raises(rmb.ConnectError, match=r"(?i)certificate"):
         async with rmb.connect(
             tls_server.url, options=options(ssl_context=untrusting, reconnect=None)
         ):

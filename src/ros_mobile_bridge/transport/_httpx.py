@@ -146,7 +146,7 @@ async def connect_httpx_websocket(
         raise ConnectError(f"timed out after {timeout:g} s connecting to {url}") from exc
     except httpx.HTTPError as exc:
         await _close(response)
-        raise ConnectError(f"cannot connect to {url}: {exc!r}") from exc
+        raise ConnectError(f"cannot connect to {url}: {_describe(exc)}") from exc
     except BaseException:
         await _close(response)
         raise
@@ -164,6 +164,19 @@ async def connect_httpx_websocket(
     ws = WebSocket(stream, proto, max_size)
     ws.read_coalesce = read_coalesce
     return ws
+
+
+def _describe(exc: BaseException) -> str:
+    """``exc`` in words: its own text, or (httpx's trio backend raises
+    errors with none) the first cause or context that has some."""
+    seen: BaseException | None = exc
+    for _ in range(8):
+        if seen is None:
+            break
+        if str(seen):
+            return f"{type(seen).__name__}: {seen}"
+        seen = seen.__cause__ or seen.__context__
+    return repr(exc)
 
 
 async def _close(response: httpx.Response | None) -> None:
