@@ -299,3 +299,34 @@ async def test_auth_callable_that_fails_fails_the_connection() -> None:
             async with rmb.connect(recorder.url, protocol="rosbridge", options=opts):
                 pass
         assert recorder.sent == []  # nothing was sent
+
+
+# -- reconnection ---------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("transport", ["default", "httpx"])
+async def test_headers_and_transport_hold_across_a_reconnection(transport: str) -> None:
+    """The upstream restarts on its port; the proxy drops the client, which
+    reconnects through the proxy with its token again."""
+    import httpx
+
+    first = SdkServer()
+    port = first.port
+    with Relay(first.url, require=("authorization", TOKEN)) as proxy:
+        async with httpx.AsyncClient() as http:
+            opts = options(
+                headers={"Authorization": TOKEN},
+                http_client=http if transport == "httpx" else None,
+                reconnect=rmb.ReconnectPolicy(initial_delay=0.05, max_delay=0.2),
+            )
+            async with rmb.connect(proxy.url, options=opts) as robot:
+                first.stop()
+                await wait_until(lambda: robot.status != "connected", what="the drop")
+                with SdkServer(port=port) as second:
+                    second.channel("/back", "std_msgs/msg/String")
+                    await wait_until(
+                        lambda: "/back" in [t.name for t in robot.topics], 10, "reconnection"
+                    )
+                    assert robot.status == "connected"
+        tokens = [h["Authorization"] for h in proxy.requests]
+    assert len(tokens) >= 2 and set(tokens) == {TOKEN}
