@@ -149,6 +149,23 @@ async def test_the_server_going_away_is_noticed(client: httpx.AsyncClient) -> No
         srv.stop()
 
 
+async def test_a_message_over_max_frame_size_fails_the_connection_as_by_default(
+    server: SdkServer, client: httpx.AsyncClient
+) -> None:
+    """The bounds are the library's WebSocket's, whichever transport opened it."""
+    chatter = server.channel("/chatter", "std_msgs/msg/String")
+    opts = options(client, max_frame_size=4096, reconnect=None)
+    async with rmb.connect(server.url, options=opts) as robot:
+        async with robot.subscribe("/chatter") as sub:
+            await wait_until(lambda: "/chatter" in server.subscribed())
+            chatter.log(string_msg("x" * 10_000))
+            with pytest.raises(rmb.NotConnected), anyio.fail_after(5):
+                async for _ in sub:
+                    raise AssertionError("an oversized message was delivered")
+        assert robot.status == "error"
+        assert "1009" in str(robot.last_error), robot.last_error
+
+
 async def test_wss_with_the_clients_tls_settings() -> None:
     ca = trustme.CA()
     cert = ca.issue_cert("127.0.0.1", "localhost")
