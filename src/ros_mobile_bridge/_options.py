@@ -89,9 +89,9 @@ class RosbridgeAuth:
     client's and the server's addresses; ``rand`` a random string; ``t``
     the request time and ``end`` the session's end (seconds since the
     epoch); ``level`` the user level. The library sends them as given and
-    computes nothing. The server answers nothing when it accepts; one that
-    refuses usually closes the connection. ``mac`` never appears in
-    ``repr``."""
+    computes nothing. The protocol has no answer to ``auth``: what a server
+    that checks it does with a wrong MAC (ignore the client, close the
+    connection) is its own choice. ``mac`` never appears in ``repr``."""
 
     mac: str
     client: str
