@@ -237,11 +237,13 @@ async def test_httpx_missing_when_the_transport_is_opened(
             pass
 
 
-def test_importing_the_library_does_not_import_httpx() -> None:
+def test_the_library_without_http_client_does_not_import_httpx() -> None:
     import subprocess
 
     code = (
-        "import sys, ros_mobile_bridge; "
+        "import sys, ros_mobile_bridge as rmb; "
+        "rmb.ClientOptions(headers={'A': 'b'}); rmb.connect; rmb.Client; "
+        "import ros_mobile_bridge.backends; "
         "print(sorted(m for m in ('httpx', 'httpcore', 'httpx_ws') if m in sys.modules))"
     )
     out = subprocess.run(
