@@ -7,7 +7,9 @@ The same Foxglove drain as ``bench_foxglove.py`` (its publisher subprocess,
 ``bench/_peer.py``, and its ``measure``): the client connects and subscribes,
 its event loop is blocked while the server queues a fixed number of
 messages, then it receives them all through ``rmb.connect`` + ``async for``
-(decoded). Two clients, interleaved, the same count each:
+(decoded), with the adaptive throttle and the breaker off so that every
+message is delivered whatever the lag. Two clients, interleaved, the same
+count each:
 
 * ``default``: ``rmb.connect(url)``, the library's own socket;
 * ``httpx``: ``rmb.connect(url, options=ClientOptions(http_client=client))``,
@@ -32,7 +34,7 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import anyio
 import httpx
@@ -56,6 +58,10 @@ from bench_foxglove import (
 )
 
 CLIENTS = ("default", "httpx")
+NO_THROTTLE: Final = {"auto": [(0.0, 0.0, "full rate")]}
+"""The adaptive throttle off (a flat curve) and no breaker: the blocked loop
+of a drain is lag the throttle would answer by dropping frames (counted, by
+design), which would measure the throttle, not the transport."""
 CASES = (
     (STRING_TOPIC, "String 99 B", 5_000, STRING_MAX),
     (IMAGE_TOPIC, "Image 640x480", 30, IMAGE_MAX),
@@ -69,7 +75,11 @@ def client(kind: str) -> ClientFactory:
     @asynccontextmanager
     async def factory(url: str, topic: str, count: int) -> AsyncIterator[Receiver]:
         async with httpx.AsyncClient() as http:
-            options = rmb.ClientOptions(http_client=http if kind == "httpx" else None)
+            options = rmb.ClientOptions(
+                http_client=http if kind == "httpx" else None,
+                preset_overrides=NO_THROTTLE,
+                breaker=None,
+            )
             async with (
                 rmb.connect(url, protocol="foxglove-ws", options=options) as robot,
                 robot.subscribe(topic, buffer=count) as sub,
