@@ -61,6 +61,7 @@ def test_site_builds_strict_with_every_page(site: Path) -> None:
         "transports/foxglove",
         "transports/rosbridge",
         "zenoh",
+        "connection-options",
         "cli",
         "errors",
         "reference/configuration",

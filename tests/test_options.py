@@ -65,6 +65,9 @@ def test_defaults() -> None:
     assert opts.discovery_interval == 2.0
     assert opts.latency_probe_interval == 5.0
     assert opts.fragment_timeout == 10.0
+    assert opts.headers == ()
+    assert opts.rosbridge_auth is None
+    assert opts.http_client is None
 
 
 def test_limit_defaults() -> None:
@@ -92,6 +95,10 @@ def test_every_field_is_covered_here() -> None:
         "preset_overrides",
         "domain_id",
         "zenoh_shared_memory",
+        # tests/test_connection_options.py and tests/test_httpx_transport.py
+        "headers",
+        "rosbridge_auth",
+        "http_client",
     }
     assert names == set(FLOAT_FIELDS) | set(INT_FIELDS) | others
 

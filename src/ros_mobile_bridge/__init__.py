@@ -37,6 +37,7 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._options import BreakerPolicy as BreakerPolicy
     from ._options import ClientOptions as ClientOptions
     from ._options import ReconnectPolicy as ReconnectPolicy
+    from ._options import RosbridgeAuth as RosbridgeAuth
     from ._record import Recording as Recording
     from ._record import RecordStats as RecordStats
     from ._serve import ServeStats as ServeStats
@@ -126,6 +127,7 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "ServeStats": ("._serve", "ServeStats"),
     "ServiceRequest": ("._serve", "ServiceRequest"),
     "ServiceRequests": ("._serve", "ServiceRequests"),
+    "RosbridgeAuth": ("._options", "RosbridgeAuth"),
 }
 """Public name -> (private module relative to this package, its name there);
 ``("", name)`` is a public submodule. Kept equal to the ``TYPE_CHECKING``
@@ -182,6 +184,7 @@ __all__ = [
     "RecordStats",
     "Recording",
     "RosBridgeError",
+    "RosbridgeAuth",
     "SchemaError",
     "ServeStats",
     "ServerInfo",

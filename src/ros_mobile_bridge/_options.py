@@ -2,16 +2,121 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
+import re
 import ssl
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Final
 
 from .flow._breaker import CircuitBreaker
 from .flow._throttle import THROTTLE_MODES, Bucket, ThrottleMode
 
-__all__ = ["BreakerPolicy", "ClientOptions", "ReconnectPolicy"]
+if TYPE_CHECKING:
+    import httpx
+
+__all__ = ["BreakerPolicy", "ClientOptions", "ReconnectPolicy", "RosbridgeAuth"]
+
+_TOKEN: Final = re.compile(r"^[!#$%&'*+\-.^_`|~0-9A-Za-z]+$")
+"""An HTTP header name (RFC 9110 ``token``)."""
+_HANDSHAKE_HEADERS: Final = frozenset(
+    {
+        "host",
+        "upgrade",
+        "connection",
+        "content-length",
+        "transfer-encoding",
+        "sec-websocket-key",
+        "sec-websocket-version",
+        "sec-websocket-accept",
+        "sec-websocket-protocol",
+        "sec-websocket-extensions",
+    }
+)
+"""Headers the WebSocket handshake sets itself: a caller may not set them."""
+_REDACTED: Final = "<redacted>"
+
+
+def _check_headers(value: object) -> tuple[tuple[str, str], ...]:
+    """``value`` (a mapping or ``(name, value)`` pairs) as a tuple of pairs,
+    or ``TypeError`` / ``ValueError`` naming the bad header (never its
+    value: it may be a secret)."""
+    if isinstance(value, str | bytes):
+        raise TypeError("headers must be a mapping or (name, value) pairs, not a str")
+    pairs: Iterable[Any]
+    if isinstance(value, Mapping):
+        pairs = value.items()
+    elif isinstance(value, Iterable):
+        pairs = value
+    else:
+        raise TypeError(f"headers must be a mapping or (name, value) pairs, not {value!r}")
+    checked: list[tuple[str, str]] = []
+    for pair in pairs:
+        if not (isinstance(pair, tuple) and len(pair) == 2):
+            raise TypeError("headers must be (name, value) pairs of str")
+        name, text = pair
+        if not isinstance(name, str) or not isinstance(text, str):
+            raise TypeError(f"header names and values must be str (header {name!r})")
+        if not _TOKEN.match(name):
+            raise ValueError(f"invalid header name {name!r}")
+        if name.lower() in _HANDSHAKE_HEADERS:
+            raise ValueError(
+                f"header {name!r} is set by the WebSocket handshake itself and cannot be "
+                "overridden (subprotocols are chosen by the protocol)"
+            )
+        if not text.isascii() or any(c in text for c in "\r\n\0"):
+            raise ValueError(
+                f"header {name!r}: the value must be ASCII without CR, LF or NUL"
+                " (its value is not shown: it may be a secret)"
+            )
+        if text != text.strip(" \t"):
+            raise ValueError(f"header {name!r}: the value must not start or end with whitespace")
+        checked.append((name, text))
+    return tuple(checked)
+
+
+@dataclass(frozen=True, slots=True, repr=False)
+class RosbridgeAuth:
+    """The rosbridge v2 ``auth`` operation, sent as the first message of
+    every rosbridge connection (reconnections included) when set in
+    :attr:`ClientOptions.rosbridge_auth`.
+
+    The fields are the protocol's: ``mac`` the message authentication code
+    the robot's authenticator (``rosauth``) checks, computed by the caller
+    from a shared secret and the other fields; ``client`` and ``dest`` the
+    client's and the server's addresses; ``rand`` a random string; ``t``
+    the request time and ``end`` the session's end (seconds since the
+    epoch); ``level`` the user level. The library sends them as given and
+    computes nothing. The protocol has no answer to ``auth``: what a server
+    that checks it does with a wrong MAC (ignore the client, close the
+    connection) is its own choice. ``mac`` never appears in ``repr``."""
+
+    mac: str
+    client: str
+    dest: str
+    rand: str
+    t: float
+    level: str
+    end: float
+
+    def __post_init__(self) -> None:
+        for name in ("mac", "client", "dest", "rand", "level"):
+            if not isinstance(getattr(self, name), str):
+                raise TypeError(f"RosbridgeAuth.{name} must be a str")
+        for name in ("t", "end"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise TypeError(f"RosbridgeAuth.{name} must be a number")
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"RosbridgeAuth.{name} must be finite and >= 0, got {value!r}")
+
+    def __repr__(self) -> str:
+        return (
+            f"RosbridgeAuth(mac={_REDACTED!r}, client={self.client!r}, dest={self.dest!r}, "
+            f"rand={self.rand!r}, t={self.t!r}, level={self.level!r}, end={self.end!r})"
+        )
 
 
 def _positive(name: str, value: object, *, allow_zero: bool = False) -> None:
@@ -102,12 +207,13 @@ class BreakerPolicy:
         )
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, repr=False)
 class ClientOptions:
     """Everything about a connection that is not the target.
 
     Every field has a safe default; invalid values raise ``ValueError`` or
-    ``TypeError`` when the options are built, never later."""
+    ``TypeError`` when the options are built, never later. ``repr`` shows
+    header names but never their values, nor a rosbridge ``auth`` MAC."""
 
     connect_timeout: float = 10.0
     """Seconds for TCP connect, TLS, the WebSocket upgrade and the server's
@@ -151,7 +257,31 @@ class ClientOptions:
     is also bounded to 64 MiB of payload; past either bound the oldest frame
     is dropped (undecoded, counted)."""
     ssl_context: ssl.SSLContext | None = None
-    """TLS settings for ``wss://``; the system defaults when None."""
+    """TLS settings for ``wss://`` (a private CA, a client certificate);
+    the system defaults when None. A context that does not trust the
+    server's certificate fails ``connect()`` with ``ConnectError``."""
+    headers: Mapping[str, str] | Sequence[tuple[str, str]] = ()
+    """Extra HTTP headers of the WebSocket handshake (Foxglove and
+    rosbridge), e.g. ``{"Authorization": "Bearer ..."}`` for a reverse
+    proxy. Stored as a tuple of ``(name, value)`` pairs. A name that is not
+    an HTTP token, one the handshake sets itself (``Host``, ``Upgrade``,
+    ``Connection``, ``Sec-WebSocket-*``), or a value with CR, LF, NUL or
+    non-ASCII text raises ``ValueError`` here. Values are never logged
+    (the handshake's debug log is silenced when headers are set) nor shown
+    in ``repr``."""
+    rosbridge_auth: RosbridgeAuth | Callable[[], RosbridgeAuth] | None = None
+    """rosbridge: the ``auth`` operation sent first on every connection, or
+    a callable returning a fresh one per connection (a MAC is usually bound
+    to a time and a random string). A callable that raises or returns
+    something else fails that connection attempt."""
+    http_client: httpx.AsyncClient | None = None
+    """Open the WebSocket (Foxglove and rosbridge) through this
+    ``httpx.AsyncClient`` (``pip install ros-mobile-bridge[httpx]``): its
+    proxies, auth, cookies, default headers, TLS settings and transport make
+    the HTTP upgrade, then the library's own WebSocket engine runs on the
+    upgraded connection. The caller keeps the client open for the whole
+    session and closes it. Not with :attr:`ssl_context` (TLS is the
+    client's: ``httpx.AsyncClient(verify=ctx)``). HTTP/1.1 only."""
     logger: logging.Logger = field(default_factory=lambda: logging.getLogger("ros_mobile_bridge"))
     """Where the library logs skipped frames, decode failures and teardown."""
     throttle_mode: ThrottleMode | Callable[[], ThrottleMode] = "auto"
@@ -287,3 +417,67 @@ class ClientOptions:
             raise TypeError("logger must be a logging.Logger")
         if self.on_latency is not None and not callable(self.on_latency):
             raise TypeError("on_latency must be callable")
+        object.__setattr__(self, "headers", _check_headers(self.headers))
+        auth = self.rosbridge_auth
+        if auth is not None and not isinstance(auth, RosbridgeAuth) and not callable(auth):
+            raise TypeError("rosbridge_auth must be a RosbridgeAuth, a callable or None")
+        if self.http_client is not None:
+            _check_http_client(self.http_client)
+            if self.ssl_context is not None:
+                raise ValueError(
+                    "ssl_context does not apply with http_client: TLS is the client's own "
+                    "(httpx.AsyncClient(verify=ssl_context))"
+                )
+
+    def __repr__(self) -> str:
+        parts = []
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.name == "headers":
+                text = repr(tuple((name, _REDACTED) for name, _ in value))
+            else:
+                text = repr(value)
+            parts.append(f"{f.name}={text}")
+        return f"ClientOptions({', '.join(parts)})"
+
+    def auth_message(self) -> RosbridgeAuth | None:
+        """The rosbridge ``auth`` to send on a new connection (calling
+        :attr:`rosbridge_auth` when it is a callable), or None. A callable
+        that fails or returns something else raises ``ValueError``."""
+        auth = self.rosbridge_auth
+        if auth is None or isinstance(auth, RosbridgeAuth):
+            return auth
+        try:
+            made = auth()
+        except Exception as exc:
+            raise ValueError(f"rosbridge_auth callable failed: {exc!r}") from exc
+        if not isinstance(made, RosbridgeAuth):
+            raise ValueError(
+                f"rosbridge_auth callable returned {type(made).__name__}, not RosbridgeAuth"
+            )
+        return made
+
+
+HTTPX_MISSING: Final = (
+    "the httpx transport (ClientOptions.http_client) needs httpx: "
+    "pip install 'ros-mobile-bridge[httpx]'"
+)
+
+
+def import_httpx() -> Any:
+    """The ``httpx`` module, or ``ImportError`` saying how to install it."""
+    try:
+        import httpx
+    except ImportError as exc:
+        raise ImportError(HTTPX_MISSING) from exc
+    return httpx
+
+
+def _check_http_client(client: object) -> None:
+    """``TypeError`` unless ``client`` is an open ``httpx.AsyncClient``
+    (httpx is imported only here, when a client was given)."""
+    httpx = import_httpx()
+    if not isinstance(client, httpx.AsyncClient):
+        raise TypeError(f"http_client must be an httpx.AsyncClient, not {type(client).__name__}")
+    if client.is_closed:
+        raise ValueError("http_client is closed")

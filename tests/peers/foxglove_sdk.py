@@ -170,7 +170,9 @@ class SdkServer:
         capabilities: list[Any] | None = None,
         supported_encodings: list[str] | None = None,
         parameters: dict[str, Any] | None = None,
+        tls: tuple[bytes, bytes] | None = None,
     ) -> None:
+        """``tls``: ``(certificate_pem, key_pem)`` to serve ``wss://``."""
         self.recorder = Recorder()
         self.param_lock = threading.Lock()
         self.parameters: dict[str, Any] = dict(parameters or {})
@@ -187,9 +189,11 @@ class SdkServer:
             if supported_encodings is None
             else supported_encodings,
             services=services or [],
+            tls_cert=tls[0] if tls else None,
+            tls_key=tls[1] if tls else None,
         )
         self.port: int = self.server.port
-        self.url = f"ws://127.0.0.1:{self.port}"
+        self.url = f"{'wss' if tls else 'ws'}://127.0.0.1:{self.port}"
 
     def channel(self, topic: str, typename: str, *, encoding: str = "cdr") -> Channel:
         """Advertise a channel of a bundled ROS 2 type (ros2msg schema)."""

@@ -11,7 +11,7 @@ from typing import Any, Protocol, TypeVar
 
 import anyio
 
-from .._options import ClientOptions
+from .._options import HTTPX_MISSING, ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, same_type_name
 from ..flow import RawFrame, TopicMessage, WireMessage
@@ -37,7 +37,27 @@ async def open_websocket(
     the client's options (message size bound, TLS context, connect timeout,
     read coalescing): the one place every WebSocket of a client is opened,
     by either backend and by ``protocol="auto"``. Raises as
-    ``connect_websocket`` does."""
+    ``connect_websocket`` does.
+
+    The handshake carries ``options.headers``; with ``options.http_client``
+    the upgrade goes through that ``httpx.AsyncClient`` (the httpx transport,
+    imported only then: ``ImportError`` naming the ``[httpx]`` extra when
+    httpx is missing), and the returned object is the same
+    :class:`~ros_mobile_bridge.transport.WebSocket` either way."""
+    if options.http_client is not None:
+        try:
+            from ..transport._httpx import connect_httpx_websocket
+        except ImportError as exc:
+            raise ImportError(HTTPX_MISSING) from exc
+        return await connect_httpx_websocket(
+            url,
+            options.http_client,
+            subprotocols=subprotocols,
+            max_size=options.max_frame_size,
+            timeout=options.connect_timeout,
+            read_coalesce=options.read_coalesce,
+            headers=options.headers,  # type: ignore[arg-type]
+        )
     return await connect_websocket(
         url,
         subprotocols=subprotocols,
@@ -45,6 +65,7 @@ async def open_websocket(
         ssl_context=options.ssl_context,
         timeout=options.connect_timeout,
         read_coalesce=options.read_coalesce,
+        headers=options.headers,  # type: ignore[arg-type]
     )
 
 

@@ -121,12 +121,27 @@ async def open_rosbridge(url: str, options: ClientOptions) -> RosbridgeBackend:
 async def start_rosbridge(
     ws: WebSocket, options: ClientOptions, deadline: float
 ) -> RosbridgeBackend:
-    """Speak rosbridge on an open WebSocket: discover the graph until
-    ``deadline``. Closes ``ws`` on failure."""
+    """Speak rosbridge on an open WebSocket: send ``options``' ``auth``
+    first when set, then discover the graph until ``deadline``. Closes
+    ``ws`` on failure."""
     try:
         if ws.subprotocol in fx.SUBPROTOCOLS:
             raise ProtocolMismatchError(
                 "rosbridge", "foxglove-ws", f"the server chose subprotocol {ws.subprotocol}"
+            )
+        auth = options.auth_message()
+        if auth is not None:
+            # the protocol's rule: auth comes before any other operation
+            await ws.send(
+                rb.RosbridgeEngine.auth(
+                    mac=auth.mac,
+                    client=auth.client,
+                    dest=auth.dest,
+                    rand=auth.rand,
+                    t=auth.t,
+                    level=auth.level,
+                    end=auth.end,
+                )
             )
         backend = RosbridgeBackend(ws, options)
         await backend._bootstrap(deadline)

@@ -8,11 +8,12 @@ frames never interleave. Keep-alive is WebSocket ping/pong
 
 from __future__ import annotations
 
+import logging
 import os
 import ssl as _ssl
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -578,9 +579,14 @@ async def connect_websocket(
     ssl_context: _ssl.SSLContext | None = None,
     timeout: float = 10.0,
     read_coalesce: float = 0.0,
+    headers: Sequence[tuple[str, str]] = (),
 ) -> WebSocket:
     """Open a WebSocket to ``url`` (``ws://`` or ``wss://``) offering
     ``subprotocols``. ``timeout`` covers TCP connect, TLS and the HTTP upgrade.
+    ``headers`` are added to the upgrade request as given (the caller
+    validates them: :class:`~ros_mobile_bridge.ClientOptions` does); when
+    there are any, the handshake is not debug-logged, so their values never
+    reach a log.
 
     Raises :class:`HandshakeRejected` when the server answers with an HTTP
     status, ``ConnectError`` for anything else that prevents the connection
@@ -588,13 +594,8 @@ async def connect_websocket(
     ``max_size`` bounds one message (``None``: no bound); a larger message
     closes the connection with code 1009. ``read_coalesce`` sets
     :attr:`WebSocket.read_coalesce`."""
-    try:
-        uri = parse_uri(url)
-    except InvalidURI as exc:
-        raise ValueError(f"not a WebSocket URL: {url!r}") from exc
-    proto = ClientProtocol(
-        uri, subprotocols=[Subprotocol(s) for s in subprotocols] or None, max_size=max_size
-    )
+    proto = client_protocol(url, subprotocols, max_size, quiet=bool(headers))
+    uri = proto.uri
     stream: anyio.abc.ByteStream | None = None
     try:
         with anyio.fail_after(timeout):
@@ -607,7 +608,10 @@ async def connect_websocket(
                 stream = await _asyncio_stream.connect_tcp(uri.host, uri.port)
             else:
                 stream = await anyio.connect_tcp(uri.host, uri.port)
-            proto.send_request(proto.connect())
+            request = proto.connect()
+            for name, value in headers:
+                request.headers[name] = value
+            proto.send_request(request)
             for chunk in proto.data_to_send():
                 await stream.send(chunk)
             response: Response | None = None
@@ -647,15 +651,46 @@ async def connect_websocket(
     if proto.handshake_exc is not None:
         with anyio.CancelScope(shield=True):
             await stream.aclose()
-        failure = proto.handshake_exc
-        if isinstance(failure, InvalidStatus):
-            body = bytes(failure.response.body or b"").decode("utf-8", "replace")
-            raise HandshakeRejected(failure.response.status_code, body) from failure
-        if isinstance(failure, InvalidHandshake):
-            raise ConnectError(f"WebSocket handshake with {url} failed: {failure}") from failure
-        raise ConnectError(f"WebSocket handshake with {url} failed: {failure!r}") from failure
+        raise handshake_error(url, proto.handshake_exc) from proto.handshake_exc
     ws = WebSocket(stream, proto, max_size)
     ws.read_coalesce = read_coalesce
     for frame in leftover:
         ws._on_frame(frame)
     return ws
+
+
+class _NoDebug(logging.LoggerAdapter):  # type: ignore[type-arg]
+    """websockets' logger without its debug level: its handshake debug log
+    prints every request header, secrets included."""
+
+    def isEnabledFor(self, level: int) -> bool:
+        return level > logging.DEBUG and self.logger.isEnabledFor(level)
+
+
+def client_protocol(
+    url: str, subprotocols: tuple[str, ...], max_size: int | None, *, quiet: bool
+) -> ClientProtocol:
+    """websockets' sans-IO client for ``url`` (``ValueError`` for a bad
+    URL); ``quiet``: its debug log off (the request carries secrets)."""
+    try:
+        uri = parse_uri(url)
+    except InvalidURI as exc:
+        raise ValueError(f"not a WebSocket URL: {url!r}") from exc
+    logger = logging.getLogger("websockets.client")
+    return ClientProtocol(
+        uri,
+        subprotocols=[Subprotocol(s) for s in subprotocols] or None,
+        max_size=max_size,
+        logger=_NoDebug(logger, {}) if quiet else logger,
+    )
+
+
+def handshake_error(url: str, failure: Exception) -> ConnectError:
+    """The error for a handshake websockets refused: :class:`HandshakeRejected`
+    for an HTTP status other than 101, else ``ConnectError``."""
+    if isinstance(failure, InvalidStatus):
+        body = bytes(failure.response.body or b"").decode("utf-8", "replace")
+        return HandshakeRejected(failure.response.status_code, body)
+    if isinstance(failure, InvalidHandshake):
+        return ConnectError(f"WebSocket handshake with {url} failed: {failure}")
+    return ConnectError(f"WebSocket handshake with {url} failed: {failure!r}")

@@ -900,6 +900,31 @@ class RosbridgeEngine:
         )
 
     @staticmethod
+    def auth(
+        *, mac: str, client: str, dest: str, rand: str, t: float, level: str, end: float
+    ) -> str:
+        """``auth``: the rosbridge v2 authentication message, to be sent
+        before any other operation. Sent as given (the MAC is the caller's);
+        ``t`` and ``end`` (seconds) go as integers when they are whole."""
+        obj: dict[str, Any] = {"op": "auth"}
+        for name, text in (("mac", mac), ("client", client), ("dest", dest), ("rand", rand)):
+            if not isinstance(text, str):
+                raise TypeError(f"{name} must be a str")
+            obj[name] = text
+        for name, when in (("t", t), ("end", end)):
+            if isinstance(when, bool) or not isinstance(when, int | float):
+                raise TypeError(f"{name} must be a number")
+            if not (math.isfinite(when) and when >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {when!r}")
+            obj[name] = int(when) if float(when).is_integer() else when
+        if not isinstance(level, str):
+            raise TypeError("level must be a str")
+        obj["level"] = level
+        return _json(
+            {k: obj[k] for k in ("op", "mac", "client", "dest", "rand", "t", "level", "end")}
+        )
+
+    @staticmethod
     def cancel_action_goal(action: str, *, id: str) -> str:
         """Cancel the goal sent with ``send_action_goal`` id ``id``."""
         return _json(
