@@ -63,6 +63,8 @@ def test_site_builds_strict_with_every_page(site: Path) -> None:
         "zenoh",
         "connection-options",
         "cli",
+        "recording",
+        "serving",
         "errors",
         "reference/configuration",
         "reference/api",
