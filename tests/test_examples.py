@@ -1,0 +1,119 @@
+"""The examples of issue 11 (teleop, monitor, fleet, relay, MCP server), each run
+as a user would run it (a separate process) against the demo robot."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import ExitStack
+from pathlib import Path
+
+import pytest
+
+from ros_mobile_bridge.demo import DemoRobot
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "examples"
+
+
+@pytest.fixture(scope="module")
+def robot() -> Iterator[DemoRobot]:
+    with DemoRobot() as bot:
+        yield bot
+
+
+def run(script: str, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, str(EXAMPLES / script), *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+        check=False,
+    )
+
+
+def test_teleop_asyncio_drives_the_route_and_stops_with_a_zero_twist(robot: DemoRobot) -> None:
+    before = len(robot.received_cmd_vel())
+    x0 = robot.pose[0]
+    result = run("teleop_asyncio.py", robot.url)
+    assert result.returncode == 0, result.stderr
+    commands = [(c.linear_x, c.angular_z) for c in robot.received_cmd_vel()[before:]]
+    # the route, step by step (10 Hz), then the teardown's zero Twist, last
+    assert commands[:6] == [(0.3, 0.0)] * 6
+    assert commands[6:11] == [(0.1, 0.8)] * 5
+    assert commands[11:15] == [(0.3, 0.0)] * 4
+    assert commands[15:] == [(0.0, 0.0)]
+    assert robot.pose[0] > x0  # it moved
+    assert "odometry messages" in result.stdout
+    assert result.stdout.rstrip().endswith("stopped: zero Twist sent on teardown")
+
+
+def test_teleop_asyncio_keyboard_mode_reads_keys_from_stdin(robot: DemoRobot) -> None:
+    before = len(robot.received_cmd_vel())
+    result = subprocess.run(
+        [sys.executable, str(EXAMPLES / "teleop_asyncio.py"), robot.url, "--interactive"],
+        input="w\nq\n",
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    commands = [(c.linear_x, c.angular_z) for c in robot.received_cmd_vel()[before:]]
+    assert (0.3, 0.0) in commands  # the "w" key
+    assert commands[-1] == (0.0, 0.0)
+
+
+def test_monitor_trio_counts_every_topic(robot: DemoRobot) -> None:
+    result = run(
+        "monitor_trio.py", robot.url, "/odom", "/battery", "/status", "/nosuch",
+        "--count", "2", "--seconds", "3", "--json",
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert list(report) == ["/odom", "/battery", "/status", "/nosuch"]
+    # /nosuch never appears, so the run ends on --seconds; the others have their count
+    for topic in ("/odom", "/battery", "/status"):
+        assert report[topic]["count"] >= 2, report
+        assert report[topic]["rate_hz"] > 0
+    assert report["/odom"]["count"] > report["/battery"]["count"]  # 20 Hz against 1 Hz
+    assert report["/nosuch"] == {"count": 0, "rate_hz": 0.0, "latest": {}}
+    assert set(report["/odom"]["latest"]) == {"x", "y"}
+    assert report["/status"]["latest"]["mode"] in ("idle", "driving", "watchdog_stop")
+
+
+def test_monitor_trio_stops_once_every_topic_has_its_count(robot: DemoRobot) -> None:
+    result = run("monitor_trio.py", robot.url, "/odom", "/status", "--count", "3", "--json")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["/status"]["count"] == 3  # 2 Hz: the last topic to reach 3 ends the run
+    assert report["/odom"]["count"] >= 3
+
+
+@pytest.mark.parametrize("backend", ["asyncio", "trio"])
+def test_fleet_drives_every_robot_and_reports_the_one_that_failed(backend: str) -> None:
+    with ExitStack() as stack:
+        bots = [stack.enter_context(DemoRobot(name=f"bot{i}")) for i in range(3)]
+        dead = "ws://127.0.0.1:1"
+        urls = [bots[0].url, dead, bots[1].url, bots[2].url]
+        result = run("fleet.py", *urls, "--seconds", "0.5", "--backend", backend)
+        assert result.returncode == 1, result.stderr  # one robot failed
+        lines = dict(line.split(": ", 1) for line in result.stdout.splitlines())
+        assert list(lines) == urls
+        assert lines[dead].startswith("FAILED ConnectError")
+        for bot in bots:
+            assert lines[bot.url].startswith("ok mode="), result.stdout
+            commands = [c.linear_x for c in bot.received_cmd_vel()]
+            assert commands.count(0.2) >= 3
+            assert commands[-1] == 0.0  # each robot's own teardown stopped it
+            assert set(commands) == {0.2, 0.0}
+
+
+def test_fleet_exits_zero_when_every_robot_answers(robot: DemoRobot) -> None:
+    with DemoRobot() as other:
+        result = run("fleet.py", robot.url, other.url, "--seconds", "0.3")
+        assert result.returncode == 0, result.stdout + result.stderr
+        assert other.received_cmd_vel()[-1].linear_x == 0.0
