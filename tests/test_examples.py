@@ -3,14 +3,22 @@ as a user would run it (a separate process) against the demo robot."""
 
 from __future__ import annotations
 
+import itertools
 import json
+import signal
+import socket
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 from pathlib import Path
+from typing import Any
 
+import anyio
+import httpx
 import pytest
+from httpx_ws import aconnect_ws
 
 from ros_mobile_bridge.demo import DemoRobot
 
@@ -117,3 +125,88 @@ def test_fleet_exits_zero_when_every_robot_answers(robot: DemoRobot) -> None:
         result = run("fleet.py", robot.url, other.url, "--seconds", "0.3")
         assert result.returncode == 0, result.stdout + result.stderr
         assert other.received_cmd_vel()[-1].linear_x == 0.0
+
+
+# -- relay_starlette.py: a Starlette app under uvicorn, browsers played by httpx-ws --------
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def relay(robot: DemoRobot) -> Iterator[str]:
+    """The relay example serving the robot's /odom (20 Hz) on a free port; yields its ws URL."""
+    port = free_port()
+    script = str(EXAMPLES / "relay_starlette.py")
+    cmd = [sys.executable, script, robot.url, "/odom", "--port", str(port)]
+    with subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True) as proc:
+        try:
+            deadline = time.monotonic() + 30
+            while True:
+                assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+                try:
+                    page = httpx.get(f"http://127.0.0.1:{port}/", timeout=1)
+                    break
+                except httpx.TransportError:
+                    assert time.monotonic() < deadline, "the relay did not start"
+                    time.sleep(0.2)
+            assert "new WebSocket" in page.text  # the page a browser loads
+            yield f"ws://127.0.0.1:{port}/ws"
+        finally:
+            proc.terminate()  # uvicorn's graceful shutdown runs the lifespan's teardown
+            _, stderr = proc.communicate(timeout=15)
+            # uvicorn re-raises the signal once it has shut down cleanly
+            assert proc.returncode in (0, -signal.SIGTERM), stderr
+            assert "Traceback" not in stderr, stderr
+
+
+async def read(ws: Any) -> dict[str, Any]:
+    message: dict[str, Any] = json.loads(await ws.receive_text(timeout=10))
+    await ws.send_text("next")
+    return message
+
+
+async def test_relay_delivers_the_topic_as_json_in_order(relay: str) -> None:
+    async with httpx.AsyncClient() as http, aconnect_ws(relay, http) as ws:
+        messages = [await read(ws) for _ in range(10)]
+    seqs = [m["seq"] for m in messages]
+    assert seqs == sorted(set(seqs))  # strictly increasing, never the same message twice
+    assert {m["topic"] for m in messages} == {"/odom"}
+    assert len(messages[0]["data"]["pose"]["covariance"]) == 36  # numpy array -> JSON list
+    assert messages[0]["data"]["header"]["frame_id"] == "odom"
+
+
+async def test_a_slow_browser_gets_the_newest_message_not_a_backlog(relay: str) -> None:
+    async with (
+        httpx.AsyncClient() as http,
+        aconnect_ws(relay, http) as fast,
+        aconnect_ws(relay, http) as slow,
+    ):
+        slow_seqs = [json.loads(await slow.receive_text(timeout=10))["seq"]]
+        for _ in range(3):
+            # the slow browser dawdles over its message while the fast one keeps reading
+            with anyio.move_on_after(0.5):
+                while True:
+                    fast_seq = (await read(fast))["seq"]
+            await slow.send_text("next")  # ready: what comes is the newest, not the next
+            slow_seqs.append(json.loads(await slow.receive_text(timeout=10))["seq"])
+            assert slow_seqs[-1] >= fast_seq
+        gaps = [b - a for a, b in itertools.pairwise(slow_seqs)]
+        assert all(gap > 1 for gap in gaps), slow_seqs  # it skipped; nothing was queued
+
+
+async def test_a_browser_leaving_does_not_disturb_the_others(relay: str) -> None:
+    async with httpx.AsyncClient() as http, aconnect_ws(relay, http) as stays:
+        async with aconnect_ws(relay, http) as leaves:
+            await read(leaves)
+            await read(stays)
+        # one left mid-stream (and one more leaves without a word, after one message)
+        async with aconnect_ws(relay, http) as rude:
+            await rude.receive_text(timeout=10)
+        seqs = [(await read(stays))["seq"] for _ in range(5)]
+        assert seqs == sorted(set(seqs))
+        async with aconnect_ws(relay, http) as newcomer:
+            assert (await read(newcomer))["seq"] >= seqs[-1]
