@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -210,3 +211,86 @@ async def test_a_browser_leaving_does_not_disturb_the_others(relay: str) -> None
         assert seqs == sorted(set(seqs))
         async with aconnect_ws(relay, http) as newcomer:
             assert (await read(newcomer))["seq"] >= seqs[-1]
+
+
+# -- mcp_server.py, driven by the MCP SDK's own client over stdio ------------------------
+
+MCP_TOOLS = {
+    "list_topics", "read_topic", "list_services", "call_service", "get_parameters",
+    "set_parameters", "show_type", "publish", "stop",
+}  # fmt: skip
+
+
+def tool_text(result: Any) -> str:
+    return "".join(getattr(block, "text", "") for block in result.content)
+
+
+async def test_mcp_server_tools_against_the_demo_robot(
+    robot: DemoRobot, anyio_backend: str, tmp_path: Path
+) -> None:
+    from mcp import ClientSession
+    from mcp.client.stdio import StdioServerParameters, stdio_client
+
+    server = StdioServerParameters(
+        command=sys.executable,
+        args=[str(EXAMPLES / "mcp_server.py"), robot.url, "--allow-publish", "/cmd_vel",
+              "--backend", anyio_backend],
+        # the SDK passes the server only a safe subset of the environment
+        env={"PYTHONPATH": os.environ["PYTHONPATH"]} if "PYTHONPATH" in os.environ else None,
+        cwd=ROOT,
+    )  # fmt: skip
+    before = len(robot.received_cmd_vel())
+    with (tmp_path / "server.log").open("w+") as errlog:
+        async with stdio_client(server, errlog=errlog) as streams, ClientSession(*streams) as mcp:
+            await mcp.initialize()
+            assert {tool.name for tool in (await mcp.list_tools()).tools} == MCP_TOOLS
+
+            async def call(tool: str, /, **arguments: Any) -> Any:
+                result = await mcp.call_tool(tool, arguments)
+                assert not result.is_error, tool_text(result)
+                return result.structured_content
+
+            topics = (await call("list_topics"))["result"]
+            assert {"name": "/odom", "type": "nav_msgs/msg/Odometry"} in topics
+            battery = await call("read_topic", topic="/battery")
+            assert battery["type"] == "sensor_msgs/msg/BatteryState"
+            assert 0 < battery["data"]["percentage"] <= 1
+            services = (await call("list_services"))["result"]
+            assert {"name": "/set_led", "type": "std_srvs/srv/SetBool"} in services
+            reply = await call("call_service", name="/set_led", request={"data": True})
+            assert reply == {"success": True, "message": "led on"} and robot.led
+            assert await call("get_parameters", names=["led"]) == {"led": True}
+            assert await call("set_parameters", values={"robot_name": "mcp-bot"}) == {
+                "robot_name": "mcp-bot"
+            }
+            assert robot.parameters["robot_name"] == "mcp-bot"
+            assert "max_speed" in await call("get_parameters")
+            fields = (await call("show_type", type_name="geometry_msgs/msg/Twist"))["result"]
+            assert [(f["name"], f["type"]) for f in fields] == [
+                ("linear", "geometry_msgs/msg/Vector3"),
+                ("angular", "geometry_msgs/msg/Vector3"),
+            ]
+            twist = {"linear": {"x": 0.25}}
+            await call("publish", topic="/cmd_vel", type_name="geometry_msgs/msg/Twist",
+                       message=twist)  # fmt: skip
+            resource = await mcp.read_resource("robot://topics")
+            assert "/odom" in getattr(resource.contents[0], "text", "")
+
+            # refused: a topic not on the allow-list, an unknown topic's bounded wait
+            refused = await mcp.call_tool(
+                "publish",
+                {"topic": "/cmd_vel_stamped", "type_name": "geometry_msgs/msg/TwistStamped",
+                 "message": {"twist": {"linear": {"x": 0.5}}}},
+            )  # fmt: skip
+            assert refused.is_error
+            assert "publishing to /cmd_vel_stamped is not allowed" in tool_text(refused)
+            missing = await mcp.call_tool("read_topic", {"topic": "/nosuch", "timeout": 0.3})
+            assert missing.is_error and "no message on /nosuch" in tool_text(missing)
+            bad = await mcp.call_tool("call_service", {"name": "/nosuch", "request": {}})
+            assert bad.is_error
+        # the session is over: the server's teardown stopped the robot
+        errlog.seek(0)
+        log = errlog.read()
+    commands = robot.received_cmd_vel()[before:]
+    assert [c.linear_x for c in commands] == [0.25, 0.0], log
+    assert "Traceback" not in log, log
