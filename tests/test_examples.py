@@ -50,11 +50,12 @@ def test_teleop_asyncio_drives_the_route_and_stops_with_a_zero_twist(robot: Demo
     result = run("teleop_asyncio.py", robot.url)
     assert result.returncode == 0, result.stderr
     commands = [(c.linear_x, c.angular_z) for c in robot.received_cmd_vel()[before:]]
-    # the route, step by step (10 Hz), then the teardown's zero Twist, last
-    assert commands[:6] == [(0.3, 0.0)] * 6
-    assert commands[6:11] == [(0.1, 0.8)] * 5
-    assert commands[11:15] == [(0.3, 0.0)] * 4
-    assert commands[15:] == [(0.0, 0.0)]
+    # the route, step by step at 10 Hz, then the teardown's zero Twist, once and last (a
+    # command may replace one the writer has not sent yet, hence "at most" per step)
+    steps = [(command, len(list(run))) for command, run in itertools.groupby(commands)]
+    assert [command for command, _ in steps] == [(0.3, 0.0), (0.1, 0.8), (0.3, 0.0), (0.0, 0.0)]
+    assert [n for _, n in steps][3] == 1
+    assert all(0 < n <= limit for (_, n), limit in zip(steps, (6, 5, 4), strict=False))
     assert robot.pose[0] > x0  # it moved
     assert "odometry messages" in result.stdout
     assert result.stdout.rstrip().endswith("stopped: zero Twist sent on teardown")
@@ -79,7 +80,7 @@ def test_teleop_asyncio_keyboard_mode_reads_keys_from_stdin(robot: DemoRobot) ->
 def test_monitor_trio_counts_every_topic(robot: DemoRobot) -> None:
     result = run(
         "monitor_trio.py", robot.url, "/odom", "/battery", "/status", "/nosuch",
-        "--count", "2", "--seconds", "3", "--json",
+        "--count", "2", "--seconds", "5", "--json",
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
@@ -187,6 +188,7 @@ async def test_a_slow_browser_gets_the_newest_message_not_a_backlog(relay: str) 
         aconnect_ws(relay, http) as slow,
     ):
         slow_seqs = [json.loads(await slow.receive_text(timeout=10))["seq"]]
+        fast_seq = (await read(fast))["seq"]
         for _ in range(3):
             # the slow browser dawdles over its message while the fast one keeps reading
             with anyio.move_on_after(0.5):
