@@ -65,6 +65,8 @@ def test_site_builds_strict_with_every_page(site: Path) -> None:
         "cli",
         "recording",
         "serving",
+        "examples",
+        "mcp",
         "errors",
         "reference/configuration",
         "reference/api",
