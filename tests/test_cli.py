@@ -146,6 +146,12 @@ def test_the_url_comes_from_rmb_url_a_leading_argument_or_u(robot: DemoRobot) ->
         (("param",), "param get, param list, param set"),
         ((), "a COMMAND is needed"),
         (("pub", "/cmd_vel"), "missing TYPE"),
+        # a ROS name is never read as the address; unquoted YAML gets a hint
+        (("echo", "/odom", "extra"), "unexpected argument(s): extra"),
+        (
+            ("pub", "/cmd_vel", "geometry_msgs/msg/Twist", "linear:", "{x: 1}"),
+            "quote YAML or JSON as one argument",
+        ),
     ],
 )
 def test_usage_mistakes_exit_2_with_one_line(args: tuple[str, ...], says: str) -> None:
@@ -491,3 +497,49 @@ def test_ros2_spellings_are_aliases(robot: DemoRobot) -> None:
     assert json.loads(called.stdout) == {"success": True, "message": "led off"}
     info = rmb("topic", "info", "/battery", url=robot.url)
     assert info.stdout.startswith("Type: sensor_msgs/msg/BatteryState\n")
+
+
+def test_pub_of_a_non_twist_type_on_a_velocity_topic_warns_that_nothing_stops_it(
+    robot: DemoRobot,
+) -> None:
+    result = rmb(
+        "pub", "/cmd_vel", "std_msgs/msg/String", "{data: go}", "--once",
+        "--no-velocity-check", url=robot.url,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "gets no stop command when rmb ends" in result.stderr
+    assert "watchdog" in result.stderr
+
+
+def test_record_of_a_misspelt_topic_names_the_nearest(robot: DemoRobot, tmp_path: Path) -> None:
+    proc = rmb_proc("record", "/odmo", "-o", str(tmp_path / "x.mcap"), url=robot.url)
+    try:
+        line = read_until(proc.stderr, lambda s: "has not appeared" in s)
+    finally:
+        interrupt(proc)
+    assert "nearest: /odom" in line
+    assert proc.returncode == 130
+
+
+def test_pub_keeps_publishing_across_a_reconnect_then_stops_on_ctrl_c(
+    rosbridge_factory: Any, ros_graph: RosGraph
+) -> None:
+    # the bridge goes away and comes back on its port: pub waits for the
+    # client's reconnect instead of exiting 1 with the robot still moving
+    bridge = rosbridge_factory()
+    port = bridge.port
+    proc = rmb_proc(
+        "pub", "/rmb_in", "std_msgs/msg/String", "{data: tick}", "-r", "10", url=bridge.url
+    )
+    try:
+        wait_for(lambda: {"data": "tick"} in ros_graph.received("/rmb_in"), 30)
+        bridge.stop()
+        read_until(proc.stderr, lambda s: "connection lost: waiting" in s)
+        ros_graph.command({"cmd": "clear", "topic": "/rmb_in"})
+        rosbridge_factory(port=port)
+        read_until(proc.stderr, lambda s: "connected again" in s)
+        wait_for(lambda: {"data": "tick"} in ros_graph.received("/rmb_in"), 30)
+        assert proc.poll() is None  # still running
+    finally:
+        interrupt(proc)
+    assert proc.returncode == 130

@@ -146,7 +146,8 @@ def _top_parser(verbs: list[Verb]) -> argparse.ArgumentParser:
         + "\n".join(lines)
         + f"\n\nThe robot's address: -u URL, else a first argument that reads as one, "
         f"else ${ENV_URL}.\n'rmb COMMAND --help' for a command's options. Exit codes: 0 ok, "
-        "1 runtime failure, 2 usage mistake, 130 Ctrl-C.",
+        "1 runtime failure, 2 usage mistake, 130 Ctrl-C (SIGINT), 143 SIGTERM, 129 SIGHUP, "
+        "141 stdout closed.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(
@@ -229,12 +230,14 @@ def _resolve(verb: Verb, ns: argparse.Namespace, parser: argparse.ArgumentParser
         parser.error(f"missing {' '.join(missing)} (after the address {pos[0]})")
     if verb.run is not None and not ns.url:
         if pos and (
-            len(pos) > high
+            (len(pos) > high and not pos[0].startswith("/"))  # a ROS name is never the address
             or (len(pos) - 1 >= low and _reads_as_address(pos[0], loose=verb.graph_names))
         ):
             ns.url = pos.pop(0)
         else:
             ns.url = os.environ.get(ENV_URL) or None
+        if not ns.url and len(pos) > high:
+            _unexpected(parser, pos, high)
         if not ns.url:
             parser.error(
                 f"no robot address: give it first (rmb {' '.join(verb.path)} HOST:PORT ...), "
@@ -244,13 +247,18 @@ def _resolve(verb: Verb, ns: argparse.Namespace, parser: argparse.ArgumentParser
         missing = [a.rstrip("?*+") for a in verb.args][len(pos) : low]
         parser.error(f"missing {' '.join(missing)}")
     if len(pos) > high:
-        parser.error(f"unexpected argument(s): {' '.join(pos[int(high) :])}")
+        _unexpected(parser, pos, high)
     for i, spec in enumerate(verb.args):
         name = spec.rstrip("?*+").lower()
         if spec.endswith(("*", "+")):
             setattr(ns, name, pos[i:])
         else:
             setattr(ns, name, pos[i] if i < len(pos) else None)
+
+
+def _unexpected(parser: argparse.ArgumentParser, pos: list[str], high: float) -> None:
+    hint = " (quote YAML or JSON as one argument)" if any(":" in p for p in pos) else ""
+    parser.error(f"unexpected argument(s): {' '.join(pos[int(high) :])}{hint}")
 
 
 def parse(argv: Sequence[str]) -> tuple[Verb, argparse.Namespace]:
@@ -318,12 +326,16 @@ def _leaf(exc: BaseException) -> BaseException:
 
 
 def _setup_logging(ns: argparse.Namespace) -> None:
+    """``-v``/``--log-level`` set the library's logger (``ros_mobile_bridge``);
+    other libraries (websockets' per-frame debug log among them) stay at
+    WARNING."""
     level = ns.log_level or {0: "WARNING", 1: "INFO"}.get(ns.verbose, "DEBUG")
     logging.basicConfig(
-        level=getattr(logging, level),
+        level=logging.WARNING,
         format="rmb: %(levelname)s %(name)s: %(message)s",
         stream=sys.stderr,
     )
+    logging.getLogger("ros_mobile_bridge").setLevel(getattr(logging, level))
 
 
 def _say(text: str) -> None:

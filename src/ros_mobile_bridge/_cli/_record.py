@@ -11,9 +11,10 @@ import sys
 
 import anyio
 
+from .._client import Client
 from .._record import Recording
 from ._app import Verb
-from ._common import open_robot
+from ._common import NOTICE_AFTER_S, missing_line, open_robot, warn
 
 __all__ = ["VERBS"]
 
@@ -52,6 +53,18 @@ def _summary(rec: Recording, output: str) -> None:
     print(f"{stats.total} messages, {stats.bytes} bytes of payload in {output}", file=sys.stderr)
 
 
+async def _notice_if_silent(robot: Client, rec: Recording, topic: str) -> None:
+    """The notice ``echo`` gives: a named topic that has recorded nothing
+    after a few seconds and that the robot does not list (a misspelling)."""
+    await anyio.sleep(NOTICE_AFTER_S)
+    if rec.stats.messages.get(topic, 0) or topic in {t.name for t in robot.topics}:
+        return
+    warn(
+        f"{topic} has not appeared (still recording): "
+        + missing_line("topic", topic, [t.name for t in robot.topics])
+    )
+
+
 async def _record(ns: argparse.Namespace) -> int:
     """Record until ``--duration`` passes or the command is stopped."""
     topics: list[str] | None = list(ns.topic) or None
@@ -68,10 +81,14 @@ async def _record(ns: argparse.Namespace) -> int:
                 held.append(rec)
                 what = ", ".join(topics) if topics else "every topic"
                 print(f"recording {what} to {ns.output} (Ctrl-C stops)", file=sys.stderr)
-                if ns.duration is not None:
-                    await anyio.sleep(ns.duration)
-                else:
-                    await anyio.sleep_forever()
+                async with anyio.create_task_group() as tg:
+                    for topic in topics or ():
+                        tg.start_soon(_notice_if_silent, robot, rec, topic)
+                    if ns.duration is not None:
+                        await anyio.sleep(ns.duration)
+                    else:
+                        await anyio.sleep_forever()
+                    tg.cancel_scope.cancel()
         finally:
             if held:  # the file is finished: say what it holds
                 _summary(held[0], ns.output)

@@ -13,6 +13,7 @@ from typing import Any
 import anyio
 
 from .._client import Client
+from .._errors import NotConnected
 from .._types import Message, Priority
 from ._app import Verb
 from ._common import missing_line, notice_if_missing, open_robot, out, warn
@@ -304,7 +305,13 @@ async def _pub(ns: argparse.Namespace) -> int:
     shown = dump_flow(data)
     async with open_robot(ns) as robot:
         check_fields(robot, ns.type, data, "the message")
-        if times == 1 and velocity and _moving(data):
+        if velocity and ns.type not in _VELOCITY_TYPES:
+            warn(
+                f"warning: {ns.type} on {ns.topic} gets no stop command when rmb ends (only "
+                "Twist and TwistStamped get the teardown's zero Twist): the robot keeps this "
+                "command until its own watchdog stops it."
+            )
+        elif times == 1 and velocity and _moving(data):
             warn(
                 f"note: one command to {ns.topic}, and the teardown's zero Twist right behind "
                 "it: the robot will not move. Use -r 10 to drive until Ctrl-C (the zero Twist "
@@ -314,13 +321,26 @@ async def _pub(ns: argparse.Namespace) -> int:
         period = 1.0 / rate
         next_at = anyio.current_time()
         while True:
-            await robot.publish(
-                ns.topic,
-                ns.type,
-                data,
-                priority=priority,
-                check_velocity=not ns.no_velocity_check,
-            )
+            try:
+                await robot.publish(
+                    ns.topic,
+                    ns.type,
+                    data,
+                    priority=priority,
+                    check_velocity=not ns.no_velocity_check,
+                )
+            except NotConnected:
+                # the connection is down: wait for the client to bring it
+                # back (its reconnect policy), so the run goes on and the
+                # teardown can still send the zero Twist; a client that
+                # gives up ends the command (exit 1)
+                if robot.status != "reconnecting":
+                    raise
+                warn(f"connection lost: waiting for it to come back ({robot.last_error})")
+                await _until_connected(robot)
+                warn("connected again: publishing")
+                next_at = anyio.current_time()
+                continue
             sent += 1
             if ns.print_nth and sent % ns.print_nth == 0:
                 out(f"publishing #{sent}: {shown}")
@@ -330,6 +350,17 @@ async def _pub(ns: argparse.Namespace) -> int:
             next_at = max(next_at + period, anyio.current_time())
             await anyio.sleep_until(next_at)
     return 0
+
+
+async def _until_connected(robot: Client) -> None:
+    """Return once ``robot`` is connected again; ``NotConnected`` when it
+    gives up (or closes) instead."""
+    async for status in robot.watch_status():
+        if status == "connected":
+            return
+        if status in ("closed", "error"):
+            break
+    raise NotConnected(f"the connection did not come back: {robot.last_error}")
 
 
 def _build_pub(p: argparse.ArgumentParser) -> None:
@@ -359,7 +390,8 @@ def _build_pub(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--no-velocity-check",
         action="store_true",
-        help="allow a type other than Twist/TwistStamped on a velocity topic (*cmd_vel)",
+        help="allow a type other than Twist/TwistStamped on a velocity topic (*cmd_vel); "
+        "such a type gets no stop command when rmb ends",
     )
 
 
