@@ -8,6 +8,7 @@ WebSocket, subprotocol included, to the upstream server in both directions.
         relay.url           # ws://127.0.0.1:PORT
         relay.requests      # [Headers, ...], one per handshake
         relay.sent          # [str | bytes, ...], client -> server, in order
+        relay.drop()        # close every client connection now (a lost link)
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ class Relay:
         self.requests: list[Headers] = []
         self.sent: list[str | bytes] = []
         self._links: dict[int, ClientConnection] = {}
+        self._live: set[ServerConnection] = set()
         self._server = serve(
             self._handle,
             "127.0.0.1",
@@ -81,6 +83,7 @@ class Relay:
     def _handle(self, conn: ServerConnection) -> None:
         with self.lock:
             link = self._links.pop(id(conn), None)
+            self._live.add(conn)
         if link is None and self.upstream is not None:  # no subprotocol offered
             link = connect(self.upstream, max_size=None, legacy=True, logger=LOG)
 
@@ -104,10 +107,21 @@ class Relay:
         except ConnectionClosed:
             pass
         finally:
+            with self.lock:
+                self._live.discard(conn)
             if link is not None:
                 link.close()
             if thread is not None:
                 thread.join(5)
+
+    def drop(self) -> int:
+        """Close every client connection open now (the upstream links
+        follow); returns how many were closed."""
+        with self.lock:
+            live = list(self._live)
+        for conn in live:
+            conn.close(1001, "dropped by the relay")
+        return len(live)
 
     def stop(self) -> None:
         self._server.shutdown()

@@ -8,6 +8,7 @@ that checks a bearer token and records what it relays."""
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import ssl
@@ -105,10 +106,14 @@ async def test_proxy_refusal_without_the_token_is_a_handshake_rejection(
         ({"X-Token": "a\r\nInjected: yes"}, ValueError, "CR, LF"),
         ({"X-Token": "a\nb"}, ValueError, "CR, LF"),
         ({"X-Token": "nul\0"}, ValueError, "CR, LF"),
+        ({"X-Token": "Injected\x01"}, ValueError, "control character"),
+        ({"X-Token": "Injected\x1f"}, ValueError, "control character"),
+        ({"X-Token": "Injected\x7f"}, ValueError, "control character"),
         ({"X-Token": "caf\u00e9"}, ValueError, "ASCII"),
         ({"X-Token": " padded"}, ValueError, "whitespace"),
         ({"Bad Name": "x"}, ValueError, "invalid header name"),
         ({"X-Na\r\nme": "x"}, ValueError, "invalid header name"),
+        ({"X-Name\n": "x"}, ValueError, "invalid header name"),
         ({"": "x"}, ValueError, "invalid header name"),
         ({"Host": "evil.example"}, ValueError, "handshake"),
         ({"upgrade": "h2c"}, ValueError, "handshake"),
@@ -126,6 +131,23 @@ def test_bad_headers_are_refused_when_the_options_are_built(
     with pytest.raises(error, match=words) as caught:
         rmb.ClientOptions(headers=headers)
     assert "Injected" not in str(caught.value)  # a value is never echoed
+
+
+@pytest.mark.parametrize("bad", ["\x01", "\x08", "\x1b", "\x7f"])
+def test_control_characters_in_a_value_are_refused_without_showing_it(bad: str) -> None:
+    """Only tab and 0x20-0x7E pass (RFC 9110 field-value, ASCII): any other
+    control character would otherwise reach websockets at connect time,
+    whose own error prints the value."""
+    secret = f"Bearer s3cret{bad}tail"
+    with pytest.raises(ValueError, match="X-Token") as caught:
+        rmb.ClientOptions(headers={"X-Token": secret})
+    assert "s3cret" not in str(caught.value) and "tail" not in str(caught.value)
+
+
+def test_header_values_may_hold_tabs_spaces_and_every_visible_ascii_character() -> None:
+    visible = "".join(chr(c) for c in range(0x21, 0x7F))
+    value = f"a\tb c {visible}"
+    assert rmb.ClientOptions(headers={"X-All": value}).headers == (("X-All", value),)
 
 
 def test_headers_accept_pairs_and_keep_their_order() -> None:
@@ -155,6 +177,23 @@ async def test_header_values_never_reach_a_log_even_at_debug(
         assert proxy.requests[0]["Authorization"] == TOKEN
     assert caplog.records  # debug logging did happen (the connection was logged)
     assert "s3cret" not in caplog.text
+
+
+async def test_the_auth_mac_never_reaches_a_log_even_at_debug(
+    rosbridge: RosBridge, caplog: pytest.LogCaptureFixture
+) -> None:
+    """No headers, only ``rosbridge_auth``: websockets' debug log of the
+    first frame would print the start of ``auth``, MAC included."""
+    caplog.set_level(logging.DEBUG)
+    for name in ("websockets", "websockets.client", "ros_mobile_bridge"):
+        caplog.set_level(logging.DEBUG, logger=name)
+    mac = "feedc0de"  # short: within the part of a frame websockets logs
+    auth = rmb.RosbridgeAuth(mac, "127.0.0.1", "127.0.0.1", "r", 1, "admin", 2)
+    opts = options(rosbridge_auth=auth, latency_probe_interval=0)
+    async with rmb.connect(rosbridge.url, protocol="rosbridge", options=opts) as robot:
+        assert robot.topics  # discovery went on after auth
+    assert caplog.records  # debug logging did happen
+    assert mac not in caplog.text
 
 
 async def test_without_headers_websockets_debug_log_is_left_alone(
@@ -242,8 +281,50 @@ def test_bad_auth_options_are_refused_at_once() -> None:
         rmb.ClientOptions(rosbridge_auth="mac")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="finite"):
         rmb.RosbridgeAuth("m", "c", "d", "r", -1, "admin", 2)
-    with pytest.raises(TypeError, match="mac"):
+    with pytest.raises(TypeError, match=r"RosbridgeAuth\.mac must be a str"):
         rmb.RosbridgeAuth(None, "c", "d", "r", 1, "admin", 2)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"RosbridgeAuth\.end must be a number"):
+        rmb.RosbridgeAuth("m", "c", "d", "r", 1, "admin", True)
+
+
+def test_auth_and_the_engine_check_the_same_rules() -> None:
+    """One validator behind both: the same input fails the same way."""
+    from ros_mobile_bridge.wire.rosbridge import RosbridgeEngine
+
+    good: dict[str, Any] = {
+        "mac": "m", "client": "c", "dest": "d", "rand": "r", "t": 1, "level": "u", "end": 2,
+    }  # fmt: skip
+    for field, bad in [("rand", 5), ("level", None), ("t", "1"), ("end", float("inf"))]:
+        fields = {**good, field: bad}
+        with pytest.raises((TypeError, ValueError)) as by_engine:
+            RosbridgeEngine.auth(**fields)
+        with pytest.raises((TypeError, ValueError)) as by_options:
+            rmb.RosbridgeAuth(**fields)
+        assert type(by_engine.value) is type(by_options.value)
+        assert str(by_options.value) == f"RosbridgeAuth.{by_engine.value}"
+
+
+def make_auth(secret: str) -> rmb.RosbridgeAuth:
+    return rmb.RosbridgeAuth(f"mac-of-{secret}", "c", "d", "r", 1, "admin", 2)
+
+
+def test_repr_hides_an_auth_callable_which_may_hold_the_secret() -> None:
+    opts = rmb.ClientOptions(rosbridge_auth=functools.partial(make_auth, secret="hunter2"))
+    assert "hunter2" not in repr(opts)
+    assert "rosbridge_auth=<callable>" in repr(opts)
+    assert "rosbridge_auth=None" in repr(rmb.ClientOptions())
+
+
+def test_a_failing_auth_callable_is_a_connect_error_that_does_not_quote_it() -> None:
+    def leaky() -> rmb.RosbridgeAuth:
+        raise RuntimeError("secret=hunter2 rejected")
+
+    with pytest.raises(rmb.ConnectError, match="RuntimeError") as caught:
+        rmb.ClientOptions(rosbridge_auth=leaky).auth_message()
+    assert "hunter2" not in str(caught.value) and "hunter2" not in repr(caught.value)
+    assert isinstance(caught.value.__cause__, RuntimeError)  # the cause is chained
+    with pytest.raises(rmb.ConnectError, match="returned str, not RosbridgeAuth"):
+        rmb.ClientOptions(rosbridge_auth=lambda: "mac").auth_message()  # type: ignore[arg-type, return-value]
 
 
 async def test_auth_is_the_first_message_and_rosbridge_server_rs_carries_on(
@@ -295,10 +376,70 @@ async def test_auth_callable_that_fails_fails_the_connection() -> None:
 
     with Relay(None) as recorder:
         opts = options(rosbridge_auth=broken, reconnect=None)
-        with pytest.raises(ValueError, match="no key"):
+        with pytest.raises(rmb.ConnectError, match="rosbridge_auth callable failed") as caught:
             async with rmb.connect(recorder.url, protocol="rosbridge", options=opts):
                 pass
         assert recorder.sent == []  # nothing was sent
+    assert "no key" not in str(caught.value)
+    assert isinstance(caught.value.__cause__, RuntimeError)
+
+
+@pytest.mark.parametrize("transport", ["default", "httpx"])
+async def test_auth_callable_failing_on_a_reconnection_is_retried(
+    rosbridge: RosBridge, transport: str
+) -> None:
+    """The relay drops the link; the callable fails for the first
+    reconnection attempt only: that attempt fails, the policy retries, the
+    next attempt sends a fresh auth and the session carries on."""
+    import httpx
+
+    made: list[int] = []
+
+    def flaky() -> rmb.RosbridgeAuth:
+        made.append(1)
+        if len(made) == 2:
+            raise OSError("key store unreachable")
+        return rmb.RosbridgeAuth(f"mac{len(made)}", "c", "d", "r", 1, "admin", 2)
+
+    with Relay(rosbridge.url) as proxy:
+        async with httpx.AsyncClient() as http:
+            opts = options(
+                rosbridge_auth=flaky,
+                latency_probe_interval=0,
+                http_client=http if transport == "httpx" else None,
+                reconnect=rmb.ReconnectPolicy(initial_delay=0.05, max_delay=0.2),
+            )
+            async with rmb.connect(proxy.url, protocol="rosbridge", options=opts) as robot:
+                assert proxy.drop() == 1
+                await wait_until(
+                    lambda: len(made) >= 3 and robot.status == "connected", 10, "reconnection"
+                )
+                async with robot.subscribe("/chatter") as sub:
+                    msg = await first_message(sub)  # the session works again
+                assert isinstance(msg.data["data"], str)
+                # the attempt whose callable failed failed with ConnectError
+                assert isinstance(robot.last_error, rmb.ConnectError)
+                assert isinstance(robot.last_error.__cause__, OSError)
+        macs = [json.loads(m)["mac"] for m in proxy.sent if json.loads(m)["op"] == "auth"]
+    assert len(made) == 3
+    assert macs == ["mac1", "mac3"]  # the failed attempt sent nothing
+
+
+async def test_no_answer_after_auth_says_a_refused_auth_looks_like_this() -> None:
+    """A server that swallows every frame (as one checking the MAC may
+    ignore a client whose MAC is wrong): the error says that a refused
+    ``auth`` looks like this; without ``auth`` it does not."""
+    with Relay(None) as silent:
+        for auth, hinted in [(AUTH, True), (None, False)]:
+            opts = options(rosbridge_auth=auth, connect_timeout=0.5, reconnect=None)
+            with pytest.raises(rmb.ProtocolMismatchError) as caught:
+                async with rmb.connect(silent.url, protocol="rosbridge", options=opts):
+                    pass
+            text = str(caught.value)
+            assert "no answer to /rosapi/topics" in text
+            assert ("refuses it (a wrong or expired MAC)" in text) is hinted
+            assert caught.value.detected is None
+            assert AUTH.mac not in text
 
 
 # -- reconnection ---------------------------------------------------------------------

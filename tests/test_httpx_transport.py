@@ -187,6 +187,52 @@ async def test_wss_with_the_clients_tls_settings() -> None:
                     pass
 
 
+# -- client transports that cannot upgrade ---------------------------------------------
+
+
+def switching_protocols(request: httpx.Request) -> httpx.Response:
+    """httpx's own MockTransport answering a correct 101 (the accept key
+    computed by websockets), but a mock has no connection to hand over."""
+    from websockets.utils import accept_key
+
+    return httpx.Response(
+        101,
+        headers={
+            "Upgrade": "websocket",
+            "Connection": "Upgrade",
+            "Sec-WebSocket-Accept": accept_key(request.headers["Sec-WebSocket-Key"]),
+            "Sec-WebSocket-Protocol": "foxglove.sdk.v1.1",
+        },
+    )
+
+
+async def test_a_transport_without_a_network_stream_is_a_connect_error_naming_it() -> None:
+    async with httpx.AsyncClient(transport=httpx.MockTransport(switching_protocols)) as c:
+        opts = options(c, reconnect=None)
+        with pytest.raises(rmb.ConnectError, match="no network stream") as caught:
+            async with rmb.connect("ws://robot.test:8765", protocol="foxglove-ws", options=opts):
+                pass
+    assert "MockTransport" in str(caught.value)
+
+
+@pytest.mark.parametrize("status", [101, 200])
+async def test_an_http2_answer_says_http2_whatever_its_status(status: int) -> None:
+    """HTTP/2 has no 101 upgrade: a client with http2=True gets a 200 (or
+    an error) from a server that would upgrade HTTP/1.1. The error names
+    HTTP/2 rather than reporting a refused handshake."""
+
+    def over_http2(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(status, extensions={"http_version": b"HTTP/2"})
+
+    async with httpx.AsyncClient(transport=httpx.MockTransport(over_http2)) as c:
+        opts = options(c, reconnect=None)
+        with pytest.raises(rmb.ConnectError, match="answered over HTTP/2") as caught:
+            async with rmb.connect("ws://robot.test:8765", protocol="foxglove-ws", options=opts):
+                pass
+    assert getattr(caught.value, "status", None) is None  # not a HandshakeRejected
+    assert "without http2" in str(caught.value)
+
+
 # -- rosbridge ------------------------------------------------------------------------
 
 

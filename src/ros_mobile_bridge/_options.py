@@ -11,8 +11,10 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Final
 
+from ._errors import ConnectError
 from .flow._breaker import CircuitBreaker
 from .flow._throttle import THROTTLE_MODES, Bucket, ThrottleMode
+from .wire._rosbridge_auth import auth_fields
 
 if TYPE_CHECKING:
     import httpx
@@ -20,7 +22,12 @@ if TYPE_CHECKING:
 __all__ = ["BreakerPolicy", "ClientOptions", "ReconnectPolicy", "RosbridgeAuth"]
 
 _TOKEN: Final = re.compile(r"^[!#$%&'*+\-.^_`|~0-9A-Za-z]+$")
-"""An HTTP header name (RFC 9110 ``token``)."""
+"""An HTTP header name (RFC 9110 ``token``); used with ``fullmatch`` (``$``
+alone would let a trailing newline through)."""
+_FIELD_VALUE: Final = re.compile(r"[\t\x20-\x7e]*")
+"""What a header value may hold (RFC 9110 field-value, ASCII only): tab and
+visible ASCII with spaces; no other control character (CR, LF, NUL, \\x01,
+DEL...) and no non-ASCII text."""
 _HANDSHAKE_HEADERS: Final = frozenset(
     {
         "host",
@@ -59,16 +66,17 @@ def _check_headers(value: object) -> tuple[tuple[str, str], ...]:
         name, text = pair
         if not isinstance(name, str) or not isinstance(text, str):
             raise TypeError(f"header names and values must be str (header {name!r})")
-        if not _TOKEN.match(name):
+        if not _TOKEN.fullmatch(name):
             raise ValueError(f"invalid header name {name!r}")
         if name.lower() in _HANDSHAKE_HEADERS:
             raise ValueError(
                 f"header {name!r} is set by the WebSocket handshake itself and cannot be "
                 "overridden (subprotocols are chosen by the protocol)"
             )
-        if not text.isascii() or any(c in text for c in "\r\n\0"):
+        if not _FIELD_VALUE.fullmatch(text):
             raise ValueError(
-                f"header {name!r}: the value must be ASCII without CR, LF or NUL"
+                f"header {name!r}: the value may hold only tab and visible ASCII with spaces"
+                " (0x20-0x7E): no CR, LF, NUL or other control character, no non-ASCII text"
                 " (its value is not shown: it may be a secret)"
             )
         if text != text.strip(" \t"):
@@ -102,15 +110,10 @@ class RosbridgeAuth:
     end: float
 
     def __post_init__(self) -> None:
-        for name in ("mac", "client", "dest", "rand", "level"):
-            if not isinstance(getattr(self, name), str):
-                raise TypeError(f"RosbridgeAuth.{name} must be a str")
-        for name in ("t", "end"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise TypeError(f"RosbridgeAuth.{name} must be a number")
-            if not math.isfinite(value) or value < 0:
-                raise ValueError(f"RosbridgeAuth.{name} must be finite and >= 0, got {value!r}")
+        auth_fields(
+            mac=self.mac, client=self.client, dest=self.dest, rand=self.rand,
+            t=self.t, level=self.level, end=self.end, owner="RosbridgeAuth.",
+        )  # fmt: skip
 
     def __repr__(self) -> str:
         return (
@@ -265,15 +268,21 @@ class ClientOptions:
     rosbridge), e.g. ``{"Authorization": "Bearer ..."}`` for a reverse
     proxy. Stored as a tuple of ``(name, value)`` pairs. A name that is not
     an HTTP token, one the handshake sets itself (``Host``, ``Upgrade``,
-    ``Connection``, ``Sec-WebSocket-*``), or a value with CR, LF, NUL or
-    non-ASCII text raises ``ValueError`` here. Values are never logged
-    (the handshake's debug log is silenced when headers are set) nor shown
-    in ``repr``."""
+    ``Connection``, ``Sec-WebSocket-*``), or a value with anything but tab
+    and visible ASCII with spaces (CR, LF, NUL, any other control
+    character, non-ASCII text) raises ``ValueError`` here, naming the
+    header, never its value. Values are never logged (websockets' debug log
+    is silenced for a connection with headers) nor shown in ``repr``."""
     rosbridge_auth: RosbridgeAuth | Callable[[], RosbridgeAuth] | None = None
     """rosbridge: the ``auth`` operation sent first on every connection, or
     a callable returning a fresh one per connection (a MAC is usually bound
     to a time and a random string). A callable that raises or returns
-    something else fails that connection attempt."""
+    something else fails that connection attempt with ``ConnectError`` (its
+    error chained, not quoted): the first ``connect()`` raises it, a
+    reconnection is retried under :attr:`reconnect`. ``repr`` shows a
+    callable as ``<callable>``; websockets' debug log (which would print the
+    start of the ``auth`` frame, MAC included) is silenced for a connection
+    with ``auth``."""
     http_client: httpx.AsyncClient | None = None
     """Open the WebSocket (Foxglove and rosbridge) through this
     ``httpx.AsyncClient`` (``pip install ros-mobile-bridge[httpx]``): its
@@ -435,6 +444,8 @@ class ClientOptions:
             value = getattr(self, f.name)
             if f.name == "headers":
                 text = repr(tuple((name, _REDACTED) for name, _ in value))
+            elif f.name == "rosbridge_auth" and callable(value):
+                text = "<callable>"  # a partial(make_auth, secret=...) would show the secret
             else:
                 text = repr(value)
             parts.append(f"{f.name}={text}")
@@ -443,16 +454,22 @@ class ClientOptions:
     def auth_message(self) -> RosbridgeAuth | None:
         """The rosbridge ``auth`` to send on a new connection (calling
         :attr:`rosbridge_auth` when it is a callable), or None. A callable
-        that fails or returns something else raises ``ValueError``."""
+        that fails or returns something else raises ``ConnectError``: that
+        connection attempt fails (a reconnection is retried under
+        :attr:`reconnect`). The callable's own error is chained as
+        ``__cause__``, never copied into the message (it may hold a secret)."""
         auth = self.rosbridge_auth
         if auth is None or isinstance(auth, RosbridgeAuth):
             return auth
         try:
             made = auth()
         except Exception as exc:
-            raise ValueError(f"rosbridge_auth callable failed: {exc!r}") from exc
+            raise ConnectError(
+                f"rosbridge_auth callable failed with {type(exc).__name__}"
+                " (its message is not shown: see __cause__)"
+            ) from exc
         if not isinstance(made, RosbridgeAuth):
-            raise ValueError(
+            raise ConnectError(
                 f"rosbridge_auth callable returned {type(made).__name__}, not RosbridgeAuth"
             )
         return made

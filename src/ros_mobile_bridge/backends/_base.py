@@ -39,7 +39,10 @@ async def open_websocket(
     by either backend and by ``protocol="auto"``. Raises as
     ``connect_websocket`` does.
 
-    The handshake carries ``options.headers``; with ``options.http_client``
+    The handshake carries ``options.headers``. websockets' debug log (request
+    headers, the start of every frame) is off for a connection that carries
+    a secret: with ``options.headers`` or ``options.rosbridge_auth`` set (the
+    ``auth`` frame would be logged MAC and all). With ``options.http_client``
     the upgrade goes through that ``httpx.AsyncClient`` (the httpx transport,
     imported only then: ``ImportError`` naming the ``[httpx]`` extra when
     httpx is missing), and the returned object is the same
@@ -66,6 +69,7 @@ async def open_websocket(
         timeout=options.connect_timeout,
         read_coalesce=options.read_coalesce,
         headers=options.headers,  # type: ignore[arg-type]
+        quiet=bool(options.headers) or options.rosbridge_auth is not None,
     )
 
 

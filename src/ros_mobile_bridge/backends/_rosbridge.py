@@ -123,7 +123,9 @@ async def start_rosbridge(
 ) -> RosbridgeBackend:
     """Speak rosbridge on an open WebSocket: send ``options``' ``auth``
     first when set, then discover the graph until ``deadline``. Closes
-    ``ws`` on failure."""
+    ``ws`` on failure. A failing ``auth`` callable raises ``ConnectError``;
+    no answer after an ``auth`` raises ``ProtocolMismatchError`` saying a
+    refused ``auth`` looks like that."""
     try:
         if ws.subprotocol in fx.SUBPROTOCOLS:
             raise ProtocolMismatchError(
@@ -144,7 +146,18 @@ async def start_rosbridge(
                 )
             )
         backend = RosbridgeBackend(ws, options)
-        await backend._bootstrap(deadline)
+        try:
+            await backend._bootstrap(deadline)
+        except ProtocolMismatchError as exc:
+            if auth is None or exc.detected is not None:
+                raise
+            # the protocol has no answer to auth: a refusal is silence
+            raise ProtocolMismatchError(
+                "rosbridge",
+                None,
+                f"{exc.detail}; an auth operation was sent first, and a server that "
+                "refuses it (a wrong or expired MAC) may ignore the client just like this",
+            ) from exc
     except BaseException:
         await ws.aclose()
         raise

@@ -120,8 +120,10 @@ async def connect_httpx_websocket(
     :func:`~ros_mobile_bridge.transport.connect_websocket` (same errors:
     :class:`HandshakeRejected` for an HTTP status other than 101,
     ``ConnectError`` for a refused connection, a proxy or TLS failure, a
-    timeout, or an HTTP/2 answer, ``ValueError`` for a bad URL). ``timeout``
-    bounds the whole upgrade on top of the client's own timeouts."""
+    timeout, an HTTP/2 answer, or a client transport that cannot upgrade a
+    connection (no network stream after the 101), ``ValueError`` for a bad
+    URL). ``timeout`` bounds the whole upgrade on top of the client's own
+    timeouts."""
     proto = client_protocol(url, subprotocols, max_size, quiet=True)
     request = proto.connect()
     for name, value in headers:
@@ -132,15 +134,24 @@ async def connect_httpx_websocket(
     try:
         with anyio.fail_after(timeout):
             response = await client.send(http_request, stream=True)
-            if response.status_code != 101:
-                body = await _refusal_body(response)
-                raise HandshakeRejected(response.status_code, body)
+            # the version first: an HTTP/2 answer (no 101 exists there) is
+            # the client's http2=True, not a refusal
             if response.http_version != "HTTP/1.1":
                 raise ConnectError(
                     f"WebSocket upgrade to {url} answered over {response.http_version}: "
                     "use an httpx.AsyncClient without http2"
                 )
-            network = response.extensions["network_stream"]
+            if response.status_code != 101:
+                body = await _refusal_body(response)
+                raise HandshakeRejected(response.status_code, body)
+            network = response.extensions.get("network_stream")
+            if network is None:
+                raise ConnectError(
+                    f"WebSocket upgrade to {url}: the httpx client's transport answered 101 "
+                    "but handed over no network stream (response.extensions"
+                    "['network_stream']): it cannot upgrade a connection (httpx.MockTransport "
+                    "and ASGITransport cannot; use httpx's default transport)"
+                )
     except TimeoutError as exc:
         await _close(response)
         raise ConnectError(f"timed out after {timeout:g} s connecting to {url}") from exc

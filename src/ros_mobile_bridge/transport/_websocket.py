@@ -580,13 +580,15 @@ async def connect_websocket(
     timeout: float = 10.0,
     read_coalesce: float = 0.0,
     headers: Sequence[tuple[str, str]] = (),
+    quiet: bool = False,
 ) -> WebSocket:
     """Open a WebSocket to ``url`` (``ws://`` or ``wss://``) offering
     ``subprotocols``. ``timeout`` covers TCP connect, TLS and the HTTP upgrade.
     ``headers`` are added to the upgrade request as given (the caller
-    validates them: :class:`~ros_mobile_bridge.ClientOptions` does); when
-    there are any, the handshake is not debug-logged, so their values never
-    reach a log.
+    validates them: :class:`~ros_mobile_bridge.ClientOptions` does).
+    websockets' debug log (the handshake's headers, the start of every
+    frame) is off for this connection when ``quiet`` is set or there are
+    headers, so secrets in either never reach a log.
 
     Raises :class:`HandshakeRejected` when the server answers with an HTTP
     status, ``ConnectError`` for anything else that prevents the connection
@@ -594,7 +596,7 @@ async def connect_websocket(
     ``max_size`` bounds one message (``None``: no bound); a larger message
     closes the connection with code 1009. ``read_coalesce`` sets
     :attr:`WebSocket.read_coalesce`."""
-    proto = client_protocol(url, subprotocols, max_size, quiet=bool(headers))
+    proto = client_protocol(url, subprotocols, max_size, quiet=quiet or bool(headers))
     uri = proto.uri
     stream: anyio.abc.ByteStream | None = None
     try:
@@ -660,8 +662,8 @@ async def connect_websocket(
 
 
 class _NoDebug(logging.LoggerAdapter):  # type: ignore[type-arg]
-    """websockets' logger without its debug level: its handshake debug log
-    prints every request header, secrets included."""
+    """websockets' logger without its debug level: its debug log prints
+    every request header and the start of every frame, secrets included."""
 
     def isEnabledFor(self, level: int) -> bool:
         return level > logging.DEBUG and self.logger.isEnabledFor(level)
@@ -671,7 +673,8 @@ def client_protocol(
     url: str, subprotocols: tuple[str, ...], max_size: int | None, *, quiet: bool
 ) -> ClientProtocol:
     """websockets' sans-IO client for ``url`` (``ValueError`` for a bad
-    URL); ``quiet``: its debug log off (the request carries secrets)."""
+    URL); ``quiet``: its debug log off (the request or the frames carry
+    secrets)."""
     try:
         uri = parse_uri(url)
     except InvalidURI as exc:

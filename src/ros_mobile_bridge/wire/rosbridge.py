@@ -41,6 +41,7 @@ import cbor2
 import numpy as np
 
 from .._limits import json_too_deep, truncate_for_log
+from ._rosbridge_auth import auth_fields
 
 __all__ = [
     "ActionFeedback",
@@ -906,22 +907,8 @@ class RosbridgeEngine:
         """``auth``: the rosbridge v2 authentication message, to be sent
         before any other operation. Sent as given (the MAC is the caller's);
         ``t`` and ``end`` (seconds) go as integers when they are whole."""
-        obj: dict[str, Any] = {"op": "auth"}
-        for name, text in (("mac", mac), ("client", client), ("dest", dest), ("rand", rand)):
-            if not isinstance(text, str):
-                raise TypeError(f"{name} must be a str")
-            obj[name] = text
-        for name, when in (("t", t), ("end", end)):
-            if isinstance(when, bool) or not isinstance(when, int | float):
-                raise TypeError(f"{name} must be a number")
-            if not (math.isfinite(when) and when >= 0):
-                raise ValueError(f"{name} must be finite and >= 0, got {when!r}")
-            obj[name] = int(when) if float(when).is_integer() else when
-        if not isinstance(level, str):
-            raise TypeError("level must be a str")
-        obj["level"] = level
         return _json(
-            {k: obj[k] for k in ("op", "mac", "client", "dest", "rand", "t", "level", "end")}
+            auth_fields(mac=mac, client=client, dest=dest, rand=rand, t=t, level=level, end=end)
         )
 
     @staticmethod
