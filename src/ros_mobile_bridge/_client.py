@@ -354,13 +354,11 @@ class Client:
         if self._watched_parameters:
             await backend.subscribe_parameters(sorted(self._watched_parameters))
         for name, served in list(self._served.items()):
-            try:
-                await backend.advertise_service(name, served.service_type, served, confirm=False)
-            except (ConnectError, NotConnected):
-                raise
-            except RosBridgeError as exc:  # refused now: that serve() block ends in error
-                self._log.error("could not serve %s again after the reconnect: %s", name, exc)
-                served._fail(exc)
+            if self._served.get(name) is not served:
+                continue  # its serve() block ended while this loop awaited
+            # unconfirmed: a refusal arrives later, through the new reader,
+            # and ends that serve() block (served.on_service_failed)
+            await backend.advertise_service(name, served.service_type, served, confirm=False)
 
     async def _next_connection(self, lost: Backend) -> bool:
         """Wait until a connection other than ``lost`` is up (the reader
@@ -1158,7 +1156,10 @@ class Client:
         try:
             await self._backend.advertise_service(name, service_type, served)
         except BaseException:
+            # the backend unadvertised what it may have served; calls that
+            # came meanwhile are answered here
             self._served.pop(name, None)
+            await served._close("the service could not be served")
             raise
         try:
             async with anyio.create_task_group() as tg:
@@ -1169,11 +1170,11 @@ class Client:
                     tg.cancel_scope.cancel()
         finally:
             self._served.pop(name, None)
-            with (
-                anyio.CancelScope(shield=True),
-                anyio.move_on_after(self._options.teardown_timeout),
-            ):
-                await served._close("the service stopped serving")
+            budget = self._options.teardown_timeout
+            with anyio.CancelScope(shield=True), anyio.move_on_after(budget):
+                # half the budget to answer what is open, the rest (at least
+                # half) to unadvertise
+                await served._close("the service stopped serving", budget / 2)
                 if self.connected:
                     try:
                         await self._backend.unadvertise_service(name)
