@@ -169,6 +169,10 @@ class FakeSocket:
         self.sent.append(json.loads(message))
 
 
+async def no_round_trip() -> None:
+    pass  # nobody answers on a fake socket
+
+
 def rosbridge_backend() -> tuple[_rosbridge.RosbridgeBackend, FakeSocket]:
     ws = FakeSocket()
     return _rosbridge.RosbridgeBackend(ws, rmb.ClientOptions()), ws  # type: ignore[arg-type]
@@ -215,16 +219,31 @@ async def test_an_advertisement_failing_after_its_frame_is_unadvertised(
         await anyio.sleep(3600)
 
     monkeypatch.setattr(backend, "_confirm_served", unconfirmed)
+    monkeypatch.setattr(backend, "_round_trip", no_round_trip)
     requests = served(backend)
+    backend_ids: list[str] = []
+    advertise = backend._engine.advertise_service
+
+    def remember(service: str, type: str, *, id: str) -> str:
+        backend_ids.append(id)
+        return advertise(service, type, id=id)
+
+    monkeypatch.setattr(backend._engine, "advertise_service", remember)
     if how == "timeout":
         with pytest.raises(rmb.ServiceError):
             await backend.advertise_service(NAME, SETBOOL, requests)
     else:
         with anyio.move_on_after(0.05):
             await backend.advertise_service(NAME, SETBOOL, requests)
-    assert [(m["op"], m["service"]) for m in ws.sent] == [
-        ("advertise_service", NAME),
-        ("unadvertise_service", NAME),
+    # maybe served: calls still reach the handler until the caller (the
+    # client, after answering them) unadvertises
+    await backend._handle(rb.ServiceRequest("q1", NAME, {"data": True}))
+    assert requests.stats.received == 1
+    await requests._close("closing")
+    await backend.unadvertise_service(NAME)
+    assert [(m["op"], m.get("id"), m.get("values")) for m in ws.sent][1:] == [
+        ("service_response", "q1", "closing"),
+        ("unadvertise_service", backend_ids[0], None),
     ]
     assert NAME not in backend._served
 
@@ -242,3 +261,64 @@ async def test_a_refused_advertisement_is_not_unadvertised(
         await backend.advertise_service(NAME, SETBOOL, served(backend))
     # the name may be the other client's: no unadvertise_service for it
     assert [m["op"] for m in ws.sent] == ["advertise_service"]
+
+
+# -- the client's side, on a stub backend ----------------------------------------------
+
+
+class ClientStub:
+    """Enough of a backend for ``Client``'s serving paths: advertisements
+    are recorded; an answer's write never completes (a stuck socket)."""
+
+    def __init__(self) -> None:
+        self.topics: list[Any] = []
+        self.services: list[Any] = []
+        self.advertised: list[str] = []
+        self.unadvertised: list[str] = []
+        self.gate: anyio.Event | None = None
+
+    def publishing(self) -> dict[str, str]:
+        return {}
+
+    async def advertise_service(
+        self, name: str, service_type: str, handler: Any, *, confirm: bool = True
+    ) -> None:
+        self.advertised.append(name)
+        if self.gate is not None:
+            await self.gate.wait()
+
+    async def unadvertise_service(self, name: str) -> None:
+        await anyio.lowlevel.checkpoint()
+        self.unadvertised.append(name)
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        await anyio.sleep(3600)
+
+
+def client_on(backend: ClientStub, **options: Any) -> rmb.Client:
+    return rmb.Client(backend, rmb.ClientOptions(**options))  # type: ignore[arg-type]
+
+
+async def test_leaving_the_block_unadvertises_though_the_answers_take_the_whole_budget() -> None:
+    backend = ClientStub()
+    client = client_on(backend, teardown_timeout=0.3)
+    async with client._serve(NAME, SETBOOL, 30.0, 16) as requests:
+        await requests.on_service_request(backend, "q", {"data": True})  # type: ignore[arg-type]
+    assert backend.unadvertised == [NAME]
+    stats = requests.stats
+    assert (stats.received, stats.lost, stats.pending) == (1, 1, 0)  # never written
+
+
+async def test_a_restore_skips_a_service_whose_block_ended_meanwhile() -> None:
+    old = ClientStub()
+    client = client_on(old)
+    first, second = served(old), served(old)
+    client._served.update({"/first": first, "/second": second})
+    new = ClientStub()
+    new.gate = anyio.Event()
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(client._restore, old, new)
+        await anyio.wait_all_tasks_blocked()  # advertising /first on the new connection
+        del client._served["/second"]  # that serve() block ended meanwhile
+        new.gate.set()
+    assert new.advertised == ["/first"]

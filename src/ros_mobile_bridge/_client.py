@@ -1156,10 +1156,11 @@ class Client:
         try:
             await self._backend.advertise_service(name, service_type, served)
         except BaseException:
-            # the backend unadvertised what it may have served; calls that
-            # came meanwhile are answered here
+            # the bridge may serve it though (sent, not confirmed): answer the
+            # calls that came, then unadvertise (the bridge drops calls still
+            # open when the service goes)
             self._served.pop(name, None)
-            await served._close("the service could not be served")
+            await self._end_serving(name, served, "the service could not be served")
             raise
         try:
             async with anyio.create_task_group() as tg:
@@ -1170,16 +1171,20 @@ class Client:
                     tg.cancel_scope.cancel()
         finally:
             self._served.pop(name, None)
-            budget = self._options.teardown_timeout
-            with anyio.CancelScope(shield=True), anyio.move_on_after(budget):
-                # half the budget to answer what is open, the rest (at least
-                # half) to unadvertise
-                await served._close("the service stopped serving", budget / 2)
-                if self.connected:
-                    try:
-                        await self._backend.unadvertise_service(name)
-                    except RosBridgeError as exc:
-                        self._log.debug("unadvertising %s failed: %s", name, exc)
+            await self._end_serving(name, served, "the service stopped serving")
+
+    async def _end_serving(self, name: str, served: ServiceRequests, reason: str) -> None:
+        """Answer what is open, then unadvertise ``name``: shielded, within
+        ``options.teardown_timeout``, half of it at most for the answers so
+        that the unadvertise always has the other half."""
+        budget = self._options.teardown_timeout
+        with anyio.CancelScope(shield=True), anyio.move_on_after(budget):
+            await served._close(reason, budget / 2)
+            if self.connected:
+                try:
+                    await self._backend.unadvertise_service(name)
+                except RosBridgeError as exc:
+                    self._log.debug("unadvertising %s failed: %s", name, exc)
 
     async def _request(
         self,

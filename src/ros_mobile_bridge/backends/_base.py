@@ -271,7 +271,10 @@ class Backend(Protocol):
         ``ServiceError`` when it refused; without, returns once sent (a
         refusal is logged: restoring after a reconnect, before the new
         connection's reader runs). ``NotSupportedError`` where the protocol
-        cannot serve."""
+        cannot serve. When it raises after the advertisement may have taken
+        effect (sent, neither confirmed nor refused: a timeout, a
+        cancellation), calls may still arrive: the caller answers them and
+        then calls :meth:`unadvertise_service`."""
 
     async def unadvertise_service(self, name: str) -> None:
         """Stop serving ``name`` (a no-op when not served)."""

@@ -804,21 +804,13 @@ class RosbridgeBackend:
                 raise _refusal(name, service_type, served.error)
             served.confirmed = True
         except BaseException:
-            if self._served.get(name) is served:
+            # never sent, or refused (the name may be another client's): free
+            if not (sent and served.error is None) and self._served.get(name) is served:
                 del self._served[name]
-            if sent and served.error is None:
-                # not confirmed (timeout, cancelled) but maybe served: the
-                # bridge must not route the name here any more (not after a
-                # refusal: the name may be another client's)
-                await self._unadvertise_after_failure(name, served)
+            # else not confirmed (a timeout, a cancellation) but maybe served:
+            # the entry stays, so calls still reach the handler, until the
+            # caller answers what came and calls unadvertise_service
             raise
-
-    async def _unadvertise_after_failure(self, name: str, served: _Served) -> None:
-        with anyio.CancelScope(shield=True), anyio.move_on_after(self._options.teardown_timeout):
-            try:
-                await self._ws.send(self._engine.unadvertise_service(name, id=served.id))
-            except ConnectError as exc:
-                self._log.debug("could not unadvertise %s: %s", name, exc)
 
     async def _confirm_served(self, name: str, served: _Served) -> None:
         """Wait until the bridge refused ``name`` (``served.error``) or the
