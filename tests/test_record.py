@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import contextlib
+import errno
 import itertools
 import json
 from collections.abc import Iterator
@@ -202,6 +203,57 @@ async def test_the_file_is_valid_after_cancellation(demo: DemoRobot, tmp_path: P
     assert summary_count(path) == rec.stats.total >= 10
     decoded = decode_all(path)
     assert sum(len(v) for v in decoded.values()) == rec.stats.total
+
+
+async def test_a_refused_topic_is_counted_and_the_others_go_on(
+    demo: DemoRobot, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "refused.mcap"
+    async with rmb.connect(demo.url, options=options()) as robot:
+        subscribe = robot.subscribe
+
+        def refusing(topic: str, **kw: Any) -> Any:
+            if topic == "/battery":  # as a bridge refusing the type would
+                raise rmb.SchemaError("no definition of sensor_msgs/msg/BatteryState")
+            return subscribe(topic, **kw)
+
+        monkeypatch.setattr(robot, "subscribe", refusing)
+        async with robot.record(path, topics=["/odom", "/battery", "/pose"]) as rec:
+            await wait_until(lambda: "/battery" in rec.stats.failed, 10)
+            await wait_until(
+                lambda: min(rec.stats.messages.get(t, 0) for t in ("/odom", "/pose")) >= 3, 10
+            )
+        stats = rec.stats
+    assert set(stats.failed) == {"/battery"}
+    assert "BatteryState" in stats.failed["/battery"]
+    assert set(stats.messages) == {"/odom", "/pose"}
+    assert summary_count(path) == stats.total
+
+
+async def test_a_disk_error_ends_the_recording_with_that_error(
+    demo: DemoRobot, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from mcap.writer import Writer
+
+    path = tmp_path / "full.mcap"
+    add_message = Writer.add_message
+    calls = itertools.count()
+
+    def filling(self: Writer, *args: Any, **kw: Any) -> None:
+        if next(calls) >= 5:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        add_message(self, *args, **kw)
+
+    monkeypatch.setattr(Writer, "add_message", filling)
+    async with rmb.connect(demo.url, options=options()) as robot:
+        with pytest.raises(OSError, match="No space left") as caught:
+            async with robot.record(path, topics=["/odom", "/pose"]) as rec:
+                await anyio.sleep(30)
+                pytest.fail("the recording went on after the disk error")
+        assert type(caught.value) is OSError  # not an exception group
+        assert robot.status == "connected"  # the client is fine
+    assert rec.stats.total == 5
+    assert summary_count(path) == 5  # finished: the file is readable
 
 
 async def test_max_hz_applies_to_the_recording(demo: DemoRobot, tmp_path: Path) -> None:

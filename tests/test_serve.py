@@ -285,6 +285,60 @@ async def test_overflow_is_answered_false_and_counted(
     assert len(refusals) == 2
 
 
+async def test_a_serve_cancelled_while_confirming_answers_its_calls_and_unadvertises(
+    rosbridge: RosBridge,
+    ros_graph: RosGraph,
+    caplog: pytest.LogCaptureFixture,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The advertise frame is out and the bridge routes calls here, but the
+    # confirmation has not come when the caller gives up: the calls that came
+    # meanwhile are answered, and the bridge stops routing the name here.
+    caplog.set_level(logging.INFO, LOGGER)
+    name = unique("/rmb_served")
+    failures: list[rmb.ServiceError] = []
+    async with (
+        rmb.connect(rosbridge.url, protocol="rosbridge", options=options()) as server,
+        rmb.connect(rosbridge.url, protocol="rosbridge", options=options()) as caller,
+    ):
+        confirming = anyio.Event()
+
+        async def never_confirmed(service: str, served: Any) -> None:
+            confirming.set()
+            await anyio.sleep(3600)
+
+        monkeypatch.setattr(server._backend, "_confirm_served", never_confirmed)
+        entering = anyio.CancelScope()
+
+        async def enter() -> None:
+            with entering:
+                async with server.serve(name, SETBOOL):
+                    pytest.fail("entered without a confirmation")
+
+        async def call() -> None:
+            try:
+                await caller.call_service(name, {"data": True}, timeout=3)
+            except rmb.ServiceError as exc:
+                failures.append(exc)
+
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(enter)
+            with anyio.fail_after(10):
+                await confirming.wait()
+            requests = server._served[name]
+            tg.start_soon(call)
+            await wait_until(lambda: requests.stats.received == 1, 10)
+            entering.cancel()
+        assert entering.cancelled_caught
+        stats = requests.stats
+        assert (stats.received, stats.unanswered, stats.pending) == (1, 1, 0)
+        assert any("cannot carry an error response" in r.getMessage() for r in caplog.records)
+        assert len(failures) == 1
+        # the bridge routes the name here no more
+        after = await ros_call(ros_graph, name, SETBOOL, {"data": True}, timeout=1.0)
+        assert after == {"timeout": True, "available": False}
+
+
 async def test_unadvertised_on_exit(rosbridge: RosBridge, ros_graph: RosGraph) -> None:
     name = unique("/rmb_served")
     async with rmb.connect(rosbridge.url, protocol="rosbridge", options=options()) as robot:

@@ -354,13 +354,11 @@ class Client:
         if self._watched_parameters:
             await backend.subscribe_parameters(sorted(self._watched_parameters))
         for name, served in list(self._served.items()):
-            try:
-                await backend.advertise_service(name, served.service_type, served, confirm=False)
-            except (ConnectError, NotConnected):
-                raise
-            except RosBridgeError as exc:  # refused now: that serve() block ends in error
-                self._log.error("could not serve %s again after the reconnect: %s", name, exc)
-                served._fail(exc)
+            if self._served.get(name) is not served:
+                continue  # its serve() block ended while this loop awaited
+            # unconfirmed: a refusal arrives later, through the new reader,
+            # and ends that serve() block (served.on_service_failed)
+            await backend.advertise_service(name, served.service_type, served, confirm=False)
 
     async def _next_connection(self, lost: Backend) -> bool:
         """Wait until a connection other than ``lost`` is up (the reader
@@ -1158,7 +1156,11 @@ class Client:
         try:
             await self._backend.advertise_service(name, service_type, served)
         except BaseException:
+            # the bridge may serve it though (sent, not confirmed): answer the
+            # calls that came, then unadvertise (the bridge drops calls still
+            # open when the service goes)
             self._served.pop(name, None)
+            await self._end_serving(name, served, "the service could not be served")
             raise
         try:
             async with anyio.create_task_group() as tg:
@@ -1169,16 +1171,20 @@ class Client:
                     tg.cancel_scope.cancel()
         finally:
             self._served.pop(name, None)
-            with (
-                anyio.CancelScope(shield=True),
-                anyio.move_on_after(self._options.teardown_timeout),
-            ):
-                await served._close("the service stopped serving")
-                if self.connected:
-                    try:
-                        await self._backend.unadvertise_service(name)
-                    except RosBridgeError as exc:
-                        self._log.debug("unadvertising %s failed: %s", name, exc)
+            await self._end_serving(name, served, "the service stopped serving")
+
+    async def _end_serving(self, name: str, served: ServiceRequests, reason: str) -> None:
+        """Answer what is open, then unadvertise ``name``: shielded, within
+        ``options.teardown_timeout``, half of it at most for the answers so
+        that the unadvertise always has the other half."""
+        budget = self._options.teardown_timeout
+        with anyio.CancelScope(shield=True), anyio.move_on_after(budget):
+            await served._close(reason, budget / 2)
+            if self.connected:
+                try:
+                    await self._backend.unadvertise_service(name)
+                except RosBridgeError as exc:
+                    self._log.debug("unadvertising %s failed: %s", name, exc)
 
     async def _request(
         self,

@@ -15,8 +15,14 @@ profile, whatever the transport:
 
 Each channel's schema is the full ``ros2msg`` text with its dependencies, as
 rosbag2 writes it. The file is finished (summary, indexes) on every exit
-path, cancellation included, in a shielded scope with a deadline. The
-``mcap`` package is imported here, lazily (the ``[record]`` extra)."""
+path, cancellation included: ``finish()`` is synchronous, so no cancellation
+can cut it short (it blocks the event loop while it writes the last chunk
+and the indexes). Writing happens on the event loop too: a slow disk adds
+lag to everything the client does. A topic the bridge refuses is counted in
+``RecordStats.failed`` and the others go on; a disk error (``OSError``) ends
+the recording and is raised from the ``record()`` block, after the file was
+finished if the disk allowed. The ``mcap`` package is imported here, lazily
+(the ``[record]`` extra)."""
 
 from __future__ import annotations
 
@@ -56,12 +62,15 @@ class RecordStats:
     ``messages``: messages written per topic; ``bytes``: payload bytes
     written (CDR or JSON, before the file's compression); ``skipped``:
     messages per topic that could not be written (no definition to encode
-    them with, or data that does not fit it; each topic's first is logged).
+    them with, or data that does not fit it; each topic's first is logged);
+    ``failed``: topics not recorded (any more) because the bridge or the
+    client refused them, with the reason (logged once).
     """
 
     messages: dict[str, int] = field(default_factory=dict)
     bytes: int = 0
     skipped: dict[str, int] = field(default_factory=dict)
+    failed: dict[str, str] = field(default_factory=dict)
 
     @property
     def total(self) -> int:
@@ -119,10 +128,15 @@ class Recording:
         self._bytes = 0
         self._sequence = 0
         self._topics: list[str] = []
+        self._failed: dict[str, str] = {}
+        self._disk_error: OSError | None = None
+        self._stop: anyio.CancelScope | None = None  # the recording's task group
 
     @property
     def stats(self) -> RecordStats:
-        return RecordStats(dict(self._messages), self._bytes, dict(self._skipped))
+        return RecordStats(
+            dict(self._messages), self._bytes, dict(self._skipped), dict(self._failed)
+        )
 
     @property
     def topics(self) -> list[str]:
@@ -231,10 +245,10 @@ class Recording:
         compression: Compression | None,
     ) -> None:
         self._topics.append(topic)
-        subscription = self._client.subscribe(
-            topic, max_hz=max_hz, adaptive=adaptive, compression=compression
-        )
         try:
+            subscription = self._client.subscribe(
+                topic, max_hz=max_hz, adaptive=adaptive, compression=compression
+            )
             async with subscription as sub:
                 while True:
                     try:
@@ -248,6 +262,15 @@ class Recording:
         except (ConnectError, NotConnected) as exc:
             # the client's status says so; the file keeps what came before
             self._log.warning("record: %s stopped: %s", topic, exc)
+        except RosBridgeError as exc:  # this topic only: the others go on
+            self._failed[topic] = str(exc)
+            self._log.error("record: %s is not recorded: %s (see stats.failed)", topic, exc)
+        except OSError as exc:  # the disk: the whole recording ends
+            if self._disk_error is None:
+                self._disk_error = exc
+                self._log.error("record: writing %s failed: %s; the recording ends", self.path, exc)
+            if self._stop is not None:
+                self._stop.cancel()
 
     async def _follow_graph(
         self,
@@ -296,6 +319,7 @@ async def open_recording(
     recording = Recording(client, name, writer, client._log)
     try:
         async with anyio.create_task_group() as tg:
+            recording._stop = tg.cancel_scope
             if topics is None:
                 tg.start_soon(recording._follow_graph, tg, max_hz, adaptive, compression)
             else:
@@ -311,8 +335,15 @@ async def open_recording(
         # already, in chunks of 1 MiB).
         try:
             writer.finish()
+        except OSError as exc:
+            if recording._disk_error is None:
+                raise
+            client._log.error("record: %s could not be finished: %s", name, exc)
         finally:
             stream.close()
+    if recording._disk_error is not None:
+        # the task group's cancellation ended the body; the disk is the news
+        raise recording._disk_error
 
 
 def _compression(mcap_writer: Any) -> Any:
@@ -344,14 +375,13 @@ def check_record_args(
     if topics is not None:
         if isinstance(topics, str) or not isinstance(topics, Sequence | set | frozenset):
             raise TypeError("topics must be a sequence of topic names or None (every topic)")
+        from ._client import _check_name
+
         wanted = []
         for topic in topics:
-            if not isinstance(topic, str):
-                raise TypeError(f"topic names must be str, not {type(topic).__name__}")
-            if not topic.startswith("/") or len(topic) < 2 or any(c.isspace() for c in topic):
-                raise ValueError(f"topic must be an absolute ROS name like '/odom', got {topic!r}")
-            if topic not in wanted:
-                wanted.append(topic)
+            name = _check_name("topic", topic)
+            if name not in wanted:
+                wanted.append(name)
         if not wanted:
             raise ValueError("topics must name at least one topic (None records every topic)")
     if max_hz is not None:

@@ -104,7 +104,10 @@ class ServiceRequest:
         type (the request stays unanswered then), ``ServiceError`` when the
         request was answered already (by the library at its deadline, for
         instance) and ``NotConnected`` when the connection that carried it
-        is gone (the caller gets no answer)."""
+        is gone (the caller gets no answer). Cancelled before the answer was
+        written, the request stays open (the library answers it
+        ``result: false`` at its deadline or when the block ends); once
+        written, it counts as replied even if a cancellation lands next."""
         if values is None:
             values = {}
         if not isinstance(values, Mapping):
@@ -147,8 +150,10 @@ class ServiceRequests:
         self._current = current
         self._teardown_timeout = teardown_timeout
         self._log = logger
-        self._queue: deque[ServiceRequest] = deque()
-        self._open: list[ServiceRequest] = []  # taken by the consumer, not answered
+        self._queue: deque[ServiceRequest] = deque()  # not read yet (some answered)
+        # every request received and not counted yet, in arrival order: the
+        # deadline and the block's end answer these, wherever they are
+        self._unsettled: dict[ServiceRequest, None] = {}
         self._taken: ServiceRequest | None = None
         self._wake = anyio.Event()
         self._changed = anyio.Event()
@@ -174,6 +179,8 @@ class ServiceRequests:
                 self.name, request_id, "the service is shutting down", False
             )
             return
+        if len(self._queue) >= self.buffer:  # drop the ones answered while queued
+            self._queue = deque(r for r in self._queue if r._outcome is None)
         if len(self._queue) >= self.buffer:
             self._counts["overflowed"] += 1
             self._log.warning(
@@ -189,7 +196,9 @@ class ServiceRequests:
             )
             return
         deadline = anyio.current_time() + self.timeout
-        self._queue.append(ServiceRequest(self, backend, request_id, args, deadline))
+        request = ServiceRequest(self, backend, request_id, args, deadline)
+        self._queue.append(request)
+        self._unsettled[request] = None
         self._wake.set()
         self._changed.set()
 
@@ -205,12 +214,14 @@ class ServiceRequests:
             while self._queue:
                 request = self._queue.popleft()
                 if request.answered:
-                    continue  # expired while queued
+                    # expired while queued (or being answered now: if that
+                    # answer is cancelled unsent, the deadline or the block's
+                    # end answers it, never the consumer)
+                    continue
                 if request._backend is not self._current():
                     self._settle(request, "lost")
                     continue
                 self._taken = request
-                self._open.append(request)
                 return request
             if self._error is not None:
                 raise self._error
@@ -223,9 +234,14 @@ class ServiceRequests:
     def _settle(self, request: ServiceRequest, outcome: Outcome) -> None:
         request._outcome = outcome
         self._counts[outcome] += 1
-        if request in self._open:
-            self._open.remove(request)
+        self._unsettled.pop(request, None)
         self._changed.set()
+
+    def _unclaim(self, request: ServiceRequest) -> None:
+        """An answer was not sent (cancelled before the write): the request
+        is open again, for the deadline or the block's end to answer."""
+        request._outcome = None
+        self._changed.set()  # the deadline task may have left it out
 
     async def _answer(
         self, request: ServiceRequest, outcome: Outcome, values: Any, result: bool
@@ -242,22 +258,24 @@ class ServiceRequests:
                 " the caller got no answer"
             )
         request._outcome = outcome  # claimed: the deadline cannot answer it too
+        # respond_service writes the frame as its last step (the write itself
+        # shielded): when it raises, nothing was sent; once it returns, the
+        # answer is out, whatever cancellation lands next
         try:
             await backend.respond_service(self.name, request.id, values, result)
         except DecodeError as exc:
-            request._outcome = None  # still the caller's to answer
+            self._unclaim(request)  # still the caller's to answer
             raise ValueError(f"{self.name}: {exc}") from exc
         except ConnectError as exc:
-            request._outcome = None
             self._settle(request, "lost")
             raise NotConnected(
                 f"disconnected: {exc} (the answer to {request.id} was not sent)"
             ) from exc
         except BaseException:
-            request._outcome = None
-            self._settle(request, "lost")
+            # cancelled before the write: the connection is fine and the
+            # request still open; the deadline or the block's end answers it
+            self._unclaim(request)
             raise
-        request._outcome = None
         self._settle(request, outcome)
 
     async def _auto_fail(self, request: ServiceRequest, reason: str) -> None:
@@ -270,15 +288,18 @@ class ServiceRequests:
             self._settle(request, "lost")
             return
         self._log.info("%s: request %s answered result false: %s", self.name, request.id, reason)
-        request._outcome = "unanswered"
+        request._outcome = "unanswered"  # claimed, as in _answer
         try:
             await backend.respond_service(self.name, request.id, reason, False)
         except RosBridgeError as exc:
-            request._outcome = None
             self._settle(request, "lost")
             self._log.debug("%s: could not answer %s: %s", self.name, request.id, exc)
             return
-        request._outcome = None
+        except BaseException:
+            # cancelled before the write: open again, so the deadline or
+            # _close answers it (a claim left behind would make them skip it)
+            self._unclaim(request)
+            raise
         self._settle(request, "unanswered")
 
     async def _expire(self) -> None:
@@ -286,7 +307,7 @@ class ServiceRequests:
         ``serve()`` block's task group)."""
         while True:
             now = anyio.current_time()
-            waiting = [r for r in (*self._queue, *self._open) if r._outcome is None]
+            waiting = [r for r in self._unsettled if r._outcome is None]
             expired = [r for r in waiting if r.deadline <= now]
             for request in expired:
                 await self._auto_fail(request, f"no answer within {self.timeout:g} s")
@@ -298,20 +319,31 @@ class ServiceRequests:
             with anyio.move_on_after(nearest - now):
                 await self._changed.wait()
 
-    async def _close(self, reason: str) -> None:
+    async def _close(self, reason: str, budget: float | None = None) -> None:
         """End serving: answer every request not answered yet (shielded,
-        within the teardown deadline) and end the iteration."""
+        within ``budget`` seconds, the teardown deadline by default) and end
+        the iteration. What the budget leaves unanswered counts as lost."""
         self._closed = True
         self._wake.set()
-        with anyio.CancelScope(shield=True), anyio.move_on_after(self._teardown_timeout):
-            for request in [*self._open, *self._queue]:
+        limit = self._teardown_timeout if budget is None else budget
+        with anyio.CancelScope(shield=True), anyio.move_on_after(limit):
+            for request in list(self._unsettled):
                 await self._auto_fail(request, reason)
-        for request in [*self._open, *self._queue]:
-            if request._outcome is None:
+        for request in list(self._unsettled):
+            if request._outcome is None:  # else an answer is being written now
                 self._settle(request, "lost")
         self._queue.clear()
 
     def _fail(self, error: RosBridgeError) -> None:
-        """The connection is lost for good: the iteration raises ``error``."""
+        """Serving ended in error (the connection is lost for good, or the
+        bridge refused the service): the iteration raises ``error`` once the
+        requests already queued are read."""
         self._error = error
         self._wake.set()
+
+    def on_service_failed(self, error: RosBridgeError) -> None:
+        """The backend's word that the bridge refused the service after it
+        was advertised (a refusal arriving after confirmation, or after a
+        restore that could not wait for one): the iteration raises it."""
+        self._log.error("%s is not served: %s", self.name, error)
+        self._fail(error)

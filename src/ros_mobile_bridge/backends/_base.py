@@ -11,6 +11,7 @@ from typing import Any, Protocol, TypeVar
 
 import anyio
 
+from .._errors import RosBridgeError
 from .._options import HTTPX_MISSING, ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, same_type_name
@@ -165,6 +166,12 @@ class ServiceHandler(Protocol):
         """A call arrived on ``backend`` (runs in the reader task: it may send
         an answer, and must not wait for anything else)."""
 
+    def on_service_failed(self, error: RosBridgeError) -> None:
+        """The bridge refused the service after :meth:`Backend.advertise_service`
+        returned (a late refusal, or one to an unconfirmed advertisement):
+        ``error`` is a ``SchemaError`` or ``ServiceError``. Runs in the reader
+        task; must not block."""
+
 
 class BackendEvents(Protocol):
     """Callbacks the backend's reader makes into the client. All run in the
@@ -268,7 +275,10 @@ class Backend(Protocol):
         ``ServiceError`` when it refused; without, returns once sent (a
         refusal is logged: restoring after a reconnect, before the new
         connection's reader runs). ``NotSupportedError`` where the protocol
-        cannot serve."""
+        cannot serve. When it raises after the advertisement may have taken
+        effect (sent, neither confirmed nor refused: a timeout, a
+        cancellation), calls may still arrive: the caller answers them and
+        then calls :meth:`unadvertise_service`."""
 
     async def unadvertise_service(self, name: str) -> None:
         """Stop serving ``name`` (a no-op when not served)."""
@@ -276,7 +286,9 @@ class Backend(Protocol):
     async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
         """Answer the call ``request_id`` to ``name``: ``values`` is the
         response (``result`` True) or the reason text (False). ``DecodeError``
-        when the response does not fit the type."""
+        when the response does not fit the type. The frame's write is the
+        last step and is not cut by cancellation: when this raises, nothing
+        was sent; once the write happened, it returns normally."""
 
     async def send_action_goal(
         self, action: str, action_type: str, goal: Any, events: GoalEvents

@@ -93,6 +93,13 @@ def _decode_cbor(payload: memoryview) -> Any:
         raise DecodeError(f"invalid CBOR publish frame: {exc}") from None
 
 
+def _refusal(name: str, service_type: str, text: str) -> RosBridgeError:
+    """The error for the bridge's refusal to serve ``name``."""
+    if "another client" in text:
+        return ServiceError(name, f"the bridge refused to serve it: {text}")
+    return SchemaError(f"the bridge refused to serve {name} as {service_type}: {text}")
+
+
 def _is_foxglove_rejection(exc: HandshakeRejected) -> bool:
     """The Foxglove SDK server's answer to a handshake without its
     subprotocols: HTTP 400 naming the missing header."""
@@ -191,6 +198,7 @@ class _Served:
     handler: ServiceHandler
     id: str
     error: str | None = None
+    confirmed: bool = False  # nobody waits for the answer: a refusal goes to the handler
 
 
 _FAILED_ANSWERS_KEPT: Final = 256
@@ -455,6 +463,9 @@ class RosbridgeBackend:
             if served.id == key and error:
                 served.error = event.msg
                 self._log.error("the bridge refused to serve %s: %s", name, event.msg)
+                if served.confirmed:  # nobody waits for it: end that serve() block
+                    del self._served[name]  # refused: not ours to unadvertise
+                    served.handler.on_service_failed(_refusal(name, served.type, event.msg))
                 return
         if error and key.startswith("service_request:"):
             service = self._failed_answers.pop(key, None)
@@ -794,18 +805,24 @@ class RosbridgeBackend:
             raise ValueError(f"{name} is served by this client already")
         served = _Served(service_type, handler, self._next_id(f"advertise_service:{name}"))
         self._served[name] = served
+        sent = False
         try:
             await self._ws.send(self._engine.advertise_service(name, service_type, id=served.id))
+            sent = True
             if not confirm:
-                return  # a refusal is logged when it arrives
+                served.confirmed = True  # a refusal goes to handler.on_service_failed
+                return
             await self._confirm_served(name, served)
             if served.error is not None:
-                text = served.error
-                if "another client" in text:
-                    raise ServiceError(name, f"the bridge refused to serve it: {text}")
-                raise SchemaError(f"the bridge refused to serve {name} as {service_type}: {text}")
+                raise _refusal(name, service_type, served.error)
+            served.confirmed = True
         except BaseException:
-            self._served.pop(name, None)
+            # never sent, or refused (the name may be another client's): free
+            if not (sent and served.error is None) and self._served.get(name) is served:
+                del self._served[name]
+            # else not confirmed (a timeout, a cancellation) but maybe served:
+            # the entry stays, so calls still reach the handler, until the
+            # caller answers what came and calls unadvertise_service
             raise
 
     async def _confirm_served(self, name: str, served: _Served) -> None:

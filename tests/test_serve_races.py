@@ -1,0 +1,324 @@
+"""``serve()``'s promise, every request answered exactly once, under the
+races a real bridge cannot be made to produce on demand: an answer cancelled
+before or after its write, a stall longer than the deadline, a refusal that
+arrives after the advertisement returned, an advertisement that fails after
+its frame was sent. The serving side runs against a stub backend (it records
+what would be written) or a rosbridge backend on a fake socket; the
+behaviour against the real bridge is in test_serve.py."""
+
+from __future__ import annotations
+
+import json
+import logging
+from typing import Any
+
+import anyio
+import pytest
+
+import ros_mobile_bridge as rmb
+from ros_mobile_bridge._serve import ServiceRequests
+from ros_mobile_bridge.backends import _rosbridge
+from ros_mobile_bridge.wire import rosbridge as rb
+
+NAME = "/rmb_served"
+SETBOOL = "std_srvs/srv/SetBool"
+
+
+class StubBackend:
+    """Writes answers to ``written`` under a lock the test can hold (the
+    checkpoint before a real write: the websocket's send lock). With
+    ``slow_write``, the write itself waits for ``release``, shielded, as a
+    real socket write is."""
+
+    def __init__(self, *, slow_write: bool = False) -> None:
+        self.lock = anyio.Lock()
+        self.written: list[tuple[str, Any, bool]] = []
+        self.slow_write = slow_write
+        self.release = anyio.Event()
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        async with self.lock:
+            if self.slow_write:
+                with anyio.CancelScope(shield=True):
+                    await self.release.wait()
+            self.written.append((request_id, values, result))
+
+
+def served(backend: Any, *, timeout: float = 30.0, buffer: int = 16) -> ServiceRequests:
+    return ServiceRequests(
+        NAME,
+        SETBOOL,
+        timeout=timeout,
+        buffer=buffer,
+        current=lambda: backend,
+        teardown_timeout=2.0,
+        logger=logging.getLogger("ros_mobile_bridge"),
+    )
+
+
+async def cancelled_while_blocked(call: Any) -> None:
+    """Run ``call`` until it blocks, then cancel it."""
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(call)
+        await anyio.wait_all_tasks_blocked()
+        tg.cancel_scope.cancel()
+
+
+async def test_moving_on_cancelled_before_the_write_leaves_the_request_to_close() -> None:
+    backend = StubBackend()
+    requests = served(backend)
+    await requests.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
+    await requests.on_service_request(backend, "b", {"data": False})  # type: ignore[arg-type]
+    first = await requests.__anext__()
+    async with backend.lock:  # the automatic answer to "a" waits for the socket
+        await cancelled_while_blocked(requests.__anext__)
+    assert not first.answered  # not claimed for good: nothing was written
+    await requests._close("closing")
+    assert backend.written == [("a", "closing", False), ("b", "closing", False)]
+    stats = requests.stats
+    assert (stats.received, stats.unanswered, stats.lost, stats.pending) == (2, 2, 0, 0)
+
+
+async def test_a_reply_cancelled_before_the_write_stays_open() -> None:
+    backend = StubBackend()
+    requests = served(backend)
+    await requests.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
+    req = await requests.__anext__()
+    async with backend.lock:
+        await cancelled_while_blocked(lambda: req.reply({"success": True}))
+    assert req.outcome is None and requests.stats.lost == 0
+    await req.reply({"success": True, "message": "second try"})  # still the handler's
+    assert backend.written == [("a", {"success": True, "message": "second try"}, True)]
+    stats = requests.stats
+    assert (stats.replied, stats.lost, stats.pending) == (1, 0, 0)
+
+
+async def test_a_reply_cancelled_before_the_write_is_answered_when_the_block_ends() -> None:
+    backend = StubBackend()
+    requests = served(backend)
+    await requests.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
+    req = await requests.__anext__()
+    async with backend.lock:
+        await cancelled_while_blocked(lambda: req.reply({"success": True}))
+    await requests._close("closing")
+    assert backend.written == [("a", "closing", False)]
+    assert req.outcome == "unanswered"
+    stats = requests.stats
+    assert (stats.unanswered, stats.lost, stats.pending) == (1, 0, 0)
+
+
+async def test_a_reply_written_counts_as_replied_though_cancelled_meanwhile() -> None:
+    backend = StubBackend(slow_write=True)
+    requests = served(backend)
+    await requests.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
+    req = await requests.__anext__()
+    returned: list[bool] = []
+
+    async def reply() -> None:
+        await req.reply({"success": True})
+        returned.append(True)
+        await anyio.sleep(3600)  # the cancellation lands here
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(reply)
+        await anyio.wait_all_tasks_blocked()  # in the shielded write
+        tg.cancel_scope.cancel()
+        backend.release.set()
+    assert returned == [True]
+    assert backend.written == [("a", {"success": True}, True)]
+    assert req.outcome == "replied"
+    await requests._close("closing")
+    stats = requests.stats
+    assert (stats.replied, stats.unanswered, stats.lost, stats.pending) == (1, 0, 0, 0)
+
+
+async def test_requests_expired_while_queued_do_not_fill_the_buffer() -> None:
+    backend = StubBackend()
+    requests = served(backend, timeout=0.05, buffer=2)
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(requests._expire)
+        await requests.on_service_request(backend, "a", {})  # type: ignore[arg-type]
+        await requests.on_service_request(backend, "b", {})  # type: ignore[arg-type]
+        with anyio.fail_after(5):
+            while requests.stats.unanswered < 2:  # the consumer stalls past the deadline
+                await anyio.sleep(0.01)
+        await requests.on_service_request(backend, "c", {})  # type: ignore[arg-type]
+        await requests.on_service_request(backend, "d", {})  # type: ignore[arg-type]
+        assert requests.stats.overflowed == 0
+        with anyio.fail_after(5):
+            first = await requests.__anext__()  # the expired ones are not handed out
+        await first.reply({"success": True})
+        tg.cancel_scope.cancel()
+    assert first.id == "c"
+    await requests._close("closing")
+    assert [w[0] for w in backend.written] == ["a", "b", "c", "d"]
+    stats = requests.stats
+    assert (stats.received, stats.replied, stats.unanswered, stats.overflowed) == (4, 1, 3, 0)
+
+
+# -- the rosbridge backend on a fake socket ---------------------------------------------
+
+
+class FakeSocket:
+    def __init__(self) -> None:
+        self.sent: list[dict[str, Any]] = []
+        self.closed = False
+
+    async def send(self, message: str | bytes) -> None:
+        await anyio.lowlevel.checkpoint()
+        self.sent.append(json.loads(message))
+
+
+async def no_round_trip() -> None:
+    pass  # nobody answers on a fake socket
+
+
+def rosbridge_backend() -> tuple[_rosbridge.RosbridgeBackend, FakeSocket]:
+    ws = FakeSocket()
+    return _rosbridge.RosbridgeBackend(ws, rmb.ClientOptions()), ws  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("confirm", [True, False])
+async def test_a_refusal_after_the_advertisement_ends_the_iteration(
+    confirm: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    backend, _ws = rosbridge_backend()
+
+    async def confirmed(name: str, served: Any) -> None:
+        pass  # the graph showed it (a real bridge may refuse only later)
+
+    monkeypatch.setattr(backend, "_confirm_served", confirmed)
+    requests = served(backend)
+    await backend.advertise_service(NAME, "nosuch_pkg/srv/Nope", requests, confirm=confirm)
+    served_id = backend._served[NAME].id
+    backend._on_status(rb.Status("error", "unknown service type nosuch_pkg/srv/Nope", served_id))
+    with anyio.fail_after(5), pytest.raises(rmb.SchemaError, match="nosuch_pkg"):
+        await requests.__anext__()
+    assert NAME not in backend._served  # refused: nothing to unadvertise
+
+
+async def test_another_client_refusal_after_a_restore_is_a_service_error() -> None:
+    backend, _ws = rosbridge_backend()
+    requests = served(backend)
+    await backend.advertise_service(NAME, SETBOOL, requests, confirm=False)
+    served_id = backend._served[NAME].id
+    backend._on_status(rb.Status("error", "served by another client", served_id))
+    with anyio.fail_after(5), pytest.raises(rmb.ServiceError, match="another client"):
+        await requests.__anext__()
+
+
+@pytest.mark.parametrize("how", ["timeout", "cancelled"])
+async def test_an_advertisement_failing_after_its_frame_is_unadvertised(
+    how: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    backend, ws = rosbridge_backend()
+
+    async def unconfirmed(name: str, served: Any) -> None:
+        if how == "timeout":
+            raise rmb.ServiceError(name, "the bridge did not confirm serving it")
+        await anyio.sleep(3600)
+
+    monkeypatch.setattr(backend, "_confirm_served", unconfirmed)
+    monkeypatch.setattr(backend, "_round_trip", no_round_trip)
+    requests = served(backend)
+    backend_ids: list[str] = []
+    advertise = backend._engine.advertise_service
+
+    def remember(service: str, type: str, *, id: str) -> str:
+        backend_ids.append(id)
+        return advertise(service, type, id=id)
+
+    monkeypatch.setattr(backend._engine, "advertise_service", remember)
+    if how == "timeout":
+        with pytest.raises(rmb.ServiceError):
+            await backend.advertise_service(NAME, SETBOOL, requests)
+    else:
+        with anyio.move_on_after(0.05):
+            await backend.advertise_service(NAME, SETBOOL, requests)
+    # maybe served: calls still reach the handler until the caller (the
+    # client, after answering them) unadvertises
+    await backend._handle(rb.ServiceRequest("q1", NAME, {"data": True}))
+    assert requests.stats.received == 1
+    await requests._close("closing")
+    await backend.unadvertise_service(NAME)
+    assert [(m["op"], m.get("id"), m.get("values")) for m in ws.sent][1:] == [
+        ("service_response", "q1", "closing"),
+        ("unadvertise_service", backend_ids[0], None),
+    ]
+    assert NAME not in backend._served
+
+
+async def test_a_refused_advertisement_is_not_unadvertised(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    backend, ws = rosbridge_backend()
+
+    async def refused(name: str, served: Any) -> None:
+        served.error = "served by another client"
+
+    monkeypatch.setattr(backend, "_confirm_served", refused)
+    with pytest.raises(rmb.ServiceError, match="another client"):
+        await backend.advertise_service(NAME, SETBOOL, served(backend))
+    # the name may be the other client's: no unadvertise_service for it
+    assert [m["op"] for m in ws.sent] == ["advertise_service"]
+
+
+# -- the client's side, on a stub backend ----------------------------------------------
+
+
+class ClientStub:
+    """Enough of a backend for ``Client``'s serving paths: advertisements
+    are recorded; an answer's write never completes (a stuck socket)."""
+
+    def __init__(self) -> None:
+        self.topics: list[Any] = []
+        self.services: list[Any] = []
+        self.advertised: list[str] = []
+        self.unadvertised: list[str] = []
+        self.gate: anyio.Event | None = None
+
+    def publishing(self) -> dict[str, str]:
+        return {}
+
+    async def advertise_service(
+        self, name: str, service_type: str, handler: Any, *, confirm: bool = True
+    ) -> None:
+        self.advertised.append(name)
+        if self.gate is not None:
+            await self.gate.wait()
+
+    async def unadvertise_service(self, name: str) -> None:
+        await anyio.lowlevel.checkpoint()
+        self.unadvertised.append(name)
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        await anyio.sleep(3600)
+
+
+def client_on(backend: ClientStub, **options: Any) -> rmb.Client:
+    return rmb.Client(backend, rmb.ClientOptions(**options))  # type: ignore[arg-type]
+
+
+async def test_leaving_the_block_unadvertises_though_the_answers_take_the_whole_budget() -> None:
+    backend = ClientStub()
+    client = client_on(backend, teardown_timeout=0.3)
+    async with client._serve(NAME, SETBOOL, 30.0, 16) as requests:
+        await requests.on_service_request(backend, "q", {"data": True})  # type: ignore[arg-type]
+    assert backend.unadvertised == [NAME]
+    stats = requests.stats
+    assert (stats.received, stats.lost, stats.pending) == (1, 1, 0)  # never written
+
+
+async def test_a_restore_skips_a_service_whose_block_ended_meanwhile() -> None:
+    old = ClientStub()
+    client = client_on(old)
+    first, second = served(old), served(old)
+    client._served.update({"/first": first, "/second": second})
+    new = ClientStub()
+    new.gate = anyio.Event()
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(client._restore, old, new)
+        await anyio.wait_all_tasks_blocked()  # advertising /first on the new connection
+        del client._served["/second"]  # that serve() block ended meanwhile
+        new.gate.set()
+    assert new.advertised == ["/first"]
