@@ -440,7 +440,6 @@ def test_a_bad_close_timeout_raises_at_once_and_a_later_close_still_tears_down(
             client.close(timeout=math.inf)
         assert not client.closed and client.connected
         assert client in _sync._open_clients
-        assert commands_since(robot, before) == [(0.15, 0.0)]
     finally:
         client.close()
     assert client.closed and client not in _sync._open_clients

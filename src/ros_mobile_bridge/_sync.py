@@ -365,8 +365,9 @@ class SyncClient:
       (on zenoh a request bounded by ``service_timeout``);
     * waiting for the robot to do something it may never do, so without a
       ``timeout`` they wait until it does, the subscription or goal ends,
-      the connection is lost for good, :meth:`close` is called from another
-      thread, or ``KeyboardInterrupt``: :meth:`SyncSubscription.get`,
+      the connection is lost (for a subscription: for good, as it survives
+      a reconnect), :meth:`close` is called from another thread, or
+      ``KeyboardInterrupt``: :meth:`SyncSubscription.get`,
       ``next(sub)``, :meth:`SyncSubscription.get_batch` and
       :meth:`SyncSubscription.wait_active` (their default is the
       ``timeout`` given to :meth:`subscribe`, None unless given),
