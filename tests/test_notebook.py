@@ -195,30 +195,36 @@ def test_open_client_raises_not_connected_when_its_task_is_cancelled_before_conn
     asyncio.run(main())
 
 
-async def test_an_error_after_open_client_returned_is_logged_at_once(
+async def test_an_error_ending_the_block_on_its_own_is_logged_at_once(
     robot: DemoRobot, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
 ) -> None:
-    """The block ends with an error while nobody awaits the handle: it is
-    logged then (WARNING), and aclose() raises it."""
+    """A task inside the connection's block fails after open_client returned
+    (as a client's own task would): the block ends while nobody awaits the
+    handle. The error is logged then (WARNING), and aclose() raises it once."""
     real_connect = _background.connect
 
     @contextlib.asynccontextmanager
-    async def failing_exit(target: str, **kwargs: Any) -> AsyncIterator[rmb.Client]:
-        async with real_connect(target, **kwargs) as client:
-            yield client
-        raise RuntimeError("the teardown broke")
+    async def failing_inside(target: str, **kwargs: Any) -> AsyncIterator[rmb.Client]:
+        async def broken() -> None:
+            raise RuntimeError("an inner task broke")
 
-    monkeypatch.setattr(_background, "connect", failing_exit)
-    handle = await rmb.open_client(robot.url, options=options())
+        async with real_connect(target, **kwargs) as client, anyio.create_task_group() as tg:
+            tg.start_soon(broken)
+            yield client
+
+    monkeypatch.setattr(_background, "connect", failing_inside)
     with caplog.at_level(logging.WARNING, logger="ros_mobile_bridge"):
-        handle._owner.release.set()  # the block ends on its own, without aclose()
+        handle = await rmb.open_client(robot.url, options=options())
         with anyio.fail_after(10):
             await handle._owner.done.wait()
+    assert handle.closed
     (record,) = [r for r in caplog.records if r.levelno == logging.WARNING]
-    assert "RuntimeError('the teardown broke')" in record.getMessage()
+    assert "an inner task broke" in record.getMessage()
     assert "aclose" in record.getMessage()
-    with pytest.raises(RuntimeError, match="the teardown broke"):
+    # the task group's ExceptionGroup (the exceptiongroup backport on 3.10)
+    with pytest.raises(Exception) as raised:  # noqa: PT011
         await handle.aclose()
+    assert "RuntimeError('an inner task broke')" in repr(raised.value)
     await handle.aclose()  # raised once
 
 

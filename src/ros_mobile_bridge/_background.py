@@ -52,9 +52,9 @@ class _Owner:
             raise  # the loop is shutting down: the teardown has run (shielded)
         except BaseException as exc:  # kept for the handle; a background task must not raise
             self.error = exc
-            if self.client is not None:
-                # open_client returned already: nobody sees this error until
-                # an aclose() that may never come, so say it now
+            if self.client is not None and not self.release.is_set():
+                # the block ended on its own after open_client returned: nobody
+                # sees this error until an aclose() that may never come, so say it now
                 self.log.warning(
                     "the client opened by open_client ended with %r "
                     "(ClientHandle.aclose() raises it again)",
@@ -170,8 +170,8 @@ class ClientHandle:
         ``options.stop_topics``, then the socket closes), and this waits for
         it, shielded from cancellation, for at most
         ``options.teardown_timeout`` + 5 s. Idempotent. Raises the error
-        the block ended with, if any (once; it was also logged when the
-        block ended before this call)."""
+        the block ended with, if any (once; logged at WARNING too if the
+        block ended on its own before this call)."""
         owner = self._owner
         owner.release.set()
         with anyio.CancelScope(shield=True):
