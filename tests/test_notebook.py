@@ -5,10 +5,12 @@ robot; and ``examples/notebook.ipynb`` executed by a real Jupyter kernel."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
+import logging
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +19,7 @@ import pytest
 import trio
 
 import ros_mobile_bridge as rmb
+from ros_mobile_bridge import _background
 from ros_mobile_bridge.demo import DemoRobot
 
 pytestmark = pytest.mark.peer
@@ -103,7 +106,7 @@ async def test_open_client_raises_what_connect_raises() -> None:
     with pytest.raises(ValueError, match="invalid port"):
         await rmb.open_client("127.0.0.1:http")
     with pytest.raises(TypeError, match="no_such_option"):
-        await rmb.open_client("127.0.0.1", no_such_option=1)
+        await rmb.open_client("127.0.0.1", no_such_option=1)  # type: ignore[call-arg]
 
 
 async def test_cancelling_open_client_while_connecting_drops_the_connection(
@@ -150,11 +153,79 @@ def test_a_handle_left_open_is_torn_down_when_its_event_loop_ends(
         await handle.publish("/cmd_vel", TWIST, {"linear": {"x": 0.2}}, priority="control")
         # returns without aclose(): the loop's shutdown cancels the owner task
 
-    if loop == "asyncio":
-        asyncio.run(main())
-    else:
-        trio.run(main)
+    # the handle is dropped when main() returns, before the loop cancels the task
+    run = (lambda: asyncio.run(main())) if loop == "asyncio" else (lambda: trio.run(main))
+    with pytest.warns(ResourceWarning, match="without aclose"):
+        run()
     assert commands_since(robot, before) == [(0.2, 0.0), (0.0, 0.0)]
+
+
+def test_open_client_raises_not_connected_when_its_task_is_cancelled_before_connecting() -> None:
+    """asyncio only: shutdown code that cancels every task (as an event
+    loop's shutdown does) cancels the background task while the caller still
+    waits for the handshake. (A trio system task is cancelled only once the
+    main task has ended, when no caller can be waiting.)"""
+
+    async def main() -> None:
+        accepted = anyio.Event()
+
+        async def silent(stream: anyio.abc.SocketStream) -> None:
+            accepted.set()
+            async with stream:
+                with contextlib.suppress(anyio.EndOfStream, anyio.BrokenResourceError):
+                    while await stream.receive():
+                        pass
+
+        async def cancel_the_owner() -> None:
+            await accepted.wait()
+            names = [t for t in asyncio.all_tasks() if t.get_name() == "rmb-open-client"]
+            assert len(names) == 1
+            names[0].cancel()
+
+        listener = await anyio.create_tcp_listener(local_host="127.0.0.1", local_port=0)
+        port = listener.extra(anyio.abc.SocketAttribute.local_port)
+        async with listener, anyio.create_task_group() as tg:
+            tg.start_soon(listener.serve, silent)
+            tg.start_soon(cancel_the_owner)
+            slow = rmb.ClientOptions(connect_timeout=60.0, reconnect=None)
+            with anyio.fail_after(10), pytest.raises(rmb.NotConnected, match="cancelled before"):
+                await rmb.open_client(f"127.0.0.1:{port}", options=slow)
+            tg.cancel_scope.cancel()
+
+    asyncio.run(main())
+
+
+async def test_an_error_ending_the_block_on_its_own_is_logged_at_once(
+    robot: DemoRobot, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A task inside the connection's block fails after open_client returned
+    (as a client's own task would): the block ends while nobody awaits the
+    handle. The error is logged then (WARNING), and aclose() raises it once."""
+    real_connect = _background.connect
+
+    @contextlib.asynccontextmanager
+    async def failing_inside(target: str, **kwargs: Any) -> AsyncIterator[rmb.Client]:
+        async def broken() -> None:
+            raise RuntimeError("an inner task broke")
+
+        async with real_connect(target, **kwargs) as client, anyio.create_task_group() as tg:
+            tg.start_soon(broken)
+            yield client
+
+    monkeypatch.setattr(_background, "connect", failing_inside)
+    with caplog.at_level(logging.WARNING, logger="ros_mobile_bridge"):
+        handle = await rmb.open_client(robot.url, options=options())
+        with anyio.fail_after(10):
+            await handle._owner.done.wait()
+    assert handle.closed
+    (record,) = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert "an inner task broke" in record.getMessage()
+    assert "aclose" in record.getMessage()
+    # the task group's ExceptionGroup (the exceptiongroup backport on 3.10)
+    with pytest.raises(Exception) as raised:  # noqa: PT011
+        await handle.aclose()
+    assert "RuntimeError('an inner task broke')" in repr(raised.value)
+    await handle.aclose()  # raised once
 
 
 # -- the example notebook, in a real kernel -------------------------------------------

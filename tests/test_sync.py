@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
+import math
 import signal
 import socket
 import subprocess
@@ -21,6 +23,7 @@ import sniffio
 import trio
 
 import ros_mobile_bridge as rmb
+from ros_mobile_bridge import _sync
 from ros_mobile_bridge.demo import DemoRobot
 
 pytestmark = pytest.mark.peer
@@ -358,7 +361,7 @@ def test_connect_errors_and_bad_arguments_raise_at_once_and_leave_no_thread(
     with pytest.raises(ValueError, match="backend"):
         rmb.connect_sync("127.0.0.1", backend="curio")  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="no_such_option"):
-        rmb.connect_sync("127.0.0.1", no_such_option=1)
+        rmb.connect_sync("127.0.0.1", no_such_option=1)  # type: ignore[call-arg]
     with pytest.raises(TypeError, match="options"):
         rmb.connect_sync("127.0.0.1", options={"teardown_timeout": 1})  # type: ignore[arg-type]
     assert sync_threads() == []
@@ -381,6 +384,12 @@ def test_bad_arguments_to_methods_raise_at_once(robot: DemoRobot, backend: str) 
             client.subscribe("/odom", compression="zip")  # type: ignore[arg-type]
         with pytest.raises(ValueError, match="timeout"):
             client.subscribe("/odom", timeout=0)
+        with pytest.raises(ValueError, match="finite"):
+            client.subscribe("/odom", timeout=math.inf)
+        with pytest.raises(ValueError, match="finite"):
+            client.call_service("/set_led", {"data": True}, timeout=math.inf)
+        with pytest.raises(TypeError, match="timeout"):
+            client.run(_count_tasks, timeout="5")  # type: ignore[arg-type]
         with pytest.raises(rmb.ServiceError):
             client.call_service("/no_such_service", {})
         with pytest.raises(RuntimeError, match="enter"):
@@ -411,3 +420,92 @@ def test_a_client_left_open_is_closed_at_interpreter_exit(robot: DemoRobot) -> N
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "published"
     assert commands_since(robot, before) == [(0.25, 0.0), (0.0, 0.0)]
+
+
+def test_a_bad_close_timeout_raises_at_once_and_a_later_close_still_tears_down(
+    robot: DemoRobot, backend: str
+) -> None:
+    """close(timeout=<bad>) raises before anything is closed: the client
+    stays connected and registered for the atexit hook, and the next
+    close() sends the zero Twist and stops the thread."""
+    before = len(robot.received_cmd_vel())
+    client = rmb.connect_sync(robot.url, backend=backend, options=options())
+    try:
+        client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.15}}, priority="control")
+        with pytest.raises(TypeError, match="timeout"):
+            client.close(timeout="3")  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match="timeout"):
+            client.close(timeout=0)
+        with pytest.raises(ValueError, match="finite"):
+            client.close(timeout=math.inf)
+        assert not client.closed and client.connected
+        assert client in _sync._open_clients
+    finally:
+        client.close()
+    assert client.closed and client not in _sync._open_clients
+    assert commands_since(robot, before) == [(0.15, 0.0), (0.0, 0.0)]
+    assert not client.worker_thread.is_alive()
+
+
+def test_close_from_inside_run_raises_and_leaves_the_client_open(
+    robot: DemoRobot, backend: str
+) -> None:
+    before = len(robot.received_cmd_vel())
+    client = rmb.connect_sync(robot.url, backend=backend, options=options())
+    try:
+        client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.35}}, priority="control")
+
+        async def close_inside(_c: rmb.Client) -> None:
+            client.close()
+
+        with pytest.raises(RuntimeError, match="own event loop"):
+            client.run(close_inside, timeout=5)
+        assert not client.closed and client.connected
+        assert client.call_service("/set_led", {"data": True}, timeout=5)["success"] is True
+    finally:
+        client.close()
+    assert commands_since(robot, before) == [(0.35, 0.0), (0.0, 0.0)]
+    assert not client.worker_thread.is_alive()
+
+
+def test_close_logs_a_subscription_that_fails_to_leave_and_still_tears_down(
+    robot: DemoRobot,
+    backend: str,
+    caplog: pytest.LogCaptureFixture,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    before = len(robot.received_cmd_vel())
+    client = rmb.connect_sync(robot.url, backend=backend, options=options())
+    sub = client.subscribe("/odom", timeout=5).__enter__()
+    assert sub.get().topic == "/odom"
+
+    def broken_leave(timeout: float) -> None:
+        raise RuntimeError("leaving broke")
+
+    monkeypatch.setattr(sub, "_leave", broken_leave)
+    client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.45}}, priority="control")
+    with caplog.at_level(logging.WARNING, logger="ros_mobile_bridge"):
+        client.close()
+    warnings = [r for r in caplog.records if r.levelno == logging.WARNING]
+    assert [r.getMessage() for r in warnings] == [
+        "close: leaving <SyncSubscription /odom> failed: RuntimeError('leaving broke')"
+    ]
+    assert commands_since(robot, before) == [(0.45, 0.0), (0.0, 0.0)]
+    assert not client.worker_thread.is_alive()
+
+
+def test_wait_active_defaults_to_the_subscriptions_timeout(robot: DemoRobot, backend: str) -> None:
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+        with client.subscribe("/never_published", timeout=0.2) as sub:
+            # a backstop so that a wait without a bound fails (NotConnected) instead of hanging
+            backstop = threading.Timer(10, client.close)
+            backstop.start()
+            try:
+                with pytest.raises(TimeoutError, match="wait_active"):
+                    sub.wait_active()
+            finally:
+                backstop.cancel()
+            assert sub.state == "pending"
+        with client.subscribe("/odom", timeout=5) as odom:
+            odom.wait_active()
+            assert odom.state == "active"

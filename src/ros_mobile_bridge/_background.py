@@ -13,6 +13,8 @@ leave the block (so the teardown and its zero Twist run there)."""
 from __future__ import annotations
 
 import logging
+import warnings
+from contextlib import AbstractAsyncContextManager
 from typing import Any, Final
 
 import anyio
@@ -21,21 +23,17 @@ import sniffio
 from ._client import Client
 from ._connect import ProtocolArg, connect
 from ._errors import NotConnected
-from ._options import ClientOptions
+from ._options import CLOSE_SLACK_S, ClientOptions
 
 __all__ = ["ClientHandle", "open_client"]
-
-_log = logging.getLogger("ros_mobile_bridge.background")
-
-#: Added to ``options.teardown_timeout`` for :meth:`ClientHandle.aclose`'s wait.
-_CLOSE_SLACK_S: Final = 5.0
 
 
 class _Owner:
     """The background task's state: the client once connected, the error
     when it failed, and the events that connect the task to the handle."""
 
-    def __init__(self) -> None:
+    def __init__(self, log: logging.Logger) -> None:
+        self.log = log
         self.client: Client | None = None
         self.error: BaseException | None = None
         self.entered = anyio.Event()
@@ -43,7 +41,7 @@ class _Owner:
         self.done = anyio.Event()
         self.scope = anyio.CancelScope()
 
-    async def run(self, cm: Any) -> None:
+    async def run(self, cm: AbstractAsyncContextManager[Client]) -> None:
         try:
             with self.scope:
                 async with cm as client:
@@ -54,12 +52,21 @@ class _Owner:
             raise  # the loop is shutting down: the teardown has run (shielded)
         except BaseException as exc:  # kept for the handle; a background task must not raise
             self.error = exc
+            if self.client is not None and not self.release.is_set():
+                # the block ended on its own after open_client returned: nobody
+                # sees this error until an aclose() that may never come, so say it now
+                self.log.warning(
+                    "the client opened by open_client ended with %r "
+                    "(ClientHandle.aclose() raises it again)",
+                    exc,
+                    exc_info=not isinstance(exc, KeyboardInterrupt | SystemExit),
+                )
         finally:
             self.done.set()
             self.entered.set()
 
 
-def _spawn(owner: _Owner, cm: Any) -> object:
+def _spawn(owner: _Owner, cm: AbstractAsyncContextManager[Client]) -> object:
     """Start ``owner.run(cm)`` as a task no caller's task group owns (that is
     the point): an asyncio task the handle keeps a reference to, or a trio
     system task. Returns what keeps it alive."""
@@ -83,7 +90,6 @@ async def open_client(
     port: int | None = None,
     secure: bool | None = None,
     options: ClientOptions | None = None,
-    **connect_kwargs: Any,
 ) -> ClientHandle:
     """Connect and return a :class:`ClientHandle` that stays open across
     tasks, for Jupyter and other REPLs where each input runs in its own
@@ -94,36 +100,43 @@ async def open_client(
         await robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", {...})
         await robot.aclose()                                     # zero Twist, then close
 
-    The arguments are :func:`~ros_mobile_bridge.connect`'s (any further
-    keyword is passed to it as given), and so are the errors, raised here.
-    The connection is owned by a background task of the running event loop
-    (asyncio or trio; a trio *system* task), not by the caller: in a program
-    that can use ``async with connect(...)``, do; it is the structured form.
-    The handle must be closed with :meth:`ClientHandle.aclose`; a handle
-    left open is torn down (zero Twist included) when its event loop shuts
-    down and cancels the task, not before. Use it from the event loop that
-    opened it only."""
+    The arguments are :func:`~ros_mobile_bridge.connect`'s, and so are the
+    errors, raised here; ``NotConnected`` if the background task was
+    cancelled before the connection was made (the event loop shutting
+    down). The connection is owned by a background task of the running
+    event loop (asyncio or trio; a trio *system* task), not by the caller:
+    in a program that can use ``async with connect(...)``, do; it is the
+    structured form. Use the handle from the event loop that opened it only.
+
+    The handle must be closed with :meth:`ClientHandle.aclose`. A handle
+    left open is torn down (zero Twist included) only if its event loop
+    cancels the background task as it shuts down, as ``asyncio.run()`` and
+    ``trio.run()`` do. Restarting or shutting down a Jupyter kernel ends
+    the process without that: no teardown runs and no zero Twist is sent;
+    the robot's own ``cmd_vel`` watchdog is then what stops it. A handle
+    garbage-collected while still open emits a ``ResourceWarning``."""
     if options is not None and not isinstance(options, ClientOptions):
         raise TypeError("options must be a ClientOptions")
-    # bad keywords raise TypeError here, before any task starts
-    cm = connect(
-        target, protocol=protocol, port=port, secure=secure, options=options, **connect_kwargs
-    )
-    owner = _Owner()
+    cm = connect(target, protocol=protocol, port=port, secure=secure, options=options)
+    opts = options or ClientOptions()
+    owner = _Owner(opts.logger)
     keep = _spawn(owner, cm)
     try:
         await owner.entered.wait()
     except BaseException:  # the caller was cancelled while connecting: stop the owner
         owner.scope.cancel()
-        with anyio.CancelScope(shield=True), anyio.move_on_after(_CLOSE_SLACK_S):
+        with anyio.CancelScope(shield=True), anyio.move_on_after(CLOSE_SLACK_S):
             await owner.done.wait()
         raise
     if owner.client is None:
-        error = owner.error
-        assert error is not None
-        raise error
-    teardown = (options or ClientOptions()).teardown_timeout
-    return ClientHandle(owner, owner.client, keep, teardown)
+        if owner.error is not None:
+            raise owner.error
+        # the owner task was cancelled from outside before it connected
+        raise NotConnected(
+            f"open_client({target!r}): the background task was cancelled before the "
+            "connection was made (is the event loop shutting down?)"
+        )
+    return ClientHandle(owner, owner.client, keep, opts.teardown_timeout)
 
 
 class ClientHandle:
@@ -157,14 +170,17 @@ class ClientHandle:
         ``options.stop_topics``, then the socket closes), and this waits for
         it, shielded from cancellation, for at most
         ``options.teardown_timeout`` + 5 s. Idempotent. Raises the error
-        the block ended with, if any (once)."""
+        the block ended with, if any (once; logged at WARNING too if the
+        block ended on its own before this call)."""
         owner = self._owner
         owner.release.set()
         with anyio.CancelScope(shield=True):
-            with anyio.move_on_after(self._teardown + _CLOSE_SLACK_S):
+            with anyio.move_on_after(self._teardown + CLOSE_SLACK_S):
                 await owner.done.wait()
             if not owner.done.is_set():
-                _log.warning("aclose: the client did not finish closing in time; cancelling it")
+                owner.log.warning(
+                    "aclose: the client did not finish closing in time; cancelling it"
+                )
                 owner.scope.cancel()
         error, owner.error = owner.error, None
         if error is not None:
@@ -175,6 +191,17 @@ class ClientHandle:
 
     async def __aexit__(self, *exc_info: object) -> None:
         await self.aclose()
+
+    def __del__(self) -> None:
+        owner = self.__dict__.get("_owner")
+        if owner is not None and not owner.release.is_set() and not owner.done.is_set():
+            warnings.warn(
+                f"{self!r} was garbage-collected without aclose(): its connection stays "
+                "open until the event loop ends (and a killed kernel sends no zero Twist)",
+                ResourceWarning,
+                source=self,
+                stacklevel=2,
+            )
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_"):

@@ -45,6 +45,12 @@ _HANDSHAKE_HEADERS: Final = frozenset(
 """Headers the WebSocket handshake sets itself: a caller may not set them."""
 _REDACTED: Final = "<redacted>"
 
+CLOSE_SLACK_S: Final = 5.0
+"""Added to :attr:`ClientOptions.teardown_timeout` by a close that waits from
+outside the client's own task (``SyncClient.close``, ``ClientHandle.aclose``):
+the teardown's own deadline, then closing the socket, then ending the task
+(and, for the sync client, its event loop)."""
+
 
 def _check_headers(value: object) -> tuple[tuple[str, str], ...]:
     """``value`` (a mapping or ``(name, value)`` pairs) as a tuple of pairs,

@@ -7,10 +7,12 @@ for its result. An ``async with`` the worker holds (the connection, a
 subscription, an action goal) is entered and left by one task of the
 worker, so anyio's cancel scopes stay in the task that opened them.
 
-Nothing here waits forever: each blocking wait ends with the call's result,
-its error, the caller's ``timeout`` (``TimeoutError``), or ``NotConnected``
-when the worker thread has stopped (every call still waiting is failed as
-the thread ends)."""
+Every blocking wait ends with the call's result, its error, the caller's
+``timeout`` (``TimeoutError``), a ``KeyboardInterrupt`` in the waiting
+thread (which cancels the call in the loop), or ``NotConnected`` when the
+client is closed or the worker thread has stopped (every call still waiting
+is failed as the thread ends). Not every wait has a bound of its own: see
+:class:`SyncClient` for which ones wait until one of those happens."""
 
 from __future__ import annotations
 
@@ -29,10 +31,10 @@ from typing import TYPE_CHECKING, Any, Final, Generic, Literal, TypeVar
 import anyio
 
 from ._action import ActionGoal
-from ._client import Client
+from ._client import Client, _check_timeout
 from ._connect import ProtocolArg, connect
 from ._errors import NotConnected
-from ._options import ClientOptions
+from ._options import CLOSE_SLACK_S, ClientOptions
 from ._types import (
     ActionOutcome,
     Compression,
@@ -58,11 +60,6 @@ __all__ = ["SyncActionGoal", "SyncClient", "SyncSubscription", "connect_sync"]
 T = TypeVar("T")
 SyncBackend = Literal["asyncio", "trio"]
 
-_log = logging.getLogger("ros_mobile_bridge.sync")
-
-#: Added to ``options.teardown_timeout`` for the whole close: the teardown's
-#: own deadline, then closing the socket, then stopping the loop.
-_CLOSE_SLACK_S: Final = 5.0
 #: How long ``close()`` waits for the worker thread to end after its loop
 #: was told to stop.
 _JOIN_S: Final = 5.0
@@ -77,8 +74,13 @@ class _Worker:
     dead loop."""
 
     def __init__(
-        self, backend: SyncBackend, backend_options: Mapping[str, Any] | None, name: str
+        self,
+        backend: SyncBackend,
+        backend_options: Mapping[str, Any] | None,
+        name: str,
+        log: logging.Logger,
     ) -> None:
+        self._log = log
         self._backend = backend
         self._backend_options = dict(backend_options) if backend_options else None
         self._ready: concurrent.futures.Future[BlockingPortal] = concurrent.futures.Future()
@@ -110,7 +112,7 @@ class _Worker:
             if not self._ready.done():
                 self._ready.set_exception(exc)
             else:
-                _log.error("the sync client's event loop failed: %r", exc)
+                self._log.error("the sync client's event loop failed: %r", exc)
         finally:
             with self._lock:
                 self._ended = True
@@ -181,9 +183,9 @@ class _Worker:
     ) -> T:
         """:meth:`run`, cancelled in the loop after ``timeout`` seconds
         (``TimeoutError``); None: no bound of its own."""
-        if timeout is None:
-            return self.run(fn, *args, what=what)
         limit = _check_timeout(timeout)
+        if limit is None:
+            return self.run(fn, *args, what=what)
 
         async def bounded() -> T:
             with anyio.move_on_after(limit):
@@ -280,8 +282,10 @@ _open_clients: set[SyncClient] = set()
 @atexit.register
 def _close_at_exit() -> None:
     for client in list(_open_clients):
-        with contextlib.suppress(Exception):
+        try:
             client.close()
+        except Exception as exc:  # the next client must still be closed
+            client._log.warning("closing %r at interpreter exit failed: %r", client, exc)
 
 
 def connect_sync(
@@ -293,7 +297,6 @@ def connect_sync(
     options: ClientOptions | None = None,
     backend: SyncBackend = "asyncio",
     backend_options: Mapping[str, Any] | None = None,
-    **connect_kwargs: Any,
 ) -> SyncClient:
     """Connect from code that is not async (scripts, notebooks, test
     harnesses); returns a :class:`SyncClient`, connected, whose methods
@@ -305,8 +308,8 @@ def connect_sync(
                 msg = sub.get()
         # the block's end sent the zero Twist and stopped the worker thread
 
-    The arguments are :func:`~ros_mobile_bridge.connect`'s (any further
-    keyword is passed to it as given), plus ``backend`` (``"asyncio"`` or
+    ``target``, ``protocol``, ``port``, ``secure`` and ``options`` are
+    :func:`~ros_mobile_bridge.connect`'s, plus ``backend`` (``"asyncio"`` or
     ``"trio"``) and ``backend_options`` (:func:`anyio.run`'s) for the event
     loop of the worker thread the client runs in. It raises what
     ``connect()`` raises (``ValueError``, ``ConnectError``, ...), with the
@@ -331,19 +334,16 @@ def connect_sync(
         raise TypeError("backend_options must be a mapping or None")
     if options is not None and not isinstance(options, ClientOptions):
         raise TypeError("options must be a ClientOptions")
-    # bad keywords raise TypeError here, before any thread starts
-    cm = connect(
-        target, protocol=protocol, port=port, secure=secure, options=options, **connect_kwargs
-    )
-    teardown = (options or ClientOptions()).teardown_timeout
-    worker = _Worker(backend, backend_options, name=f"rmb-sync-{backend}")
+    cm = connect(target, protocol=protocol, port=port, secure=secure, options=options)
+    opts = options or ClientOptions()
+    worker = _Worker(backend, backend_options, f"rmb-sync-{backend}", opts.logger)
     held = _Held(worker, cm, "the connection")
     try:
         client = held.enter()
     except BaseException:
         worker.stop(_JOIN_S)
         raise
-    return SyncClient(worker, held, client, teardown)
+    return SyncClient(worker, held, client, opts.teardown_timeout, opts.logger)
 
 
 class SyncClient:
@@ -353,25 +353,63 @@ class SyncClient:
     async one in the worker thread's event loop and returns its result or
     raises its error. Methods that talk to the robot take an optional
     ``timeout`` (seconds; ``TimeoutError`` when it passes, the call is then
-    cancelled); without one they wait as the async method does, which
-    never waits forever. Once the worker thread has stopped, or after
-    :meth:`close`, they raise ``NotConnected``.
+    cancelled); without one they wait as the async method does:
+
+    * bounded by options: :func:`connect_sync` (``connect_timeout``),
+      :meth:`call_service` and the parameter calls (``service_timeout``),
+      :meth:`close` (``teardown_timeout`` + 5 s, plus up to 5 s to join
+      the thread);
+    * waiting on local progress (the outbox, the socket), which a lost
+      connection fails: :meth:`publish`, :meth:`publish_zero_twist`,
+      :meth:`advertise`, :meth:`unadvertise`, :meth:`SyncActionGoal.cancel`
+      (on zenoh a request bounded by ``service_timeout``);
+    * waiting for the robot to do something it may never do, so without a
+      ``timeout`` they wait until it does, the subscription or goal ends,
+      the connection is lost (for a subscription: for good, as it survives
+      a reconnect), :meth:`close` is called from another thread, or
+      ``KeyboardInterrupt``: :meth:`SyncSubscription.get`,
+      ``next(sub)``, :meth:`SyncSubscription.get_batch` and
+      :meth:`SyncSubscription.wait_active` (their default is the
+      ``timeout`` given to :meth:`subscribe`, None unless given),
+      :meth:`SyncActionGoal.accepted`, :meth:`SyncActionGoal.result`,
+      :meth:`SyncActionGoal.next_feedback`, and :meth:`run` (as long as
+      ``fn`` runs). :meth:`wait_for_topic` needs a ``timeout``.
+
+    Once the worker thread has stopped, or after :meth:`close`, they raise
+    ``NotConnected``.
 
     Several threads may call one SyncClient at once: each call is its own
     task in the worker's event loop (a :class:`SyncSubscription` is meant
     for one consuming thread)."""
 
     def __init__(
-        self, worker: _Worker, held: _Held[Client], client: Client, teardown_timeout: float
+        self,
+        worker: _Worker,
+        held: _Held[Client],
+        client: Client,
+        teardown_timeout: float,
+        log: logging.Logger,
     ) -> None:
         self._worker = worker
         self._held = held
         self._client = client
         self._teardown_timeout = teardown_timeout
+        self._log = log
+        # entered subscriptions and goals, left by close(); the lock guards
+        # the set, which threads entering and leaving them change concurrently
         self._children: weakref.WeakSet[SyncSubscription | SyncActionGoal] = weakref.WeakSet()
+        self._children_lock = threading.Lock()
         self._closed = False
         self._close_lock = threading.Lock()
         _open_clients.add(self)
+
+    def _track(self, child: SyncSubscription | SyncActionGoal) -> None:
+        with self._children_lock:
+            self._children.add(child)
+
+    def _untrack(self, child: SyncSubscription | SyncActionGoal) -> None:
+        with self._children_lock:
+            self._children.discard(child)
 
     # -- lifecycle ----------------------------------------------------------
     def __enter__(self) -> SyncClient:
@@ -397,27 +435,43 @@ class SyncClient:
         (default ``options.teardown_timeout`` + 5 s), except that joining
         the thread may take up to 5 s of its own; past it the thread is left
         to end on its own and a warning is logged. Idempotent; safe to call
-        from any thread but the worker's."""
+        from any thread but the worker's.
+
+        A bad ``timeout`` (``TypeError``, or ``ValueError`` unless a
+        positive finite number) or a call from the worker's own loop
+        (``RuntimeError``, inside :meth:`run`) raises at once and leaves the
+        client open: a later ``close()`` still closes it. Once closing has
+        begun it always ends with the loop stopped, whatever is raised on
+        the way (a second Ctrl-C included)."""
+        limit = _check_timeout(timeout)
+        if threading.get_ident() == self._worker.thread.ident:
+            raise RuntimeError(
+                "SyncClient.close() was called from its own event loop (inside "
+                "SyncClient.run): close it from another thread, after run() returns"
+            )
+        deadline = _now() + (self._teardown_timeout + CLOSE_SLACK_S if limit is None else limit)
         with self._close_lock:
             if self._closed:
                 return
             self._closed = True
-        _open_clients.discard(self)
-        budget = self._teardown_timeout + _CLOSE_SLACK_S if timeout is None else timeout
-        deadline = _now() + budget
         try:
-            for child in list(self._children):
-                with contextlib.suppress(Exception):
+            _open_clients.discard(self)
+            with self._children_lock:
+                children = list(self._children)
+            for child in children:
+                try:
                     child._leave(max(0.0, deadline - _now()))
+                except Exception as exc:  # the connection's teardown must still run
+                    self._log.warning("close: leaving %r failed: %r", child, exc)
             try:
                 self._held.exit(max(0.0, deadline - _now()))
             except TimeoutError as exc:
-                _log.warning("close: %s", exc)
+                self._log.warning("close: %s", exc)
             except NotConnected:
                 pass  # the worker had stopped: nothing left to tear down
         finally:
             if not self._worker.stop(max(_JOIN_S, deadline - _now())):
-                _log.warning(
+                self._log.warning(
                     "close: the worker thread %s did not end in time", self._worker.thread.name
                 )
 
@@ -478,7 +532,8 @@ class SyncClient:
         :class:`~ros_mobile_bridge.Client`, and return its result: the way to
         reach what has no blocking method here (``watch_topics()``,
         ``subscribe(...).batches()``, several calls at once in a task group).
-        ``fn`` must not keep the client for use outside the loop."""
+        ``fn`` must not keep the client for use outside the loop. Without
+        ``timeout`` this waits as long as ``fn`` runs."""
         return self._call(fn, self._client, timeout=timeout, what="run")
 
     def wait_for_topic(self, topic: str, *, timeout: float) -> TopicInfo:
@@ -623,8 +678,7 @@ class SyncClient:
         once; the subscription starts when the block is entered."""
         if self._closed:
             raise NotConnected("subscribe: the client is closed")
-        if timeout is not None:
-            _check_timeout(timeout)
+        _check_timeout(timeout)
         client = self._client
 
         def make() -> AbstractAsyncContextManager[Subscription]:
@@ -674,7 +728,7 @@ class SyncSubscription:
         if self._sub is not None:
             raise RuntimeError("a SyncSubscription can be entered once")
         self._sub = self._held.enter()
-        self._owner._children.add(self)
+        self._owner._track(self)
         return self
 
     def __exit__(
@@ -687,12 +741,15 @@ class SyncSubscription:
 
     def close(self) -> None:
         """Unsubscribe (idempotent)."""
-        self._leave(self._owner._teardown_timeout + _CLOSE_SLACK_S)
+        self._leave(self._owner._teardown_timeout + CLOSE_SLACK_S)
 
     def _leave(self, timeout: float) -> None:
-        self._owner._children.discard(self)
+        self._owner._untrack(self)
         with contextlib.suppress(NotConnected):
             self._held.exit(timeout)
+
+    def __repr__(self) -> str:
+        return f"<SyncSubscription {self.topic}>"
 
     def _require(self) -> Subscription:
         if self._sub is None:
@@ -702,7 +759,8 @@ class SyncSubscription:
     def get(self, timeout: float | None = None) -> Message:
         """The next message. ``timeout`` (default: the one given to
         ``subscribe``) bounds the wait: ``TimeoutError`` when no message came
-        (nothing is lost; call again). ``NotConnected`` once the subscription
+        (nothing is lost; call again); with neither, it waits until a
+        message comes or the subscription ends. ``NotConnected`` once the subscription
         has ended (after the queued messages), or the connection's error."""
         try:
             return self._next(timeout)
@@ -744,9 +802,12 @@ class SyncSubscription:
 
     def wait_active(self, timeout: float | None = None) -> None:
         """Return once the topic is carried (``state == "active"``);
-        ``TimeoutError`` after ``timeout`` seconds."""
+        ``TimeoutError`` after ``timeout`` seconds (default: the one given
+        to ``subscribe``; with neither, it waits until the topic is carried
+        or the subscription ends, ``NotConnected``)."""
         sub = self._require()
-        self._owner._worker.run_bounded(sub.wait_active, (), timeout, "wait_active")
+        limit = self._timeout if timeout is None else _check_timeout(timeout)
+        self._owner._worker.run_bounded(sub.wait_active, (), limit, "wait_active")
 
     @property
     def state(self) -> SubscriptionState:
@@ -773,7 +834,7 @@ class SyncActionGoal:
         if self._goal is not None:
             raise RuntimeError("a SyncActionGoal can be entered once")
         self._goal = self._held.enter()
-        self._owner._children.add(self)
+        self._owner._track(self)
         return self
 
     def __exit__(
@@ -782,12 +843,15 @@ class SyncActionGoal:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self._leave(self._owner._teardown_timeout + _CLOSE_SLACK_S)
+        self._leave(self._owner._teardown_timeout + CLOSE_SLACK_S)
 
     def _leave(self, timeout: float) -> None:
-        self._owner._children.discard(self)
+        self._owner._untrack(self)
         with contextlib.suppress(NotConnected):
             self._held.exit(timeout)
+
+    def __repr__(self) -> str:
+        return f"<SyncActionGoal {self.action}>"
 
     def _require(self) -> ActionGoal:
         if self._goal is None:
@@ -808,11 +872,13 @@ class SyncActionGoal:
         return self._require().done
 
     def accepted(self, timeout: float | None = None) -> None:
-        """:meth:`ActionGoal.accepted`, blocking."""
+        """:meth:`ActionGoal.accepted`, blocking; without ``timeout`` it
+        waits until the goal is accepted or fails."""
         self._wait(self._require().accepted, timeout, "accepted")
 
     def result(self, timeout: float | None = None) -> ActionOutcome:
-        """:meth:`ActionGoal.result`, blocking."""
+        """:meth:`ActionGoal.result`, blocking; without ``timeout`` it waits
+        until the goal ends, however long the action runs."""
         return self._wait(self._require().result, timeout, "result")
 
     def cancel(self, timeout: float | None = None) -> None:
@@ -820,7 +886,8 @@ class SyncActionGoal:
         self._wait(self._require().cancel, timeout, "cancel")
 
     def next_feedback(self, timeout: float | None = None) -> Any:
-        """The newest feedback not yet seen (waits for one); ``StopIteration``
+        """The newest feedback not yet seen (waits for one: without
+        ``timeout``, until one comes or the goal ends); ``StopIteration``
         is never raised: ``NotConnected`` once the goal has ended."""
         goal = self._require()
 
@@ -875,14 +942,6 @@ async def _set_parameters(
 
 async def _list_parameters(client: Client, timeout: float | None) -> dict[str, Any]:
     return await client.list_parameters(timeout=timeout)
-
-
-def _check_timeout(timeout: object) -> float:
-    if isinstance(timeout, bool) or not isinstance(timeout, int | float):
-        raise TypeError(f"timeout must be a number of seconds, not {type(timeout).__name__}")
-    if not timeout > 0:
-        raise ValueError(f"timeout must be positive, got {timeout!r}")
-    return float(timeout)
 
 
 def _now() -> float:
