@@ -17,9 +17,7 @@ the network between the two is gone. See docs/mcp.md.
 from __future__ import annotations
 
 import argparse
-import base64
-import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -30,25 +28,6 @@ from mcp.server.mcpserver.exceptions import ToolError
 import ros_mobile_bridge as rmb
 
 MAX_WAIT_S = 30.0  # the longest any tool waits for the robot
-
-
-def plain(value: Any) -> Any:
-    """``value`` as JSON-safe data: arrays as lists, bytes as base64, NaN and inf as null."""
-    if isinstance(value, dict):
-        return {k: plain(v) for k, v in value.items()}
-    if isinstance(value, (bytes, bytearray, memoryview)):
-        return base64.b64encode(value).decode()
-    if hasattr(value, "tolist"):  # numpy arrays and scalars
-        return plain(value.tolist())
-    if isinstance(value, (list, tuple)):
-        return [plain(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def plain_dict(value: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: plain(v) for k, v in value.items()}
 
 
 @contextmanager
@@ -74,7 +53,7 @@ def build_server(robot: rmb.Client, allowed: frozenset[str]) -> MCPServer:
         with robot_errors(), anyio.move_on_after(min(max(timeout, 0.0), MAX_WAIT_S)):
             async with robot.subscribe(topic, dispatch="latest") as sub:
                 async for msg in sub:
-                    return {"topic": topic, "type": msg.schema_name, "data": plain(msg.data)}
+                    return {"topic": topic, "type": msg.schema_name, "data": rmb.jsonable(msg.data)}
         raise ToolError(f"no message on {topic} within {timeout} s (is the name right?)")
 
     @server.tool()
@@ -89,20 +68,23 @@ def build_server(robot: rmb.Client, allowed: frozenset[str]) -> MCPServer:
         """Call service ``name`` with ``request`` (a JSON object) and return its reply."""
         with robot_errors():
             reply = await robot.call_service(name, request, timeout=min(timeout, MAX_WAIT_S))
-            return plain_dict(reply)
+            answer: dict[str, Any] = rmb.jsonable(reply)
+            return answer
 
     @server.tool()
     async def get_parameters(names: list[str] | None = None) -> dict[str, Any]:
         """Parameter values: the named ones, or all of them when ``names`` is omitted."""
         with robot_errors():
             values = await (robot.get_parameters(names) if names else robot.list_parameters())
-            return plain_dict(values)
+            found: dict[str, Any] = rmb.jsonable(values)
+            return found
 
     @server.tool()
     async def set_parameters(values: dict[str, Any]) -> dict[str, Any]:
         """Set parameters; returns the values the robot reports afterwards."""
         with robot_errors():
-            return plain_dict(await robot.set_parameters(values))
+            now: dict[str, Any] = rmb.jsonable(await robot.set_parameters(values))
+            return now
 
     @server.tool()
     def show_type(type_name: str) -> list[dict[str, Any]]:

@@ -20,12 +20,9 @@ buffers, which latest-only delivery is meant to avoid.
 from __future__ import annotations
 
 import argparse
-import base64
 import json
-import math
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
-from typing import Any
 
 import anyio
 import uvicorn
@@ -62,21 +59,6 @@ class Latest:
         return self.seq, self.text
 
 
-def plain(value: Any) -> Any:
-    """``value`` as JSON-safe data: arrays as lists, bytes as base64, NaN and inf as null."""
-    if isinstance(value, dict):
-        return {k: plain(v) for k, v in value.items()}
-    if isinstance(value, (bytes, bytearray, memoryview)):
-        return base64.b64encode(value).decode()
-    if hasattr(value, "tolist"):  # numpy arrays and scalars
-        return plain(value.tolist())
-    if isinstance(value, (list, tuple)):
-        return [plain(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 async def pump(robot: rmb.Client, topic: str, latest: Latest) -> None:
     seq = 0
     async with robot.subscribe(topic, dispatch="latest") as sub:
@@ -86,7 +68,7 @@ async def pump(robot: rmb.Client, topic: str, latest: Latest) -> None:
                 "seq": seq,
                 "topic": msg.topic,
                 "receive_time_ns": msg.receive_time_ns,
-                "data": plain(msg.data),
+                "data": rmb.jsonable(msg.data),
             }
             latest.put(seq, json.dumps(record, allow_nan=False))
 

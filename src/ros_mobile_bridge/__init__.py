@@ -34,6 +34,7 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._errors import SchemaError as SchemaError
     from ._errors import ServiceError as ServiceError
     from ._errors import ServiceTimeout as ServiceTimeout
+    from ._jsonable import jsonable as jsonable
     from ._options import BreakerPolicy as BreakerPolicy
     from ._options import ClientOptions as ClientOptions
     from ._options import ReconnectPolicy as ReconnectPolicy
@@ -128,6 +129,7 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "ServiceRequest": ("._serve", "ServiceRequest"),
     "ServiceRequests": ("._serve", "ServiceRequests"),
     "RosbridgeAuth": ("._options", "RosbridgeAuth"),
+    "jsonable": ("._jsonable", "jsonable"),
 }
 """Public name -> (private module relative to this package, its name there);
 ``("", name)`` is a public submodule. Kept equal to the ``TYPE_CHECKING``
@@ -207,6 +209,7 @@ __all__ = [
     "cancel_on_signals",
     "connect",
     "connect_sync",
+    "jsonable",
     "lag",
     "open_client",
     "parse_target",
