@@ -305,7 +305,8 @@ async def _pub(ns: argparse.Namespace) -> int:
     shown = dump_flow(data)
     async with open_robot(ns) as robot:
         check_fields(robot, ns.type, data, "the message")
-        if velocity and ns.type not in _VELOCITY_TYPES:
+        if velocity and ns.no_velocity_check and ns.type not in _VELOCITY_TYPES:
+            # (without --no-velocity-check the library refuses such a publish)
             warn(
                 f"warning: {ns.type} on {ns.topic} gets no stop command when rmb ends (only "
                 "Twist and TwistStamped get the teardown's zero Twist): the robot keeps this "
