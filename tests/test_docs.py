@@ -16,6 +16,8 @@ from types import ModuleType
 
 import pytest
 
+pytestmark = pytest.mark.docs  # built on the main Python only (scripts/test)
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
