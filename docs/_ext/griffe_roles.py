@@ -9,55 +9,21 @@ renders to a link to it (``[`Client`][ros_mobile_bridge.Client]``)."""
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Any
 
 import griffe
 
 DOCUMENTED = frozenset(
-    {
-        "ActionGoal",
-        "ActionGoalError",
-        "ActionOutcome",
-        "Batches",
-        "BreakerPolicy",
-        "BreakerState",
-        "Bucket",
-        "CircuitBreaker",
-        "Client",
-        "ClientOptions",
-        "ConnectError",
-        "DEFAULT_PORTS",
-        "DEFAULT_PRESETS",
-        "DecodeError",
-        "Endpoint",
-        "FieldDef",
-        "Message",
-        "NotConnected",
-        "NotSupportedError",
-        "ProtocolMismatchError",
-        "ReconnectPolicy",
-        "RosBridgeError",
-        "SchemaError",
-        "ServerInfo",
-        "ServiceError",
-        "ServiceInfo",
-        "ServiceTimeout",
-        "SignalScope",
-        "Subscription",
-        "SubscriptionStats",
-        "SyncActionGoal",
-        "SyncClient",
-        "SyncSubscription",
-        "ThrottleMode",
-        "TopicInfo",
-        "cancel_on_signals",
-        "connect",
-        "connect_sync",
-        "open_client",
-        "parse_target",
-    }
+    match["name"]
+    for page in (Path(__file__).parents[1] / "reference").glob("*.md")
+    for match in re.finditer(
+        r"^::: ros_mobile_bridge\.(?P<name>[\w.]+)", page.read_text(encoding="utf-8"), re.M
+    )
 )
-"""Public names rendered by docs/reference/*.md: a role naming one becomes a link."""
+"""Public names rendered by docs/reference/*.md (read from their ``:::``
+lines, so the list cannot drift from the pages): a role naming one becomes
+a link."""
 
 _TITLED = re.compile(r"(?P<shown>.+?)\s*<(?P<target>[^<>]+)>")
 _LITERAL = re.compile(r"(?<=\S)::\n\n")
