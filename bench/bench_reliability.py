@@ -261,8 +261,11 @@ def trace_sends(robot: rmb.Client, into: dict[int, Sent]) -> Iterator[bool]:
     ``put_control`` / ``put_data`` and the backend's ``send`` on this
     connection. Bench-only instrumentation, a few microseconds per frame;
     yields False (recording nothing) if the client's internals have moved."""
-    backend: Any = getattr(robot, "_backend", None)
-    outbox: Any = getattr(robot, "_outbox", None)
+    conn: Any = getattr(robot, "_conn", None)  # since the connection moved out of Client
+    backend: Any = getattr(conn, "adapter", None) or getattr(robot, "_backend", None)
+    outbox: Any = getattr(getattr(conn, "outbound", None), "outbox", None) or getattr(
+        robot, "_outbox", None
+    )
     send = getattr(backend, "send", None)
     put_control = getattr(outbox, "put_control", None)
     put_data = getattr(outbox, "put_data", None)
@@ -608,7 +611,11 @@ async def latency_case(
         overflow = stats.dropped_overflow if stats is not None else 0
         adaptive_drops = stats.dropped_throttle if stats is not None else 0
         breaker_drops = getattr(stats, "dropped_breaker", 0)
-        coalesced = publisher._outbox.coalesced if hasattr(publisher, "_outbox") else 0
+        conn: Any = getattr(publisher, "_conn", None)
+        outbox: Any = getattr(getattr(conn, "outbound", None), "outbox", None) or getattr(
+            publisher, "_outbox", None
+        )
+        coalesced = outbox.coalesced if outbox is not None else 0
     received: dict[int, int] = {}
     for _ in range(20):  # the teardown confirmed delivery; this is a safety net
         received.update(await blocking(peer.commands))

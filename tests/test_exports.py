@@ -285,7 +285,7 @@ def test_import_resolution_helper_sees_relative_imports() -> None:
     found = _imports(PACKAGE_DIR / "flow" / "__init__.py")
     assert f"{PACKAGE}.flow._subscription" in found
     # the rule checks can fire: the backends do use the wire engines
-    backend_imports = set().union(*map(_imports, _modules_in("backends")))
+    backend_imports = set().union(*map(_imports, _modules_in("adapters")))
     assert _hits(backend_imports, (f"{PACKAGE}.wire",))
 
 
@@ -311,7 +311,7 @@ def test_wire_engines_do_no_io_and_know_no_other_layer(path: Path) -> None:
         "zenoh",
         f"{PACKAGE}.flow",
         f"{PACKAGE}.transport",
-        f"{PACKAGE}.backends",
+        f"{PACKAGE}.adapters",
         f"{PACKAGE}._client",
         f"{PACKAGE}._connect",
     )
@@ -322,7 +322,7 @@ def test_wire_engines_do_no_io_and_know_no_other_layer(path: Path) -> None:
 def test_flow_knows_no_protocol(path: Path) -> None:
     forbidden = (
         f"{PACKAGE}.wire",
-        f"{PACKAGE}.backends",
+        f"{PACKAGE}.adapters",
         f"{PACKAGE}.transport",
         "websockets",
         "zenoh",

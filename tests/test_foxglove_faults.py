@@ -727,7 +727,7 @@ async def test_call_beyond_max_pending_requests_raises_at_once() -> None:
             async with rmb.connect(url, options=options(max_pending_requests=1)) as robot:
                 async with anyio.create_task_group() as tg:
                     tg.start_soon(robot.call_service, "/set_flag", {"data": True})
-                    await wait_until(lambda: len(robot._backend._calls) == 1)  # type: ignore[attr-defined]
+                    await wait_until(lambda: len(robot._conn.adapter._calls) == 1)  # type: ignore[attr-defined]
                     with anyio.fail_after(1):  # at once, not at the 10 s timeout
                         with pytest.raises(rmb.ServiceError, match="max_pending_requests"):
                             await robot.call_service("/set_flag", {"data": False})

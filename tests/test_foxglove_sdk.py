@@ -549,8 +549,9 @@ async def test_control_burst_coalesces_to_the_newest_value(server: SdkServer) ->
         await robot.advertise("/cmd_vel", "geometry_msgs/msg/Twist")
         # queued without yielding: the writer sees only the newest control value
         for i in range(10):
-            robot._outbox.put_control(
-                "/cmd_vel", robot._backend.encode_publish("/cmd_vel", {"linear": {"x": float(i)}})
+            robot._conn.outbound.outbox.put_control(
+                "/cmd_vel",
+                robot._conn.adapter.encode_publish("/cmd_vel", {"linear": {"x": float(i)}}),
             )
         await wait_until(lambda: server.messages("/cmd_vel"))
         await anyio.sleep(0.2)

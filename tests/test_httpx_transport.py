@@ -289,7 +289,7 @@ def test_the_library_without_http_client_does_not_import_httpx() -> None:
     code = (
         "import sys, ros_mobile_bridge as rmb; "
         "rmb.ClientOptions(headers={'A': 'b'}); rmb.connect; rmb.Client; "
-        "import ros_mobile_bridge.backends; "
+        "import ros_mobile_bridge.adapters; "
         "print(sorted(m for m in ('httpx', 'httpcore', 'httpx_ws') if m in sys.modules))"
     )
     out = subprocess.run(

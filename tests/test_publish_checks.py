@@ -225,7 +225,7 @@ async def test_rosbridge_refuses_bad_types_before_advertising(
             await robot.publish("/cmd_vel", "std_msgs/msg/String", {"data": "go"})
         with pytest.raises(rmb.SchemaError, match=r"/chatter.*String"):
             await robot.publish("/chatter", "geometry_msgs/msg/Twist", {})
-        assert dict(robot._backend.publishing()) == {}  # nothing was advertised
+        assert dict(robot._conn.adapter.publishing()) == {}  # nothing was advertised
     received = await anyio.to_thread.run_sync(
         ros_graph.command, {"cmd": "received", "topic": "/cmd_vel"}
     )
@@ -240,4 +240,4 @@ async def test_rosbridge_resolves_a_type_through_rosapi(
     topic = f"/rmb_builtins_{next(_unique)}"
     async with rmb.connect(rosbridge.url, protocol="rosbridge", options=ros_options()) as robot:
         await robot.publish(topic, "test_msgs/msg/Builtins", {})
-        assert robot._backend.codecs.resolves("test_msgs/msg/Builtins")
+        assert robot._conn.adapter.codecs.resolves("test_msgs/msg/Builtins")

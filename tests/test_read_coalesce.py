@@ -40,7 +40,7 @@ def options(**kw: Any) -> rmb.ClientOptions:
 
 
 def websocket(robot: rmb.Client) -> WebSocket:
-    ws = robot._backend._ws  # type: ignore[attr-defined]
+    ws = robot._conn.adapter._ws  # type: ignore[attr-defined]
     assert isinstance(ws, WebSocket)
     return ws
 

@@ -176,15 +176,15 @@ async def test_control_frame_leaves_ahead_of_queued_data_under_an_image_flood(
             async with robot.subscribe("/camera", adaptive=False) as sub:
                 thread.start()
                 await wait_until(lambda: sub.stats.received > 5, what="the flood")
-                backend = robot._backend
+                backend = robot._conn.adapter
                 # 200 data frames queued, then 5 control values for one topic,
                 # all without yielding: the writer sees the whole backlog
                 for i in range(200):
-                    await robot._outbox.put_data(
+                    await robot._conn.outbound.outbox.put_data(
                         "/log", backend.encode_publish("/log", {"data": str(i)})
                     )
                 for x in range(5):
-                    robot._outbox.put_control(
+                    robot._conn.outbound.outbox.put_control(
                         "/cmd_vel", backend.encode_publish("/cmd_vel", {"linear": {"x": float(x)}})
                     )
                 consumed = 0

@@ -272,7 +272,7 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) 
         for window in (0.004, 0.0):
             opts = options(read_coalesce=window)
             async with rmb.connect(peer.url, protocol="rosbridge", options=opts) as robot:
-                ws = robot._backend._ws  # type: ignore[attr-defined]
+                ws = robot._conn.adapter._ws  # type: ignore[attr-defined]
                 assert isinstance(ws, WebSocket)
                 async with robot.subscribe(
                     topic, schema="std_msgs/msg/String", adaptive=False, buffer=10_000
@@ -617,7 +617,7 @@ async def test_reconnect_restores_a_published_topic_without_waiting_on_the_bridg
     # published topic's advertise waited out the internal call timeout, the
     # status "reconnecting" meanwhile). With that timeout made an hour, such
     # a wait would hang this test instead of slowing it.
-    from ros_mobile_bridge.backends import _rosbridge
+    from ros_mobile_bridge.adapters import _rosbridge
 
     monkeypatch.setattr(_rosbridge, "_INTERNAL_TIMEOUT", 3600.0)
     bridge = rosbridge_factory()
@@ -636,7 +636,7 @@ async def test_reconnect_restores_a_published_topic_without_waiting_on_the_bridg
         await wait_until(lambda: robot.status == "reconnecting", 10)
         await anyio.to_thread.run_sync(lambda: rosbridge_factory(port=port))
         await wait_until(lambda: robot.status == "connected", 30, "the reconnect")
-        assert topic in robot._backend.publishing()  # restored
+        assert topic in robot._conn.adapter.publishing()  # restored
         for n in range(40):  # until the graph hears one: the first may beat the advertise
             await robot.publish(topic, "std_msgs/msg/String", {"data": f"after {n}"})
             if any(m.get("data", "").startswith("after") for m in ros_graph.received(topic)):

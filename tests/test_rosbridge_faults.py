@@ -361,7 +361,7 @@ def test_message_details_become_a_definition_the_codec_reads() -> None:
     primitive names, ``pkg/Name`` types, -1 / 0 / N array lengths) turns
     into ``.msg`` text that decodes CDR (the cbor-raw path for types the
     bundled definitions lack)."""
-    from ros_mobile_bridge.backends._rosbridge import _typedefs_to_msg
+    from ros_mobile_bridge.adapters._rosbridge import _typedefs_to_msg
     from ros_mobile_bridge.codec import CodecRegistry
 
     answer = {
@@ -470,7 +470,7 @@ async def test_call_beyond_max_pending_requests_raises_at_once() -> None:
                 async with anyio.create_task_group() as tg:
                     # a non-rosapi service the fake bridge never answers
                     tg.start_soon(robot.call_service, "/set_flag", {"data": True})
-                    await wait_until(lambda: len(robot._backend._calls) == 1)  # type: ignore[attr-defined]
+                    await wait_until(lambda: len(robot._conn.adapter._calls) == 1)  # type: ignore[attr-defined]
                     with anyio.fail_after(1):
                         with pytest.raises(rmb.ServiceError, match="max_pending_requests"):
                             await robot.call_service("/set_flag", {"data": False})

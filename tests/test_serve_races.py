@@ -16,8 +16,8 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from ros_mobile_bridge._serve import ServiceRequests
-from ros_mobile_bridge.backends import _rosbridge
+from ros_mobile_bridge._serve import ServedServices, ServiceRequests
+from ros_mobile_bridge.adapters import _rosbridge
 from ros_mobile_bridge.wire import rosbridge as rb
 
 NAME = "/rmb_served"
@@ -173,9 +173,9 @@ async def no_round_trip() -> None:
     pass  # nobody answers on a fake socket
 
 
-def rosbridge_backend() -> tuple[_rosbridge.RosbridgeBackend, FakeSocket]:
+def rosbridge_backend() -> tuple[_rosbridge.RosbridgeAdapter, FakeSocket]:
     ws = FakeSocket()
-    return _rosbridge.RosbridgeBackend(ws, rmb.ClientOptions()), ws  # type: ignore[arg-type]
+    return _rosbridge.RosbridgeAdapter(ws, rmb.ClientOptions()), ws  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("confirm", [True, False])
@@ -295,14 +295,16 @@ class ClientStub:
         await anyio.sleep(3600)
 
 
-def client_on(backend: ClientStub, **options: Any) -> rmb.Client:
-    return rmb.Client(backend, rmb.ClientOptions(**options))  # type: ignore[arg-type]
+def services_of(teardown_timeout: float = 2.0) -> ServedServices:
+    """The client's registry of served services (``Connection.served``)."""
+    return ServedServices(teardown_timeout, logging.getLogger("ros_mobile_bridge"))
 
 
 async def test_leaving_the_block_unadvertises_though_the_answers_take_the_whole_budget() -> None:
     backend = ClientStub()
-    client = client_on(backend, teardown_timeout=0.3)
-    async with client._serve(NAME, SETBOOL, 30.0, 16) as requests:
+    services = services_of(teardown_timeout=0.3)
+    current: Any = lambda: backend  # noqa: E731
+    async with services.serve(NAME, SETBOOL, 30.0, 16, current) as requests:
         await requests.on_service_request(backend, "q", {"data": True})  # type: ignore[arg-type]
     assert backend.unadvertised == [NAME]
     stats = requests.stats
@@ -311,14 +313,14 @@ async def test_leaving_the_block_unadvertises_though_the_answers_take_the_whole_
 
 async def test_a_restore_skips_a_service_whose_block_ended_meanwhile() -> None:
     old = ClientStub()
-    client = client_on(old)
+    services = services_of()
     first, second = served(old), served(old)
-    client._served.update({"/first": first, "/second": second})
-    new = ClientStub()
+    services._served.update({"/first": first, "/second": second})
+    new: Any = ClientStub()
     new.gate = anyio.Event()
     async with anyio.create_task_group() as tg:
-        tg.start_soon(client._restore, old, new)
+        tg.start_soon(services.restore, new)
         await anyio.wait_all_tasks_blocked()  # advertising /first on the new connection
-        del client._served["/second"]  # that serve() block ended meanwhile
+        del services._served["/second"]  # that serve() block ended meanwhile
         new.gate.set()
     assert new.advertised == ["/first"]

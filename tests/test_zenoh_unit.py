@@ -13,7 +13,7 @@ import pytest
 import ros_mobile_bridge as rmb
 from peers.rosbridge import free_port
 from ros_mobile_bridge._connect import parse_target
-from ros_mobile_bridge.backends._zenoh import (
+from ros_mobile_bridge.adapters._zenoh import (
     default_domain,
     parameter_from_ros,
     parameter_to_ros,

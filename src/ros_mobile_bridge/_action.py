@@ -1,7 +1,7 @@
 """The handle of one action goal: feedback, acceptance, result, cancel.
 
 Protocol-free: the backend reports what happens to the goal through the
-:class:`~ros_mobile_bridge.backends.GoalEvents` callbacks, which this class
+:class:`~ros_mobile_bridge.adapters.GoalEvents` callbacks, which this class
 implements."""
 
 from __future__ import annotations

@@ -12,10 +12,11 @@ from typing import Final, Literal
 import anyio
 
 from ._client import Client
+from ._connection import Connection
 from ._options import ClientOptions
 from ._types import DEFAULT_PORTS
-from .backends import (
-    Backend,
+from .adapters import (
+    Adapter,
     open_foxglove,
     open_rosbridge,
     open_websocket,
@@ -168,9 +169,9 @@ def parse_target(
     return Endpoint(host=host, port=chosen, secure=is_secure, path=path, zenoh=zenoh)
 
 
-async def _open_backend(endpoint: Endpoint, protocol: str, options: ClientOptions) -> Backend:
+async def _open_adapter(endpoint: Endpoint, protocol: str, options: ClientOptions) -> Adapter:
     if endpoint.zenoh or protocol == "zenoh":
-        from .backends._zenoh import open_zenoh  # eclipse-zenoh is an optional extra
+        from .adapters._zenoh import open_zenoh  # eclipse-zenoh is an optional extra
 
         return await open_zenoh(endpoint.zenoh_locator, options)
     if protocol == "rosbridge":
@@ -218,25 +219,26 @@ async def connect(
         raise TypeError("options must be a ClientOptions")
     endpoint = parse_target(target, protocol=protocol, port=port, secure=secure)
     presets = resolve_presets(options.preset_overrides, options.logger)  # before any I/O
-    backend = await _open_backend(endpoint, protocol, options)
+    adapter = await _open_adapter(endpoint, protocol, options)
 
-    async def reopen() -> Backend:
+    async def reopen() -> Adapter:
         # the same endpoint and the protocol the first connection settled on
-        return await _open_backend(endpoint, backend.protocol, options)
+        return await _open_adapter(endpoint, adapter.protocol, options)
 
-    client = Client(backend, options, reopen, presets)
+    conn = Connection(adapter, options, presets, reopen)
+    client = Client(conn, options)
     body_error: Exception | None = None
     try:
         async with anyio.create_task_group() as tg:
-            client._start(tg)
+            conn.start(tg)
             try:
                 yield client
             except Exception as exc:  # re-raised below, outside the task group
                 body_error = exc
             finally:
-                await client._teardown()
-                client._stop_tasks()
+                await conn.teardown()
+                conn.stop_tasks()
     finally:
-        await client._close_backend()
+        await conn.close_adapter()
     if body_error is not None:
         raise body_error

@@ -39,6 +39,8 @@ from typing import IO, TYPE_CHECKING, Any, Final
 import anyio
 import anyio.abc
 
+from ._checks import check_name
+from ._connection import Connection, RouteContext
 from ._errors import ConnectError, DecodeError, NotConnected, RosBridgeError
 from ._types import Compression
 from ._version import __version__
@@ -46,7 +48,6 @@ from ._version import __version__
 if TYPE_CHECKING:
     from mcap.writer import Writer
 
-    from ._client import Client
     from .codec import CodecRegistry
     from .flow import RawFrame
 
@@ -116,8 +117,8 @@ class Recording:
     the file; :attr:`stats` what was written; :attr:`topics` the topics
     recorded so far."""
 
-    def __init__(self, client: Client, path: str, writer: Writer, logger: logging.Logger) -> None:
-        self._client = client
+    def __init__(self, conn: Connection, path: str, writer: Writer, logger: logging.Logger) -> None:
+        self._conn = conn
         self.path = path
         self._writer = writer
         self._log = logger
@@ -171,7 +172,7 @@ class Recording:
             )
 
     def _write(self, frame: RawFrame) -> None:
-        codecs = self._client._backend.codecs
+        codecs = self._conn.adapter.codecs
         topic, schema = frame.topic, frame.schema_name
         if frame.encoding == "cdr":
             data = bytes(frame.payload)
@@ -246,13 +247,19 @@ class Recording:
     ) -> None:
         self._topics.append(topic)
         try:
-            subscription = self._client.subscribe(
-                topic, max_hz=max_hz, adaptive=adaptive, compression=compression
+            route = self._conn.router.route(
+                topic,
+                max_hz=max_hz,
+                adaptive=adaptive,
+                dispatch="all",
+                schema=None,
+                buffer=None,
+                compression=compression,
             )
-            async with subscription as sub:
+            async with RouteContext(self._conn, route):
                 while True:
                     try:
-                        frame = await sub._next_frame()
+                        frame = await route.queue.next_frame()
                     except StopAsyncIteration:
                         return
                     try:
@@ -280,7 +287,7 @@ class Recording:
         compression: Compression | None,
     ) -> None:
         started: set[str] = set()
-        async for topics in self._client.watch_topics():
+        async for topics in self._conn.router.topics.watch():
             for info in topics:
                 if info.name not in started:
                     started.add(info.name)
@@ -297,7 +304,7 @@ def _jsonable(value: Any) -> Any:
 
 @asynccontextmanager
 async def open_recording(
-    client: Client,
+    conn: Connection,
     path: str | os.PathLike[str],
     topics: Sequence[str] | None,
     max_hz: float | None,
@@ -306,7 +313,8 @@ async def open_recording(
 ) -> AsyncIterator[Recording]:
     """The body of :meth:`Client.record` (arguments already checked)."""
     mcap_writer = _import_mcap()
-    client._require_connected()
+    conn.require_connected()
+    log = conn.router.logger
     name = os.fspath(path)
     # the writer needs a blocking file; creating it is one quick system call
     stream: IO[bytes] = open(name, "wb")  # noqa: SIM115, ASYNC230 - closed in the finally below
@@ -316,7 +324,7 @@ async def open_recording(
     except BaseException:
         stream.close()
         raise
-    recording = Recording(client, name, writer, client._log)
+    recording = Recording(conn, name, writer, log)
     try:
         async with anyio.create_task_group() as tg:
             recording._stop = tg.cancel_scope
@@ -338,7 +346,7 @@ async def open_recording(
         except OSError as exc:
             if recording._disk_error is None:
                 raise
-            client._log.error("record: %s could not be finished: %s", name, exc)
+            log.error("record: %s could not be finished: %s", name, exc)
         finally:
             stream.close()
     if recording._disk_error is not None:
@@ -375,11 +383,9 @@ def check_record_args(
     if topics is not None:
         if isinstance(topics, str) or not isinstance(topics, Sequence | set | frozenset):
             raise TypeError("topics must be a sequence of topic names or None (every topic)")
-        from ._client import _check_name
-
         wanted = []
         for topic in topics:
-            name = _check_name("topic", topic)
+            name = check_name("topic", topic)
             if name not in wanted:
                 wanted.append(name)
         if not wanted:

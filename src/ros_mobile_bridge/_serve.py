@@ -14,16 +14,17 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import AsyncIterator, Callable, Mapping
+from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from typing import Any, Final, Literal
 
 import anyio
 
 from ._errors import ConnectError, DecodeError, NotConnected, RosBridgeError, ServiceError
-from .backends import Backend
+from .adapters import Adapter
 
-__all__ = ["ServeStats", "ServiceRequest", "ServiceRequests"]
+__all__ = ["ServeStats", "ServedServices", "ServiceRequest", "ServiceRequests"]
 
 DEFAULT_SERVE_TIMEOUT: Final = 10.0
 DEFAULT_SERVE_BUFFER: Final = 16
@@ -71,7 +72,7 @@ class ServiceRequest:
     def __init__(
         self,
         owner: ServiceRequests,
-        backend: Backend,
+        backend: Adapter,
         request_id: str,
         args: dict[str, Any],
         deadline: float,
@@ -139,7 +140,7 @@ class ServiceRequests:
         *,
         timeout: float,
         buffer: int,
-        current: Callable[[], Backend | None],
+        current: Callable[[], Adapter | None],
         teardown_timeout: float,
         logger: logging.Logger,
     ) -> None:
@@ -169,7 +170,7 @@ class ServiceRequests:
         return ServeStats(**self._counts)
 
     # -- from the backend's reader ------------------------------------------------
-    async def on_service_request(self, backend: Backend, request_id: str, args: Any) -> None:
+    async def on_service_request(self, backend: Adapter, request_id: str, args: Any) -> None:
         """Queue a forwarded call; answer ``result: false`` at once when
         serving ended or ``buffer`` requests already wait."""
         self._counts["received"] += 1
@@ -347,3 +348,100 @@ class ServiceRequests:
         restore that could not wait for one): the iteration raises it."""
         self._log.error("%s is not served: %s", self.name, error)
         self._fail(error)
+
+
+class ServedServices:
+    """The services one client serves, by name, across reconnects: each
+    ``serve()`` block's :class:`ServiceRequests`, advertised again after a
+    reconnect and failed when the connection is lost for good."""
+
+    def __init__(self, teardown_timeout: float, logger: logging.Logger) -> None:
+        self._served: dict[str, ServiceRequests] = {}
+        self._teardown_timeout = teardown_timeout
+        self._log = logger
+
+    @asynccontextmanager
+    async def serve(
+        self,
+        name: str,
+        service_type: str,
+        timeout: float,
+        buffer: int,
+        current: Callable[[], Adapter | None],
+    ) -> AsyncIterator[ServiceRequests]:
+        """The body of ``Client.serve`` (arguments checked, connected):
+        advertise, yield the requests, answer what is open and unadvertise on
+        every exit."""
+        if name in self._served:
+            raise ValueError(f"{name} is served by this client already")
+        adapter = current()
+        if adapter is None:
+            raise NotConnected("the connection is not up")
+        served = ServiceRequests(
+            name,
+            service_type,
+            timeout=timeout,
+            buffer=buffer,
+            current=current,
+            teardown_timeout=self._teardown_timeout,
+            logger=self._log,
+        )
+        self._served[name] = served
+        try:
+            await adapter.advertise_service(name, service_type, served)
+        except BaseException:
+            # the bridge may serve it though (sent, not confirmed): answer the
+            # calls that came, then unadvertise (the bridge drops calls still
+            # open when the service goes)
+            self._served.pop(name, None)
+            await self._end(name, served, "the service could not be served", current)
+            raise
+        try:
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(served._expire, name=f"rmb-serve-{name}")
+                try:
+                    yield served
+                finally:
+                    tg.cancel_scope.cancel()
+        finally:
+            self._served.pop(name, None)
+            await self._end(name, served, "the service stopped serving", current)
+
+    async def _end(
+        self,
+        name: str,
+        served: ServiceRequests,
+        reason: str,
+        current: Callable[[], Adapter | None],
+    ) -> None:
+        """Answer what is open, then unadvertise ``name``: shielded, within
+        the teardown deadline, half of it at most for the answers so that the
+        unadvertise always has the other half."""
+        budget = self._teardown_timeout
+        with anyio.CancelScope(shield=True), anyio.move_on_after(budget):
+            await served._close(reason, budget / 2)
+            adapter = current()
+            if adapter is not None:
+                try:
+                    await adapter.unadvertise_service(name)
+                except RosBridgeError as exc:
+                    self._log.debug("unadvertising %s failed: %s", name, exc)
+
+    async def restore(self, adapter: Adapter) -> None:
+        """Advertise every served service on a fresh connection, unconfirmed:
+        a refusal arrives later, through the new reader, and ends that
+        ``serve()`` block (``on_service_failed``)."""
+        for name, served in list(self._served.items()):
+            if self._served.get(name) is not served:
+                continue  # its serve() block ended while this loop awaited
+            await adapter.advertise_service(name, served.service_type, served, confirm=False)
+
+    def fail_all(self, error: RosBridgeError) -> None:
+        """Every ``serve()`` iteration raises ``error`` (once the requests
+        already queued are read)."""
+        for served in self._served.values():
+            served._fail(error)
+
+    def names(self) -> list[str]:
+        """The names served now."""
+        return list(self._served)

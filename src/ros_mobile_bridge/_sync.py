@@ -31,7 +31,8 @@ from typing import TYPE_CHECKING, Any, Final, Generic, Literal, TypeVar
 import anyio
 
 from ._action import ActionGoal
-from ._client import Client, _check_timeout
+from ._checks import check_timeout as _check_timeout
+from ._client import Client
 from ._connect import ProtocolArg, connect
 from ._errors import NotConnected
 from ._options import CLOSE_SLACK_S, ClientOptions

@@ -186,7 +186,7 @@ async def _definition(robot: Client, name: str) -> list[str]:
         robot.schema_definition(name)
     except SchemaError:
         # rosbridge: ask the bridge (/rosapi/message_details) for it
-        await robot._backend.fetch_definition(name)
+        await robot.fetch_definition(name)
     lines: list[str] = []
     _render(robot, name, 0, lines)
     return lines

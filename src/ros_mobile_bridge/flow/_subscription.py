@@ -25,7 +25,7 @@ import asyncio
 import logging
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Final
 
 import anyio
@@ -112,6 +112,11 @@ class FrameQueue:
         self._last_release: float | None = None
         self._wakeup: anyio.Event | None = None
         self._closed = False
+        self.error: Exception | None = None
+        """Why the subscription ended (the connection was lost), once it did."""
+        self.state: SubscriptionState = "pending"
+        """``"active"`` while the server carries the topic; set by the router."""
+        self._state_changed = anyio.Event()
         self.received = 0
         self.delivered = 0
         self.dropped_throttle = 0
@@ -208,9 +213,57 @@ class FrameQueue:
             wakeup.set()
 
     def close(self) -> None:
-        """No more frames will be offered; the consumer drains what is queued."""
-        self._closed = True
-        self._wake()
+        """No more frames will be offered; the consumer drains what is queued
+        (and :meth:`wait_active` stops waiting)."""
+        if not self._closed:
+            self._closed = True
+            self._wake()
+            self._state_changed.set()
+
+    def fail(self, error: Exception) -> None:
+        """Close with ``error``: the consumer drains what is queued, then
+        gets ``error`` (the connection was lost for good)."""
+        if self.error is None:
+            self.error = error
+        self.close()
+
+    def set_state(self, state: SubscriptionState) -> None:
+        """The server now carries the topic (``"active"``) or not."""
+        if state != self.state:
+            self.state = state
+            self._state_changed.set()
+            self._state_changed = anyio.Event()
+
+    async def wait_active(self, topic: str) -> None:
+        """Return once :attr:`state` is ``"active"``; raise :attr:`error` (or
+        ``NotConnected``) if the queue closes first."""
+        while self.state != "active":
+            if self._closed:
+                raise self.error or NotConnected(f"the subscription to {topic} is closed")
+            await self._state_changed.wait()
+
+    async def next_frame(self) -> RawFrame:
+        """The next frame, not decoded (the recorder writes CDR payloads as
+        they came). It passed the same filters (throttle, breaker, buffer)
+        and counts as delivered. ``StopAsyncIteration`` once closed and
+        drained, :attr:`error` instead when the connection was lost."""
+        frame = self.take()
+        if frame is None:
+            frame = await self.wait_frame()
+        else:
+            await anyio.lowlevel.checkpoint()
+        self.delivered += 1
+        return frame
+
+    async def wait_frame(self) -> RawFrame:
+        """:meth:`get`, ending as an iterator does: ``StopAsyncIteration``
+        once closed and drained, or :attr:`error`."""
+        try:
+            return await self.get()
+        except anyio.EndOfStream:
+            if self.error is not None:
+                raise self.error from None
+            raise StopAsyncIteration from None
 
     @property
     def closed(self) -> bool:
@@ -282,30 +335,18 @@ class Subscription:
         local subscription still wants it); manual changes apply within the
         client's next reliability tick (200 ms)."""
         self._logger = logger
-        self._state: SubscriptionState = "pending"
-        self._state_changed = anyio.Event()
         self._since_yield = 0
-        self._error: Exception | None = None
 
     @property
     def state(self) -> SubscriptionState:
         """``"pending"`` until the server carries the topic to this client
         (it may not be advertised yet), then ``"active"``."""
-        return self._state
-
-    def _set_state(self, state: SubscriptionState) -> None:
-        if state != self._state:
-            self._state = state
-            self._state_changed.set()
-            self._state_changed = anyio.Event()
+        return self._queue.state
 
     async def wait_active(self) -> None:
         """Return once the subscription is active. Raises ``NotConnected``
         (or the connection's error) if it closes first."""
-        while self._state != "active":
-            if self._queue.closed:
-                raise self._error or NotConnected(f"the subscription to {self.topic} is closed")
-            await self._state_changed.wait()
+        await self._queue.wait_active(self.topic)
 
     @property
     def stats(self) -> SubscriptionStats:
@@ -347,7 +388,7 @@ class Subscription:
             raise TypeError(f"max_size must be an int, not {type(max_size).__name__}")
         if max_size < 1:
             raise ValueError(f"max_size must be at least 1, got {max_size}")
-        return Batches(self, max_size)
+        return Batches(self._next_batch, max_size)
 
     async def _next_batch(self, max_size: int) -> list[Message]:
         queue = self._queue
@@ -396,28 +437,11 @@ class Subscription:
             self._since_yield = _YIELD_EVERY  # yield before the next big decode
         return message
 
-    async def _next_frame(self) -> RawFrame:
-        """The next frame, not decoded (the recorder writes CDR payloads as
-        they came). It passed the same filters (throttle, breaker, buffer)
-        and counts as delivered; raises like ``__anext__``."""
-        frame = self._queue.take()
-        if frame is None:
-            frame = await self._wait()
-        else:
-            await anyio.lowlevel.checkpoint()
-        self._queue.delivered += 1
-        return frame
-
     async def _wait(self) -> RawFrame:
         """The next frame once one arrives; ``StopAsyncIteration`` once the
         subscription is closed and drained (the connection's error instead,
         when it was lost)."""
-        try:
-            return await self._queue.get()
-        except anyio.EndOfStream:
-            if self._error is not None:
-                raise self._error from None
-            raise StopAsyncIteration from None
+        return await self._queue.wait_frame()
 
     def _decode(self, frame: RawFrame) -> Message:
         queue = self._queue
@@ -454,31 +478,25 @@ class Subscription:
             error,
         )
 
-    def _fail(self, error: Exception) -> None:
-        """The connection is gone: iteration raises ``error`` once the queued
-        frames are consumed."""
-        self._error = error
-        self.close()
-
     def close(self) -> None:
         """Stop receiving; iteration ends after the queued frames."""
-        if not self._queue.closed:
-            self._queue.close()
-            self._state_changed.set()
+        self._queue.close()
 
 
 class Batches:
     """The async iterator :meth:`Subscription.batches` returns: each step is a
     non-empty ``list`` of :class:`Message`."""
 
-    __slots__ = ("_max_size", "_sub")
+    __slots__ = ("_max_size", "_next")
 
-    def __init__(self, sub: Subscription, max_size: int) -> None:
-        self._sub = sub
+    def __init__(
+        self, next_batch: Callable[[int], Awaitable[list[Message]]], max_size: int
+    ) -> None:
+        self._next = next_batch
         self._max_size = max_size
 
     def __aiter__(self) -> Batches:
         return self
 
     async def __anext__(self) -> list[Message]:
-        return await self._sub._next_batch(self._max_size)
+        return await self._next(self._max_size)

@@ -3,7 +3,7 @@
 No sessions, no threads, no event loop: this module turns ROS names, types and
 QoS into the Zenoh key expressions, liveliness tokens and attachments that
 ``rmw_zenoh_cpp`` uses, and parses what a peer sends back. The backend
-(``backends/_zenoh.py``) owns the Zenoh session and feeds these functions.
+(``adapters/_zenoh.py``) owns the Zenoh session and feeds these functions.
 
 The conventions, as ``rmw_zenoh_cpp`` (Jazzy) writes them:
 

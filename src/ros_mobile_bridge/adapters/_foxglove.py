@@ -30,18 +30,24 @@ from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket
 from ..wire import foxglove as fx
-from ._base import (
+from ._seam import (
+    EventSink,
+    GoalEvents,
+    GraphChanged,
+    ParameterValues,
+    SubscribeHints,
+    TopicState,
+)
+from ._shared import (
     Advertisement,
     Advertisements,
-    BackendEvents,
-    GoalEvents,
-    ServiceHandler,
-    SubscribeHints,
+    CannotServe,
+    EventSource,
     open_websocket,
     socket_frame,
 )
 
-__all__ = ["FoxgloveBackend", "open_foxglove", "start_foxglove"]
+__all__ = ["FoxgloveAdapter", "open_foxglove", "start_foxglove"]
 
 _EMPTY_CDR: Final = b"\x00\x01\x00\x00"
 """A CDR encapsulation header (little endian) with no body: an empty request."""
@@ -55,7 +61,7 @@ class _ClientChannel(Advertisement):
     encode: Any
 
 
-async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
+async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveAdapter:
     """Connect to a Foxglove WebSocket server at ``url`` and wait for its
     ``serverInfo``, all within ``options.connect_timeout``.
 
@@ -66,7 +72,7 @@ async def open_foxglove(url: str, options: ClientOptions) -> FoxgloveBackend:
     return await start_foxglove(ws, options, deadline)
 
 
-async def start_foxglove(ws: WebSocket, options: ClientOptions, deadline: float) -> FoxgloveBackend:
+async def start_foxglove(ws: WebSocket, options: ClientOptions, deadline: float) -> FoxgloveAdapter:
     """Speak Foxglove on an open WebSocket (opened offering
     :data:`~ros_mobile_bridge.wire.foxglove.SUBPROTOCOLS`): wait for
     ``serverInfo`` and the first advertisements until ``deadline``. Closes
@@ -113,18 +119,19 @@ async def start_foxglove(ws: WebSocket, options: ClientOptions, deadline: float)
     except BaseException:
         await ws.aclose()
         raise
-    return FoxgloveBackend(ws, engine, options, early)
+    return FoxgloveAdapter(ws, engine, options, early)
 
 
 def _greeted(engine: fx.FoxgloveEngine) -> bool:
     return engine.server_info is not None
 
 
-class FoxgloveBackend:
-    """One Foxglove WebSocket connection (see :class:`~.Backend`)."""
+class FoxgloveAdapter(EventSource, CannotServe):
+    """One Foxglove WebSocket connection (see :class:`~.Adapter`)."""
 
     protocol = "foxglove-ws"
     wire_timeout_slack = 0.0  # the protocol carries no timeout
+    serve_refusal = "the Foxglove protocol lets a client call services, not offer them"
 
     def __init__(
         self,
@@ -155,7 +162,7 @@ class FoxgloveBackend:
         self._params: PendingRequests[dict[str, Any]] = PendingRequests()
         self._call_ids = itertools.count(1)
         self._param_ids = itertools.count(1)
-        self._events: BackendEvents | None = None
+        self._init_events()
         self._early = early_events
         info = engine.server_info
         assert info is not None
@@ -189,6 +196,9 @@ class FoxgloveBackend:
 
     def topic_active(self, topic: str) -> bool:
         return topic in self._active
+
+    def _graph(self) -> GraphChanged:
+        return GraphChanged(self.topics, self.services)
 
     def _index_channels(self, added: Sequence[fx.Channel], removed: Sequence[fx.Channel]) -> None:
         """Follow an advertisement in the topic index and the sorted topic
@@ -237,46 +247,46 @@ class FoxgloveBackend:
         return None
 
     # -- the reader ---------------------------------------------------------
-    async def run(self, events: BackendEvents) -> None:
-        self._events = events
+    async def run(self, sink: EventSink) -> None:
+        self._attach(sink)
         early, self._early = self._early, []
         for event in early:
             await self._handle(event)
+        await self._deliver()
         ws = self._ws
         engine = self._engine
         while True:
             text, message = await ws.receive_raw()
-            await events.before_inbound()
             if text:  # UTF-8 bytes: the engine reports invalid ones
                 for event in engine.receive_text(message):
                     await self._handle(event)
+                await self._deliver()
                 continue
             received_ns = time.time_ns()
+            pending = self._pending
             for event in engine.receive_binary(message):
                 if type(event) is fx.MessageData:
-                    self._on_message_data(event, received_ns, events)
+                    pending.append(self._frame(event, received_ns))
                 else:
                     await self._handle(event)
+                    pending = self._pending
+            await self._deliver()
 
-    def _on_message_data(
-        self, event: fx.MessageData, received_ns: int, events: BackendEvents
-    ) -> None:
+    def _frame(self, event: fx.MessageData, received_ns: int) -> RawFrame:
         channel = event.channel
         entry = self._decoders.get(channel.id)
         if entry is not None and entry[0] is channel:
             decode = entry[1]
         else:  # not built ahead (a channel re-advertised meanwhile): build it here
             decode = self._store_decoder(channel, self._build_decoder(channel))
-        events.on_frame(
-            RawFrame(
-                channel.topic,
-                channel.schema_name,
-                channel.encoding,
-                event.payload,
-                event.log_time_ns,
-                received_ns,
-                decode,
-            )
+        return RawFrame(
+            channel.topic,
+            channel.schema_name,
+            channel.encoding,
+            event.payload,
+            event.log_time_ns,
+            received_ns,
+            decode,
         )
 
     def _build_decoder(self, channel: fx.Channel) -> Decoder | SchemaError:
@@ -293,8 +303,8 @@ class FoxgloveBackend:
         decode: Decoder | None = None
         if isinstance(built, SchemaError):
             what = f"channel {channel.id} ({channel.topic}, {channel.schema_name})"
-            if isinstance(built, SchemaTooLarge) and self._events is not None:
-                self._events.on_rejected("schema_too_large", f"{what}: {built}")
+            if isinstance(built, SchemaTooLarge):
+                self._reject("schema_too_large", f"{what}: {built}")
             else:
                 self._log.warning(
                     "%s: no decoder, messages will be delivered raw: %s",
@@ -333,8 +343,8 @@ class FoxgloveBackend:
             done.set()
 
     async def _handle(self, event: fx.Event) -> None:
-        events = self._events
-        assert events is not None
+        """Follow one engine event; what the layer above must hear goes to
+        :meth:`_emit`."""
         if isinstance(event, fx.Advertise):
             for ch in event.channels:
                 entry = self._decoders.get(ch.id)
@@ -344,21 +354,21 @@ class FoxgloveBackend:
             for ch in event.channels:
                 if ch.topic in self._wanted and ch.topic not in self._active:
                     await self._subscribe_channel(ch)
-            events.on_graph()
+            self._emit(self._graph())
         elif isinstance(event, fx.Unadvertise):
             self._index_channels((), event.channels)
             for ch in event.channels:
                 sub_id = self._active.get(ch.topic)
                 if sub_id is not None and self._engine.subscription_channel(sub_id) == ch:
                     del self._active[ch.topic]
-                    events.on_topic_state(ch.topic, False)
+                    self._emit(TopicState(ch.topic, False))
                     # another channel may still carry the topic
                     other = self._channel_for(ch.topic)
                     if other is not None and ch.topic in self._wanted:
                         await self._subscribe_channel(other)
-            events.on_graph()
+            self._emit(self._graph())
         elif isinstance(event, fx.AdvertiseServices | fx.UnadvertiseServices):
-            events.on_graph()
+            self._emit(self._graph())
         elif isinstance(event, fx.ServiceCallResponse):
             self._calls.resolve(event.call_id, event)
         elif isinstance(event, fx.ServiceCallFailure):
@@ -373,7 +383,7 @@ class FoxgloveBackend:
         elif isinstance(event, fx.ParameterValues):
             values = {p.name: p.value for p in event.parameters}
             if event.id is None or not self._params.resolve(event.id, values):
-                events.on_parameters(values)
+                self._emit(ParameterValues(values))
         elif isinstance(event, fx.Status):
             level = {0: logging.INFO, 1: logging.WARNING}.get(event.level, logging.ERROR)
             self._log.log(level, "server status: %s", truncate_for_log(event.message))
@@ -382,11 +392,11 @@ class FoxgloveBackend:
             # already reported the old channels and services as unadvertised.
             self.server_info = self._server_info(event)
             self._decoders.clear()
-            events.on_graph()
+            self._emit(self._graph())
         elif isinstance(event, fx.ProtocolViolation):
-            events.on_rejected(event.kind, event.reason)
+            self._reject(event.kind, event.reason)
         elif isinstance(event, fx.MessageData):
-            self._on_message_data(event, time.time_ns(), events)
+            self._pending.append(self._frame(event, time.time_ns()))
 
     async def _subscribe_channel(self, channel: fx.Channel) -> None:
         await self._prepare_decoder(channel)
@@ -397,8 +407,7 @@ class FoxgloveBackend:
         sub_id, message = self._engine.subscribe(channel.id)
         self._active[channel.topic] = sub_id
         await self._ws.send(message)
-        if self._events is not None:
-            self._events.on_topic_state(channel.topic, True)
+        self._emit(TopicState(channel.topic, True))
 
     # -- subscriptions ------------------------------------------------------
     async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
@@ -408,6 +417,7 @@ class FoxgloveBackend:
         channel = self._channel_for(topic)
         if channel is not None:
             await self._subscribe_channel(channel)
+            self._post()
 
     async def unsubscribe(self, topic: str) -> None:
         self._wanted.pop(topic, None)
@@ -536,18 +546,6 @@ class FoxgloveBackend:
             return decode(response.payload)
         except DecodeError as exc:
             raise ServiceError(name, f"the response does not decode: {exc}") from exc
-
-    # -- serving -------------------------------------------------------------
-    async def advertise_service(
-        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
-    ) -> None:
-        raise NotSupportedError("the Foxglove protocol lets a client call services, not offer them")
-
-    async def unadvertise_service(self, name: str) -> None:
-        return None
-
-    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
-        raise NotSupportedError("the Foxglove protocol lets a client call services, not offer them")
 
     # -- actions --------------------------------------------------------------
     async def send_action_goal(

@@ -66,16 +66,10 @@ from ..transport._zenoh import (
     ZenohSession,
 )
 from ..wire import rmw_zenoh as rz
-from ._base import (
-    Advertisement,
-    Advertisements,
-    BackendEvents,
-    GoalEvents,
-    ServiceHandler,
-    SubscribeHints,
-)
+from ._seam import EventSink, GoalEvents, GraphChanged, SubscribeHints, TopicState
+from ._shared import Advertisement, Advertisements, CannotServe, EventSource
 
-__all__ = ["ZenohBackend", "open_zenoh"]
+__all__ = ["ZenohAdapter", "open_zenoh"]
 
 _GRAPH_TAG: Final = 0
 _ATTACHMENT_SIZE: Final = rz.ATTACHMENT_SIZE
@@ -133,7 +127,7 @@ class _Goal:
     feedback_decode: Decoder | None
 
 
-async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohBackend:
+async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     """Open a zenoh client session to the router at ``endpoint`` and read
     the domain's graph, within ``options.connect_timeout``. ``ConnectError``
     when the router is refused or unreachable."""
@@ -146,7 +140,7 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohBackend:
         max_bytes=options.zenoh_backlog_bytes,
     )
     try:
-        backend = ZenohBackend(session, options, endpoint)
+        backend = ZenohAdapter(session, options, endpoint)
         await backend._bootstrap(deadline)
     except BaseException:
         await session.aclose()
@@ -154,11 +148,12 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohBackend:
     return backend
 
 
-class ZenohBackend:
-    """One zenoh session to one router (see :class:`~.Backend`)."""
+class ZenohAdapter(EventSource, CannotServe):
+    """One zenoh session to one router (see :class:`~.Adapter`)."""
 
     protocol = "zenoh"
     wire_timeout_slack = 0.0  # the client's deadline is the query's timeout
+    serve_refusal = "serving a service over Zenoh is not implemented (rosbridge can)"
 
     def __init__(self, session: ZenohSession, options: ClientOptions, endpoint: str) -> None:
         self._session = session
@@ -178,7 +173,7 @@ class ZenohBackend:
             metadata={"domain_id": str(self.domain), "zid": session.zid},
             session_id=session.zid,
         )
-        self._events: BackendEvents | None = None
+        self._init_events()
         self._ids = itertools.count(0)  # node and entity ids, as rmw_zenoh counts them
         self._tags = itertools.count(1)  # inbox tags (0 is the graph)
         self._node_id = next(self._ids)
@@ -288,12 +283,6 @@ class ZenohBackend:
         self._graph[key] = token
         return True
 
-    def _reject(self, reason: str, detail: str) -> None:
-        if self._events is not None:
-            self._events.on_rejected(reason, detail)
-        else:
-            self._log.warning("skipped input (%s): %s", reason, truncate_for_log(detail))
-
     def _rebuild_graph(self) -> None:
         topics: dict[str, str] = {}
         publishers: dict[str, int] = {}
@@ -312,12 +301,10 @@ class ZenohBackend:
         self._service_infos = [ServiceInfo(n, t) for n, t in sorted(services.items())]
         before = self._publishers_of
         self._publishers_of = publishers
-        events = self._events
-        if events is not None:
-            for topic in self._wanted:
-                was, now = topic in before, topic in publishers
-                if was != now:
-                    events.on_topic_state(topic, now)
+        for topic in self._wanted:
+            was, now = topic in before, topic in publishers
+            if was != now:
+                self._emit(TopicState(topic, now))
         for topic, sub in self._subs.items():
             if sub.token is None and topic in topics:
                 self._declare_subscription_token(sub, topics[topic])
@@ -346,15 +333,14 @@ class ZenohBackend:
         return None
 
     # -- the reader -----------------------------------------------------------------------
-    async def run(self, events: BackendEvents) -> None:
-        self._events = events
+    async def run(self, sink: EventSink) -> None:
+        self._attach(sink)
         inbox = self._session.inbox
         by_tag = self._by_tag
         while True:
             if self._lost is not None:
                 raise ConnectError(f"zenoh: {self._lost}")
             batch = await inbox.get_batch()
-            await events.before_inbound()
             graph_changed = False
             for item in batch:
                 kind = item[0]
@@ -363,10 +349,9 @@ class ZenohBackend:
                     if sub is None:
                         pass
                     elif sub.feedback_of is not None:
-                        self._on_feedback(sub, item[3], item[4], events)
+                        self._on_feedback(sub, item[3], item[4])
                     else:
-                        self._on_sample(sub, item[2], item[3], item[4], events)
-                        await events.before_inbound()
+                        self._on_sample(sub, item[2], item[3], item[4])
                 elif kind == LIVELINESS:
                     graph_changed |= self._on_token(item[2], item[3])
                 elif kind == REPLY:
@@ -386,26 +371,26 @@ class ZenohBackend:
                 for tag, count in by.items():
                     sub = by_tag.get(tag)
                     what = sub.topic if sub is not None else f"tag {tag}"
-                    events.on_rejected(
+                    self._reject(
                         "backlog_overflow",
                         f"{what}: the reader fell behind by more than the zenoh backlog",
                         count,
                     )
             if graph_changed:
                 self._rebuild_graph()
-                events.on_graph()
+                self._emit(GraphChanged(self.topics, self.services))
+            await self._deliver()
 
     def _on_feedback(
         self,
         sub: _Subscription,
         payload: bytes,
         attachment: bytes | None,
-        events: BackendEvents,
     ) -> None:
         """One ``_action/feedback`` sample: to the goal its uuid names (the
         topic carries every client's goals; others' are ignored)."""
         if not _valid_attachment(attachment):
-            events.on_rejected("attachment", f"{sub.topic}: a sample without a valid attachment")
+            self._reject("attachment", f"{sub.topic}: a sample without a valid attachment")
             return
         goals = [g for g in self._goals.values() if g.action == sub.feedback_of]
         if not goals:
@@ -416,7 +401,7 @@ class ZenohBackend:
         try:
             message = decode(memoryview(payload))
         except DecodeError as exc:
-            events.on_rejected("decode", f"{sub.topic}: {exc}")
+            self._reject("decode", f"{sub.topic}: {exc}")
             return
         raw = _field(_field(message, "goal_id"), "uuid")
         try:
@@ -433,10 +418,9 @@ class ZenohBackend:
         key: str,
         payload: bytes,
         attachment: bytes | None,
-        events: BackendEvents,
     ) -> None:
         if attachment is None or not _valid_attachment(attachment):
-            events.on_rejected(
+            self._reject(
                 "attachment",
                 f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
                 f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
@@ -444,7 +428,7 @@ class ZenohBackend:
             return
         entry = sub.keys.get(key)
         if entry is None:
-            built = self._key_entry(sub.topic, key, events)
+            built = self._key_entry(sub.topic, key)
             if built is None:
                 return
             entry = built
@@ -452,7 +436,7 @@ class ZenohBackend:
                 sub.keys[key] = entry
         schema, decode = entry
         stamp = int.from_bytes(attachment[8:16], "little", signed=True)
-        events.on_frame(
+        self._pending.append(
             RawFrame(
                 sub.topic,
                 schema,
@@ -464,18 +448,16 @@ class ZenohBackend:
             )
         )
 
-    def _key_entry(
-        self, topic: str, key: str, events: BackendEvents
-    ) -> tuple[str, Decoder | None] | None:
+    def _key_entry(self, topic: str, key: str) -> tuple[str, Decoder | None] | None:
         """The type and decoder for samples on ``key``; None (counted) for a
         key that is not a well-formed rmw_zenoh data key of ``topic``."""
         try:
             parsed = rz.parse_key(key)
         except rz.MalformedKey as exc:
-            events.on_rejected("malformed", f"{topic}: data key {key!r}: {exc}")
+            self._reject("malformed", f"{topic}: data key {key!r}: {exc}")
             return None
         if parsed.name != topic or parsed.domain != self.domain:
-            events.on_rejected("malformed", f"{topic}: data key {key!r} names another topic")
+            self._reject("malformed", f"{topic}: data key {key!r} names another topic")
             return None
         return parsed.type_name, self._decoder_for(parsed)
 
@@ -530,8 +512,9 @@ class ZenohBackend:
         self._by_tag[tag] = sub
         if type_name is not None:
             self._declare_subscription_token(sub, type_name)
-        if self._events is not None and topic in self._publishers_of:
-            self._events.on_topic_state(topic, True)
+        if topic in self._publishers_of:
+            self._emit(TopicState(topic, True))
+        self._post()
 
     async def _prepare_decoder(self, topic: str, type_name: str) -> None:
         """Build the type's decoder (and hash) in a worker thread ahead of
@@ -704,18 +687,6 @@ class ZenohBackend:
         if srv_type is None:
             raise ServiceError(name, "no server offers this service on this domain")
         return await self._request(name, srv_type, request, timeout)
-
-    # -- serving -------------------------------------------------------------
-    async def advertise_service(
-        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
-    ) -> None:
-        raise NotSupportedError("serving a service over Zenoh is not implemented (rosbridge can)")
-
-    async def unadvertise_service(self, name: str) -> None:
-        return None
-
-    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
-        raise NotSupportedError("serving a service over Zenoh is not implemented (rosbridge can)")
 
     # -- actions ----------------------------------------------------------------------------
     async def send_action_goal(

@@ -38,18 +38,10 @@ from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
-from ._base import (
-    Advertisement,
-    Advertisements,
-    BackendEvents,
-    GoalEvents,
-    ServiceHandler,
-    SubscribeHints,
-    open_websocket,
-    socket_frame,
-)
+from ._seam import EventSink, GoalEvents, GraphChanged, ServiceHandler, SubscribeHints, TopicState
+from ._shared import Advertisement, Advertisements, EventSource, open_websocket, socket_frame
 
-__all__ = ["RosbridgeBackend", "open_rosbridge", "start_rosbridge"]
+__all__ = ["RosbridgeAdapter", "open_rosbridge", "start_rosbridge"]
 
 _INTERNAL_TIMEOUT: Final = 5.0
 """Seconds for the backend's own rosapi requests (discovery, parameters)."""
@@ -106,7 +98,7 @@ def _is_foxglove_rejection(exc: HandshakeRejected) -> bool:
     return exc.status == 400 and "sec-websocket-protocol" in exc.body.lower()
 
 
-async def open_rosbridge(url: str, options: ClientOptions) -> RosbridgeBackend:
+async def open_rosbridge(url: str, options: ClientOptions) -> RosbridgeAdapter:
     """Connect to a rosbridge v2 server at ``url`` and learn its graph, all
     within ``options.connect_timeout``.
 
@@ -127,7 +119,7 @@ async def open_rosbridge(url: str, options: ClientOptions) -> RosbridgeBackend:
 
 async def start_rosbridge(
     ws: WebSocket, options: ClientOptions, deadline: float
-) -> RosbridgeBackend:
+) -> RosbridgeAdapter:
     """Speak rosbridge on an open WebSocket: send ``options``' ``auth``
     first when set, then discover the graph until ``deadline``. Closes
     ``ws`` on failure. A failing ``auth`` callable raises ``ConnectError``;
@@ -152,7 +144,7 @@ async def start_rosbridge(
                     end=auth.end,
                 )
             )
-        backend = RosbridgeBackend(ws, options)
+        backend = RosbridgeAdapter(ws, options)
         try:
             await backend._bootstrap(deadline)
         except ProtocolMismatchError as exc:
@@ -204,8 +196,8 @@ class _Served:
 _FAILED_ANSWERS_KEPT: Final = 256
 
 
-class RosbridgeBackend:
-    """One rosbridge v2 connection (see :class:`~.Backend`)."""
+class RosbridgeAdapter(EventSource):
+    """One rosbridge v2 connection (see :class:`~.Adapter`)."""
 
     protocol = "rosbridge"
     wire_timeout_slack = _WIRE_SLACK
@@ -236,13 +228,12 @@ class RosbridgeBackend:
         self._calls: PendingRequests[rb.ServiceResponse] = PendingRequests()
         self._call_names: dict[str, str] = {}
         self._goals: dict[str, tuple[str, GoalEvents]] = {}
-        self._events: BackendEvents | None = None
+        self._init_events()
         self._rosapi_warned = False
         self._discovery_ok = False
         self._no_definition: set[str] = set()
         self._foreign: str | None = None  # why the server looks like Foxglove
         self._over_limit: set[str] = set()  # graph limits exceeded at the last poll
-        self._deferred: list[tuple[str, str]] = []  # rejections before run()
         self._served: dict[str, _Served] = {}
         self._failed_answers: dict[str, str] = {}  # request id -> service, answered false
 
@@ -295,7 +286,7 @@ class RosbridgeBackend:
 
         async def read() -> None:
             try:
-                await self._read(None)
+                await self._read(reading=False)
             except ConnectError as exc:
                 lost.append(exc)
                 self._calls.fail_all(exc)
@@ -323,39 +314,39 @@ class RosbridgeBackend:
             )
 
     # -- the reader --------------------------------------------------------------
-    async def run(self, events: BackendEvents) -> None:
-        self._events = events
-        deferred, self._deferred = self._deferred, []
-        for reason, detail in deferred:
-            events.on_rejected(reason, detail)
+    async def run(self, sink: EventSink) -> None:
+        self._attach(sink)
+        await self._deliver()  # what the first discovery found
         error: ConnectError | None = None
         async with anyio.create_task_group() as tg:
             tg.start_soon(self._poll_discovery)
             try:
-                await self._read(events)
+                await self._read(reading=True)
             except ConnectError as exc:
                 error = exc
             tg.cancel_scope.cancel()
         if error is not None:
             raise error
 
-    async def _read(self, events: BackendEvents | None) -> None:
+    async def _read(self, *, reading: bool) -> None:
+        """The read loop; ``reading`` False for the bootstrap's temporary
+        reader, which answers requests only (no subscription exists yet)."""
         ws = self._ws
         engine = self._engine
         while True:
             text, data = await ws.receive_raw()
-            if events is not None:
-                await events.before_inbound()
             received_ns = time.time_ns()
             batch = engine.receive_text(data) if text else engine.receive_binary(data)
             for event in batch:
                 if type(event) is rb.Publish:
-                    if events is not None:
-                        self._on_publish(event, received_ns, events)
+                    if reading:
+                        self._on_publish(event, received_ns)
                 else:
                     await self._handle(event)
+            if reading:
+                await self._deliver()
 
-    def _on_publish(self, event: rb.Publish, received_ns: int, events: BackendEvents) -> None:
+    def _on_publish(self, event: rb.Publish, received_ns: int) -> None:
         topic = event.topic
         wire = self._subs.get(topic)
         if wire is None:
@@ -380,7 +371,7 @@ class RosbridgeBackend:
                 decode = self._make_decoder(topic, kind, schema or None)
         if topic not in self._live:
             self._set_live(topic, True)
-        events.on_frame(
+        self._pending.append(
             RawFrame(
                 topic,
                 schema,
@@ -410,8 +401,8 @@ class RosbridgeBackend:
                     topic,
                     truncate_for_log(str(exc)),
                 )
-                if isinstance(exc, SchemaTooLarge) and self._events is not None:
-                    self._events.on_rejected("schema_too_large", f"{topic}: {exc}")
+                if isinstance(exc, SchemaTooLarge):
+                    self._reject("schema_too_large", f"{topic}: {exc}")
         self._decoders[(topic, kind)] = decode
         return decode
 
@@ -517,8 +508,7 @@ class RosbridgeBackend:
             self._live.add(topic)
         else:
             self._live.discard(topic)
-        if self._events is not None:
-            self._events.on_topic_state(topic, live)
+        self._emit(TopicState(topic, live))
 
     async def _discover(self, *, first: bool = False) -> bool:
         """Poll the graph once; True when it changed. A failing rosapi is
@@ -570,14 +560,6 @@ class RosbridgeBackend:
             self._reject(reason, detail)
         return names[:limit]
 
-    def _reject(self, reason: str, detail: str) -> None:
-        """Report a rejection to the client; during the first discovery
-        (before the client's reader runs) keep it until :meth:`run`."""
-        if self._events is not None:
-            self._events.on_rejected(reason, detail)
-        elif len(self._deferred) < _STRAY_LOGGED:
-            self._deferred.append((reason, detail))
-
     async def _lookup_service_types(self) -> bool:
         unknown = [n for n, t in self._services.items() if not t][:_TYPE_LOOKUPS_PER_POLL]
         changed = False
@@ -595,8 +577,6 @@ class RosbridgeBackend:
     async def _poll_discovery(self) -> None:
         """Keep the graph current: right away (after a (re)connect), then every
         ``options.discovery_interval``."""
-        events = self._events
-        assert events is not None
         interval = self._options.discovery_interval
         first = True
         try:
@@ -605,9 +585,10 @@ class RosbridgeBackend:
                 first = False
                 changed |= await self._lookup_service_types()
                 if changed:
-                    events.on_graph()
+                    self._emit(GraphChanged(self.topics, self.services))
                 for topic in list(self._wanted):
                     await self._sync(topic)
+                self._post()
                 await anyio.sleep(interval)
         except (ConnectError, NotConnected):
             return  # the reader reports the loss
@@ -727,6 +708,7 @@ class RosbridgeBackend:
             raise ValueError(f"compression must be one of {COMPRESSIONS} or None")
         self._wanted[topic] = hints
         await self._sync(topic)
+        self._post()
 
     async def unsubscribe(self, topic: str) -> None:
         self._wanted.pop(topic, None)

@@ -1,0 +1,42 @@
+"""The argument checks every public call shares: the same mistake gets the
+same exception and the same words, wherever it is made."""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["check_name", "check_schema", "check_timeout"]
+
+
+def check_name(kind: str, name: object) -> str:
+    """``name`` when it is an absolute ROS name (``/cmd_vel``); else
+    ``TypeError`` / ``ValueError`` naming ``kind``."""
+    if not isinstance(name, str):
+        raise TypeError(f"{kind} must be a str, not {type(name).__name__}")
+    if not name.startswith("/") or any(c.isspace() for c in name) or len(name) < 2:
+        raise ValueError(f"{kind} must be an absolute ROS name like '/cmd_vel', got {name!r}")
+    return name
+
+
+def check_schema(schema: object) -> str:
+    """``schema`` when it reads as a ROS type (``pkg/msg/Name`` or
+    ``pkg/Name``); else ``TypeError`` / ``ValueError``."""
+    if not isinstance(schema, str):
+        raise TypeError(f"schema must be a str, not {type(schema).__name__}")
+    if schema.count("/") not in (1, 2) or any(c.isspace() for c in schema):
+        raise ValueError(
+            f"schema must be a ROS type like 'geometry_msgs/msg/Twist', got {schema!r}"
+        )
+    return schema
+
+
+def check_timeout(timeout: object) -> float | None:
+    """``timeout`` as seconds (None stays None) when positive and finite;
+    else ``TypeError`` / ``ValueError``."""
+    if timeout is None:
+        return None
+    if isinstance(timeout, bool) or not isinstance(timeout, int | float):
+        raise TypeError("timeout must be a number of seconds or None")
+    if not timeout > 0 or math.isinf(timeout):
+        raise ValueError(f"timeout must be a positive, finite number of seconds, got {timeout!r}")
+    return float(timeout)

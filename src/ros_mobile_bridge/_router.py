@@ -1,0 +1,417 @@
+"""The router: what the adapter's reader hands up goes to the subscriptions
+and the client's watchable state (topics, services, parameters, rejection
+counts), and what the subscriptions want goes down to the bridge (subscribe,
+unsubscribe, the forwarded rate, the circuit breaker's verdict). It is the
+adapter's :class:`~.adapters.EventSink`; the connection tells it which
+adapter is current."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import AsyncIterator, Callable, Mapping
+from dataclasses import dataclass
+from functools import partial
+from typing import Any, Final
+
+import anyio
+import anyio.lowlevel
+
+from ._errors import ConnectError
+from ._limits import truncate_for_log
+from ._options import ClientOptions
+from ._outbound import Outbound
+from ._types import Compression, Dispatch, ServiceInfo, Status, TopicInfo
+from .adapters import (
+    Adapter,
+    Event,
+    GraphChanged,
+    ParameterValues,
+    Rejected,
+    SubscribeHints,
+    TopicState,
+)
+from .flow import (
+    AdaptiveThrottle,
+    Bucket,
+    FrameQueue,
+    LagMonitor,
+    RawFrame,
+    Subscription,
+    ThrottleMode,
+    Watchable,
+    current_monitor,
+)
+
+__all__ = ["Route", "Router"]
+
+_READER_YIELD_EVERY: Final = 64
+"""Events handed over between two turns the reader gives the consumers."""
+
+
+@dataclass(eq=False, slots=True)
+class Route:
+    """One local subscription as the router keeps it: the user's
+    :class:`Subscription`, the queue frames go to, its adaptive throttle and
+    what the bridge is told."""
+
+    sub: Subscription
+    queue: FrameQueue
+    throttle: AdaptiveThrottle | None
+    hints: SubscribeHints
+
+
+class Router:
+    """Events in, subscriptions and watchable state out; see the module."""
+
+    def __init__(
+        self,
+        adapter: Adapter,
+        options: ClientOptions,
+        presets: Mapping[ThrottleMode, tuple[Bucket, ...]],
+        status: Watchable[Status],
+        outbound: Outbound,
+    ) -> None:
+        self.adapter = adapter
+        """The current connection (the lost one until a reconnect restores)."""
+        self._options = options
+        self._log: logging.Logger = options.logger
+        self.logger = self._log
+        """The client's logger (``options.logger``)."""
+        self._presets = presets
+        mode = options.throttle_mode
+        self._mode: Callable[[], ThrottleMode] = mode if callable(mode) else (lambda: mode)
+        self._status = status
+        self._outbound = outbound
+        self.topics: Watchable[list[TopicInfo]] = Watchable(adapter.topics)
+        self.services: Watchable[list[ServiceInfo]] = Watchable(adapter.services)
+        self.parameters: Watchable[dict[str, Any]] = Watchable({})
+        self._rejections: dict[str, int] = {}
+        self._routes: dict[str, list[Route]] = {}
+        self._offers: dict[str, list[Callable[[RawFrame], None]]] = {}  # the hot path's table
+        self._watched_parameters: dict[str, int] = {}
+        self._inbound = 0
+        self._breaker_changed = anyio.Event()  # set by the tick when a breaker changed
+        self._breaker_topics: set[str] = set()  # topics to subscribe again at the bridge
+        self._forwarded_hz: dict[str, float | None] = {}  # the rate each topic's bridge sub asks
+
+    @property
+    def _connected(self) -> bool:
+        return self._status.value == "connected"
+
+    # -- the sink (reader task) ------------------------------------------------
+    async def deliver(self, events: list[Event]) -> None:
+        """:meth:`EventSink.deliver`: before each event, queued control frames
+        are written; every 64 events the consumers get a turn, so a burst
+        read in one go does not overflow their queues before they wake."""
+        outbox = self._outbound.outbox
+        offers = self._offers
+        if outbox.has_control:
+            await self._send_control()
+        for event in events:
+            if type(event) is RawFrame:
+                targets = offers.get(event.topic)
+                if targets:
+                    for offer in targets:
+                        offer(event)
+            else:
+                self.post(event)
+            self._inbound += 1
+            if self._inbound >= _READER_YIELD_EVERY:
+                self._inbound = 0
+                await anyio.lowlevel.checkpoint()
+            if outbox.has_control:
+                await self._send_control()
+
+    async def _send_control(self) -> None:
+        with contextlib.suppress(ConnectError):  # the reader's next read reports it
+            await self._outbound.send_control()
+
+    def post(self, event: Event) -> None:
+        """:meth:`EventSink.post`: apply one event at once."""
+        if type(event) is RawFrame:
+            for offer in self._offers.get(event.topic, ()):
+                offer(event)
+        elif type(event) is GraphChanged:
+            self.topics.set(event.topics)
+            self.services.set(event.services)
+        elif type(event) is TopicState:
+            self.set_topic_state(event.topic, event.active)
+        elif type(event) is ParameterValues:
+            merged = dict(self.parameters.value)
+            merged.update(event.values)
+            self.parameters.set(merged)
+        elif type(event) is Rejected:
+            self._rejected(event)
+
+    def set_topic_state(self, topic: str, active: bool) -> None:
+        """The server now carries ``topic`` to us, or not."""
+        for route in self._routes.get(topic, ()):
+            route.queue.set_state("active" if active else "pending")
+
+    def _rejected(self, event: Rejected) -> None:
+        """Counted per reason (see :attr:`rejections`) and logged once per
+        event, truncated."""
+        reason, count = event.reason, event.count
+        self._rejections[reason] = self._rejections.get(reason, 0) + count
+        detail = truncate_for_log(event.detail)
+        if count == 1:
+            self._log.warning("skipped input from the server (%s): %s", reason, detail)
+        else:
+            self._log.warning("skipped %d inputs from the server (%s): %s", count, reason, detail)
+
+    @property
+    def rejections(self) -> dict[str, int]:
+        """How many inbound frames were skipped or refused, per reason, over
+        the client's life (a copy)."""
+        return dict(self._rejections)
+
+    def graph_now(self) -> None:
+        """Take the current adapter's topic and service lists."""
+        self.topics.set(self.adapter.topics)
+        self.services.set(self.adapter.services)
+
+    # -- subscriptions ---------------------------------------------------------
+    def route(
+        self,
+        topic: str,
+        *,
+        max_hz: float | None,
+        adaptive: bool,
+        dispatch: Dispatch,
+        schema: str | None,
+        buffer: int | None,
+        compression: Compression | None,
+    ) -> Route:
+        """Build one subscription's pipeline (throttle, queue, breaker); not
+        routed until :meth:`add`. The queue checks its own arguments."""
+        throttle = (
+            AdaptiveThrottle(
+                self._presets, self._mode, current_monitor(), logger=self._log, name=topic
+            )
+            if adaptive
+            else None
+        )
+        queue = FrameQueue(
+            max_hz=max_hz,
+            dispatch=dispatch,
+            buffer=self._options.subscription_buffer if buffer is None else buffer,
+            adaptive=throttle.interval_s if throttle is not None else None,
+        )
+        policy = self._options.breaker
+        breaker = policy.build() if policy is not None else None
+        sub = Subscription(topic, queue, logger=self._log, throttle=throttle, breaker=breaker)
+        hints = SubscribeHints(max_hz=max_hz, schema=schema, compression=compression)
+        return Route(sub, queue, throttle, hints)
+
+    def _rate_for(self, route: Route) -> float | None:
+        """The rate the bridge need not exceed for ``route`` (None: all): its
+        ``max_hz``, tightened by its adaptive throttle's current interval.
+        rosbridge gets it as ``throttle_rate``; the other bridges have no
+        such option."""
+        hz = route.hints.max_hz
+        throttle = route.throttle
+        if throttle is not None and (interval := throttle.interval) > 0.0:
+            adaptive = 1.0 / interval
+            hz = adaptive if hz is None else min(hz, adaptive)
+        return hz
+
+    def _merged_hints(self, topic: str) -> SubscribeHints:
+        routes = [r for r in self._routes.get(topic, ()) if not r.queue.blocked]
+        caps = [self._rate_for(r) for r in routes]
+        loosest = None if not caps or None in caps else max(c for c in caps if c is not None)
+        schema = next((r.hints.schema for r in routes if r.hints.schema), None)
+        compression = next((r.hints.compression for r in routes if r.hints.compression), None)
+        return SubscribeHints(max_hz=loosest, schema=schema, compression=compression)
+
+    async def _subscribe_at_bridge(self, topic: str) -> None:
+        """Subscribe (again) at the bridge with the merged hints of the local
+        subscriptions, and remember the rate forwarded."""
+        hints = self._merged_hints(topic)
+        self._forwarded_hz[topic] = hints.max_hz
+        await self.adapter.subscribe(topic, hints)
+
+    def _link(self, route: Route) -> None:
+        topic = route.sub.topic
+        self._routes.setdefault(topic, []).append(route)
+        self._offers.setdefault(topic, []).append(route.queue.offer)
+
+    def _unlink(self, route: Route) -> list[Route] | None:
+        """Stop routing to ``route``; the topic's routes left (None when it
+        was not routed)."""
+        topic = route.sub.topic
+        routes = self._routes.get(topic)
+        if routes is None or route not in routes:
+            return None
+        routes.remove(route)
+        self._offers[topic] = [r.queue.offer for r in routes]
+        if not routes:
+            del self._routes[topic]
+            del self._offers[topic]
+            self._forwarded_hz.pop(topic, None)
+        return routes
+
+    async def add(self, route: Route) -> None:
+        """Route ``route`` and have the bridge send its topic. While the
+        connection is being re-established it stays pending: the reconnect
+        subscribes it. ``NotConnected`` when there is no connection."""
+        reconnecting = self._status.value == "reconnecting"
+        self._link(route)
+        if reconnecting:
+            return
+        try:
+            await self._subscribe_at_bridge(route.sub.topic)
+        except BaseException:
+            await self.remove(route)
+            raise
+        if self.adapter.topic_active(route.sub.topic):
+            route.queue.set_state("active")
+
+    async def remove(self, route: Route) -> None:
+        """Stop ``route``; the bridge stops sending once no local
+        subscription wants the topic (shielded, within the teardown
+        deadline)."""
+        route.sub.close()
+        topic = route.sub.topic
+        left = self._unlink(route)
+        if left is None or not self._connected:
+            return
+        with anyio.CancelScope(shield=True), anyio.move_on_after(self._options.teardown_timeout):
+            try:
+                if left:
+                    await self._subscribe_at_bridge(topic)
+                else:
+                    await self.adapter.unsubscribe(topic)
+            except ConnectError as exc:
+                self._log.debug("unsubscribe from %s failed: %s", topic, exc)
+
+    async def sync_topic(self, topic: str) -> None:
+        """Make the bridge carry ``topic`` exactly when a local subscription
+        whose breaker is not tripped wants it."""
+        adapter = self.adapter
+        if any(not r.queue.blocked for r in self._routes.get(topic, ())):
+            await self._subscribe_at_bridge(topic)
+            if adapter.topic_active(topic):
+                self.set_topic_state(topic, True)
+        else:
+            self._forwarded_hz.pop(topic, None)
+            await adapter.unsubscribe(topic)
+            self.set_topic_state(topic, False)
+
+    async def restore(self) -> None:
+        """On a fresh connection (:attr:`adapter`): the graph, every topic
+        wanted and the parameter watches."""
+        self.graph_now()
+        for topic in list(self._routes):
+            await self.sync_topic(topic)
+        if self._watched_parameters:
+            await self.adapter.subscribe_parameters(sorted(self._watched_parameters))
+
+    def connection_lost(self) -> None:
+        """Every subscription is pending again; breaker timers die with the
+        connection."""
+        for topic, routes in self._routes.items():
+            self.set_topic_state(topic, False)
+            for route in routes:
+                route.sub.breaker.reset()
+                route.queue.blocked = False
+
+    def fail_all(self, error: Exception) -> None:
+        """The connection is gone for good: every subscription raises
+        ``error`` once its queued frames are consumed."""
+        for routes in self._routes.values():
+            for route in routes:
+                route.queue.fail(error)
+
+    def close(self) -> None:
+        """The client is closed: subscriptions end after their queued frames,
+        the watchable state stops."""
+        for routes in self._routes.values():
+            for route in routes:
+                route.sub.close()
+        self.topics.close()
+        self.services.close()
+        self.parameters.close()
+
+    # -- parameters ------------------------------------------------------------
+    @contextlib.asynccontextmanager
+    async def watch_parameters(self, names: list[str]) -> AsyncIterator[None]:
+        """Keep ``names`` watched at the bridge (counted per name, restored
+        after a reconnect) for the block."""
+        await self.adapter.subscribe_parameters(names)
+        for name in names:
+            self._watched_parameters[name] = self._watched_parameters.get(name, 0) + 1
+        try:
+            yield
+        finally:
+            unwatched = []
+            for name in names:
+                left = self._watched_parameters.get(name, 0) - 1
+                if left > 0:
+                    self._watched_parameters[name] = left
+                else:
+                    self._watched_parameters.pop(name, None)
+                    unwatched.append(name)
+            if self._connected and unwatched:
+                with contextlib.suppress(ConnectError):
+                    await self.adapter.unsubscribe_parameters(unwatched)
+
+    # -- reliability -----------------------------------------------------------
+    async def run_reliability(self) -> None:
+        """Apply breaker and forwarded-rate changes at the bridge. The checks
+        run in :meth:`_reliability_tick`, which the event loop's shared lag
+        sampler calls every 200 ms for every client on the loop (one wake-up
+        per loop, not one per client); this task wakes only when a breaker
+        changed state and the bridge must stop or resume sending a topic."""
+        monitor = current_monitor()
+        key = monitor.add_tick(partial(self._reliability_tick, monitor))
+        try:
+            while True:
+                await self._breaker_changed.wait()
+                self._breaker_changed = anyio.Event()
+                topics, self._breaker_topics = self._breaker_topics, set()
+                for topic in sorted(topics):
+                    if topic not in self._routes or not self._connected:
+                        continue
+                    try:
+                        await self.sync_topic(topic)
+                    except ConnectError as exc:
+                        self._log.debug("bridge change on %s not applied: %s", topic, exc)
+                    except Exception:  # a bug must not take the user's program down
+                        self._log.exception("bridge change on %s failed", topic)
+        finally:
+            monitor.remove_tick(key)
+
+    def _reliability_tick(self, monitor: LagMonitor) -> None:
+        """Every 200 ms (see :meth:`run_reliability`): refresh each adaptive
+        subscription's throttle, feed its breaker the lag, and note the
+        topics whose breakers changed (tripped: the bridge stops sending;
+        half-open or closed: it sends again) or whose forwarded rate moved
+        with an adaptive throttle (rosbridge's ``throttle_rate``)."""
+        if not self._routes or not self._connected:
+            return
+        lag = monitor.recurring_lag_ms()  # the loop's monitor, not looked up per client
+        policy = self._options.breaker
+        for topic, routes in self._routes.items():
+            for route in routes:
+                breaker = route.sub.breaker
+                throttle = route.throttle
+                if throttle is not None and policy is not None:
+                    throttle.interval_s()  # refresh at_deepest
+                    breaker.observe(lag, throttle.at_deepest)
+                else:
+                    breaker.poll()
+                blocked = breaker.state in ("tripped_auto", "tripped_manual")
+                if blocked != route.queue.blocked:
+                    route.queue.blocked = blocked
+                    self._breaker_topics.add(topic)
+                    self._breaker_changed.set()
+                    self._log.warning("subscription to %s: breaker %s", topic, breaker.state)
+            if (
+                topic not in self._breaker_topics
+                and topic in self._forwarded_hz
+                and self._merged_hints(topic).max_hz != self._forwarded_hz[topic]
+            ):
+                # an adaptive throttle moved: the bridge may send less (or more)
+                self._breaker_topics.add(topic)
+                self._breaker_changed.set()

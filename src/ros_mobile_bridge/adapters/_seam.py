@@ -1,0 +1,263 @@
+"""The seam between the connection (above) and a transport adapter (below).
+
+An adapter is one live connection to one bridge: a sans-IO wire engine
+(``wire/``) driven over a transport (``transport/``). It knows no throttling,
+no outbox and no teardown policy, and holds no reference to the client: its
+reader hands typed :data:`Event` values to an :class:`EventSink`, and the
+layer above calls the :class:`Adapter` methods. A new transport is one wire
+engine plus one adapter; what every adapter shares is in ``_shared.py``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from .._errors import RosBridgeError
+from .._types import ServerInfo, ServiceInfo, TopicInfo
+from ..codec import CodecRegistry
+from ..flow import RawFrame, WireMessage
+
+__all__ = [
+    "Adapter",
+    "Event",
+    "EventSink",
+    "GoalEvents",
+    "GraphChanged",
+    "ParameterValues",
+    "Rejected",
+    "ServiceHandler",
+    "SubscribeHints",
+    "TopicState",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class SubscribeHints:
+    """What the client knows about a topic subscription that a bridge can use
+    to send less (rosbridge ``throttle_rate``), or to pick a type."""
+
+    max_hz: float | None = None
+    schema: str | None = None
+    compression: str | None = None
+    """rosbridge: ``"cbor"`` or ``"cbor-raw"`` (None: JSON). Other adapters
+    ignore it."""
+
+
+class GoalEvents(Protocol):
+    """Callbacks the adapter's reader makes for one action goal. All run in
+    the reader task and must not block."""
+
+    def on_feedback(self, values: Any) -> None:
+        """A feedback message for the goal."""
+
+    def on_result(self, status: int | None, values: Any, succeeded: bool) -> None:
+        """The goal ended: ``status`` is the ``GoalStatus`` code if known."""
+
+    def on_failed(self, reason: str) -> None:
+        """The goal is lost (refused by the server, or the connection went)."""
+
+
+class ServiceHandler(Protocol):
+    """Where an adapter hands the calls to a service this client serves."""
+
+    async def on_service_request(self, adapter: Adapter, request_id: str, args: Any) -> None:
+        """A call arrived on ``adapter`` (runs in the reader task: it may send
+        an answer, and must not wait for anything else)."""
+
+    def on_service_failed(self, error: RosBridgeError) -> None:
+        """The bridge refused the service after :meth:`Adapter.advertise_service`
+        returned (a late refusal, or one to an unconfirmed advertisement):
+        ``error`` is a ``SchemaError`` or ``ServiceError``. Runs in the reader
+        task; must not block."""
+
+
+@dataclass(frozen=True, slots=True)
+class GraphChanged:
+    """The topic or service list changed: both, as they are now (sorted)."""
+
+    topics: list[TopicInfo]
+    services: list[ServiceInfo]
+
+
+@dataclass(frozen=True, slots=True)
+class TopicState:
+    """The server now carries ``topic`` to this client (``active``), or no
+    longer does."""
+
+    topic: str
+    active: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ParameterValues:
+    """Unsolicited parameter values (a parameter subscription's update)."""
+
+    values: Mapping[str, Any]
+
+
+@dataclass(frozen=True, slots=True)
+class Rejected:
+    """``count`` inbound frames (or parts of one) were skipped or refused for
+    one reason. ``reason`` is a key of ``Client.rejections``
+    (``"invalid_utf8"``, ``"malformed"``, ``"json_depth"``,
+    ``"schema_too_large"``, ``"channel_limit"``, ``"service_limit"``,
+    ``"fragment_limit"``, ...); ``detail`` says what, untruncated (the
+    consumer truncates it to log). One event is one log line however large
+    ``count`` is: a burst of drops is reported once, not once per frame."""
+
+    reason: str
+    detail: str
+    count: int = 1
+
+
+Event = RawFrame | GraphChanged | TopicState | ParameterValues | Rejected
+"""What an adapter hands up. A :class:`~ros_mobile_bridge.flow.RawFrame` is
+one message for a subscribed topic, not decoded."""
+
+
+class EventSink(Protocol):
+    """Where an adapter hands its events: the only thing it knows of what
+    stands above it. It holds no reference to the client."""
+
+    async def deliver(self, events: list[Event]) -> None:
+        """The reader's events, in order: one call per inbound message (per
+        batch where the adapter reads in batches), made before it reads on,
+        even with no events (the sink writes queued control frames first).
+        The list is the sink's from then on."""
+
+    def post(self, event: Event) -> None:
+        """One event from outside the reader (a subscribe call, a discovery
+        poll), applied at once. Must not block."""
+
+
+class Adapter(Protocol):
+    """One connection to one bridge. Built connected by the adapter's
+    ``open_*`` function; closed by :meth:`aclose`."""
+
+    protocol: str
+    server_info: ServerInfo
+    codecs: CodecRegistry
+
+    @property
+    def topics(self) -> list[TopicInfo]: ...
+
+    @property
+    def services(self) -> list[ServiceInfo]: ...
+
+    def topic_active(self, topic: str) -> bool:
+        """Whether the server currently carries ``topic`` to this client."""
+
+    rejections: dict[str, int]
+    """Inbound frames skipped or refused on this connection, per reason
+    (every :class:`Rejected` event it handed up, counted)."""
+
+    async def run(self, sink: EventSink) -> None:
+        """The reader loop: hands every event to ``sink`` (events that
+        happened before it started first). Returns when the connection
+        closed cleanly after :meth:`aclose`; raises ``ConnectError`` when it
+        was lost."""
+
+    async def send(self, message: WireMessage) -> None:
+        """Write one encoded message (the outbox's writer calls this)."""
+
+    async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
+        """Want ``topic``: subscribe now if the server offers it, otherwise as
+        soon as it does. Idempotent per topic."""
+
+    async def unsubscribe(self, topic: str) -> None:
+        """No local subscriber wants ``topic`` any more."""
+
+    async def advertise(
+        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+    ) -> None:
+        """Make ``topic`` publishable with type ``schema`` (waits for the
+        bridge to be ready). A no-op when already advertised with it.
+        ``latch``: the bridge keeps the last message for late subscribers
+        (``NotSupportedError`` where the protocol cannot). ``confirm=False``:
+        do not wait for an answer only the reader could read (a reconnect
+        restores advertisements before the new connection's reader runs); a
+        refusal is logged when it arrives."""
+
+    async def unadvertise(self, topic: str) -> None: ...
+
+    def publishing(self) -> Mapping[str, str]:
+        """Topics this client advertised, with their schema names."""
+
+    def advertised(self, topic: str) -> str | None:
+        """The schema ``topic`` is advertised with and ready to publish, or
+        None (then :meth:`advertise` first). Never waits."""
+
+    def encode_publish(self, topic: str, data: Any) -> WireMessage:
+        """Encode ``data`` for the advertised ``topic``. Raises
+        ``DecodeError`` for data that does not fit the schema."""
+
+    wire_timeout_slack: float
+    """Seconds the client's deadline for a call runs past the ``timeout``
+    forwarded to the server (0 when the protocol forwards none)."""
+
+    async def call_service(self, name: str, request: Any, timeout: float) -> Any:
+        """Call ``name`` and return the decoded response. ``timeout`` is
+        forwarded where the protocol carries one; the client owns the
+        deadline. Raises ``ServiceError`` on failure."""
+
+    async def advertise_service(
+        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
+    ) -> None:
+        """Serve ``name`` (type ``pkg/srv/Name``): calls go to ``handler``.
+        With ``confirm``, returns once the server accepted it (this needs the
+        reader running) and raises ``SchemaError`` (unknown type) or
+        ``ServiceError`` when it refused; without, returns once sent (a
+        refusal is logged: restoring after a reconnect, before the new
+        connection's reader runs). ``NotSupportedError`` where the protocol
+        cannot serve. When it raises after the advertisement may have taken
+        effect (sent, neither confirmed nor refused: a timeout, a
+        cancellation), calls may still arrive: the caller answers them and
+        then calls :meth:`unadvertise_service`."""
+
+    async def unadvertise_service(self, name: str) -> None:
+        """Stop serving ``name`` (a no-op when not served)."""
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        """Answer the call ``request_id`` to ``name``: ``values`` is the
+        response (``result`` True) or the reason text (False). ``DecodeError``
+        when the response does not fit the type. The frame's write is the
+        last step and is not cut by cancellation: when this raises, nothing
+        was sent; once the write happened, it returns normally."""
+
+    async def send_action_goal(
+        self, action: str, action_type: str, goal: Any, events: GoalEvents
+    ) -> str:
+        """Send a goal; returns its id. ``events`` hears what becomes of it.
+        ``NotSupportedError`` where the protocol has no actions."""
+
+    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
+        """Ask the server to cancel goal ``goal_id``."""
+
+    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]: ...
+
+    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]: ...
+
+    async def subscribe_parameters(self, names: Sequence[str]) -> None: ...
+
+    async def unsubscribe_parameters(self, names: Sequence[str]) -> None: ...
+
+    async def fetch_definition(self, schema: str) -> bool:
+        """Whether a definition of message type ``schema`` is known now,
+        after asking the server for one if its protocol can (rosbridge:
+        ``/rosapi/message_details``; Foxglove sends definitions only with its
+        channels, so there it only checks what is known)."""
+        ...
+
+    async def confirm_delivery(self) -> None:
+        """Return once everything sent so far has reached the server (a
+        round trip), so closing now loses nothing."""
+
+    def fail_pending(self, error: Exception) -> None:
+        """Fail every pending request with ``error``."""
+
+    async def keepalive(self) -> None:
+        """Run the transport's keep-alive until the connection closes."""
+
+    async def aclose(self) -> None:
+        """Close the connection (never raises)."""

@@ -1,0 +1,210 @@
+"""What every adapter shares, written once: opening a WebSocket with the
+client's options, the bookkeeping of advertised topics, handing events to the
+sink (:class:`EventSource`), and the refusal of what a protocol cannot do
+(:class:`CannotServe`)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Any, Final, TypeVar
+
+import anyio
+
+from .._errors import NotSupportedError
+from .._options import HTTPX_MISSING, ClientOptions
+from ..codec import same_type_name
+from ..flow import TopicMessage, WireMessage
+from ..transport import WebSocket, connect_websocket
+from ._seam import Event, EventSink, Rejected, ServiceHandler
+
+__all__ = [
+    "Advertisement",
+    "Advertisements",
+    "CannotServe",
+    "EventSource",
+    "open_websocket",
+    "socket_frame",
+]
+
+_KEPT_BEFORE_RUN: Final = 256
+"""Events kept while no reader runs yet (a bootstrap's rejections and graph
+changes); more are dropped and counted in one :class:`Rejected` event."""
+
+
+async def open_websocket(
+    url: str, options: ClientOptions, subprotocols: tuple[str, ...] = ()
+) -> WebSocket:
+    """:func:`~ros_mobile_bridge.transport.connect_websocket` to ``url`` with
+    the client's options (message size bound, TLS context, connect timeout,
+    read coalescing): the one place every WebSocket of a client is opened,
+    by either backend and by ``protocol="auto"``. Raises as
+    ``connect_websocket`` does.
+
+    The handshake carries ``options.headers``. websockets' debug log (request
+    headers, the start of every frame) is off for a connection that carries
+    a secret: with ``options.headers`` or ``options.rosbridge_auth`` set (the
+    ``auth`` frame would be logged MAC and all). With ``options.http_client``
+    the upgrade goes through that ``httpx.AsyncClient`` (the httpx transport,
+    imported only then: ``ImportError`` naming the ``[httpx]`` extra when
+    httpx is missing), and the returned object is the same
+    :class:`~ros_mobile_bridge.transport.WebSocket` either way."""
+    if options.http_client is not None:
+        try:
+            from ..transport._httpx import connect_httpx_websocket
+        except ImportError as exc:
+            raise ImportError(HTTPX_MISSING) from exc
+        return await connect_httpx_websocket(
+            url,
+            options.http_client,
+            subprotocols=subprotocols,
+            max_size=options.max_frame_size,
+            timeout=options.connect_timeout,
+            read_coalesce=options.read_coalesce,
+            headers=options.headers,  # type: ignore[arg-type]
+        )
+    return await connect_websocket(
+        url,
+        subprotocols=subprotocols,
+        max_size=options.max_frame_size,
+        ssl_context=options.ssl_context,
+        timeout=options.connect_timeout,
+        read_coalesce=options.read_coalesce,
+        headers=options.headers,  # type: ignore[arg-type]
+        quiet=bool(options.headers) or options.rosbridge_auth is not None,
+    )
+
+
+def socket_frame(message: WireMessage) -> str | bytes:
+    """``message`` as a WebSocket frame (text or binary). A
+    :class:`~ros_mobile_bridge.flow.TopicMessage` is for per-topic
+    transports only: ``TypeError`` here."""
+    if isinstance(message, TopicMessage):
+        raise TypeError("a TopicMessage cannot be sent on a WebSocket")
+    return message
+
+
+@dataclass(slots=True)
+class Advertisement:
+    """What every adapter keeps for a topic this client publishes: its type,
+    and whether the bridge is ready for it (set once the advertise is done)."""
+
+    schema: str
+    ready: anyio.Event
+
+    async def reuse(self, topic: str, schema: str) -> None:
+        """Advertising ``topic`` again: fine with the same type (wait until
+        ready), ``ValueError`` with another."""
+        if not same_type_name(self.schema, schema):
+            raise ValueError(
+                f"{topic} is advertised as {self.schema}; unadvertise it before publishing {schema}"
+            )
+        await self.ready.wait()
+
+    @staticmethod
+    def ready_schema(ad: Advertisement | None) -> str | None:
+        """``ad``'s type once it is ready to publish, else None."""
+        return ad.schema if ad is not None and ad.ready.is_set() else None
+
+
+A = TypeVar("A", bound=Advertisement)
+
+
+class Advertisements(dict[str, A]):
+    """The topics a backend publishes, by name: the same bookkeeping for
+    every adapter."""
+
+    def schemas(self) -> dict[str, str]:
+        """Every published topic's type (``Adapter.publishing``)."""
+        return {topic: ad.schema for topic, ad in self.items()}
+
+    def ready_schema(self, topic: str) -> str | None:
+        """``topic``'s type once it is ready to publish, else None
+        (``Adapter.advertised``)."""
+        return Advertisement.ready_schema(self.get(topic))
+
+    async def reuse(self, topic: str, schema: str) -> bool:
+        """True when ``topic`` is advertised already: with the same type,
+        once it is ready; ``ValueError`` with another. False when it is not
+        advertised."""
+        existing = self.get(topic)
+        if existing is None:
+            return False
+        await existing.reuse(topic, schema)
+        return True
+
+
+class EventSource:
+    """How an adapter hands its events up. Every emitting place calls
+    :meth:`_emit`; the reader passes what collected to the sink after each
+    inbound message (:meth:`_deliver`); a call from outside the reader (a
+    subscribe, a discovery poll) passes them on at its end (:meth:`_post`).
+    Before :meth:`_attach` (the bootstrap, before the reader runs) they wait,
+    :data:`_KEPT_BEFORE_RUN` at most. Rejections are also counted here
+    (``Adapter.rejections``)."""
+
+    _log: logging.Logger
+
+    def _init_events(self) -> None:
+        self._sink: EventSink | None = None
+        self._pending: list[Event] = []
+        self._dropped_before_run = 0
+        self.rejections: dict[str, int] = {}
+
+    def _attach(self, sink: EventSink) -> None:
+        """The reader starts: from now on events go to ``sink``."""
+        self._sink = sink
+        if self._dropped_before_run:
+            self._pending.append(
+                Rejected(
+                    "overflow",
+                    f"{self._dropped_before_run} events before the reader started were dropped",
+                )
+            )
+            self._dropped_before_run = 0
+
+    def _emit(self, event: Event) -> None:
+        if self._sink is None and len(self._pending) >= _KEPT_BEFORE_RUN:
+            self._dropped_before_run += 1
+            return
+        self._pending.append(event)
+
+    def _reject(self, reason: str, detail: str, count: int = 1) -> None:
+        """Count a rejection and hand it up (the client counts it over its
+        life and logs it)."""
+        self.rejections[reason] = self.rejections.get(reason, 0) + count
+        self._emit(Rejected(reason, detail, count))
+
+    async def _deliver(self) -> None:
+        """The reader's turn: hand what collected to the sink (even nothing:
+        the sink writes queued control frames before the next message)."""
+        sink = self._sink
+        if sink is not None:
+            pending, self._pending = self._pending, []
+            await sink.deliver(pending)
+
+    def _post(self) -> None:
+        """Outside the reader: hand what collected to the sink at once."""
+        sink = self._sink
+        if sink is not None and self._pending:
+            pending, self._pending = self._pending, []
+            for event in pending:
+                sink.post(event)
+
+
+class CannotServe:
+    """The serving half of :class:`~._seam.Adapter` for a protocol that
+    cannot offer a service: refused with :attr:`serve_refusal`."""
+
+    serve_refusal: str
+
+    async def advertise_service(
+        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
+    ) -> None:
+        raise NotSupportedError(self.serve_refusal)
+
+    async def unadvertise_service(self, name: str) -> None:
+        return None
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        raise NotSupportedError(self.serve_refusal)
