@@ -106,9 +106,13 @@ class Router:
         read in one go does not overflow their queues before they wake."""
         outbox = self._outbound.outbox
         offers = self._offers
-        if outbox.has_control:
-            await self._send_control()
+        if not events:
+            if outbox.has_control:
+                await self._send_control()
+            return
         for event in events:
+            if outbox.has_control:
+                await self._send_control()
             if type(event) is RawFrame:
                 targets = offers.get(event.topic)
                 if targets:
@@ -120,8 +124,6 @@ class Router:
             if self._inbound >= _READER_YIELD_EVERY:
                 self._inbound = 0
                 await anyio.lowlevel.checkpoint()
-            if outbox.has_control:
-                await self._send_control()
 
     async def _send_control(self) -> None:
         with contextlib.suppress(ConnectError):  # the reader's next read reports it

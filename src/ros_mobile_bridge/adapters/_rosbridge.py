@@ -333,18 +333,20 @@ class RosbridgeAdapter(EventSource):
         reader, which answers requests only (no subscription exists yet)."""
         ws = self._ws
         engine = self._engine
+        sink = self._sink if reading else None
         while True:
             text, data = await ws.receive_raw()
             received_ns = time.time_ns()
             batch = engine.receive_text(data) if text else engine.receive_binary(data)
             for event in batch:
                 if type(event) is rb.Publish:
-                    if reading:
+                    if sink is not None:
                         self._on_publish(event, received_ns)
                 else:
                     await self._handle(event)
-            if reading:
-                await self._deliver()
+            if sink is not None:  # (self._deliver, inlined on the hot path)
+                pending, self._pending = self._pending, []
+                await sink.deliver(pending)
 
     def _on_publish(self, event: rb.Publish, received_ns: int) -> None:
         topic = event.topic
