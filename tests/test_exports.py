@@ -235,8 +235,9 @@ def test_the_wheel_packages_the_whole_package_dir() -> None:
 
 
 # -- layering ------------------------------------------------------------------------------------
-def _modules_in(subpackage: str) -> list[Path]:
-    files = sorted((PACKAGE_DIR / subpackage).glob("*.py"))
+def _modules_in(subpackage: str, *, nested: bool = False) -> list[Path]:
+    folder = PACKAGE_DIR / subpackage
+    files = sorted(folder.rglob("*.py") if nested else folder.glob("*.py"))
     assert files, f"no modules in {subpackage}/"
     return files
 
@@ -292,7 +293,11 @@ def test_import_resolution_helper_sees_relative_imports() -> None:
 EVENT_LOOPS = ("anyio", "asyncio", "trio", "sniffio")
 
 
-@pytest.mark.parametrize("path", _modules_in("wire"), ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "path",
+    _modules_in("wire", nested=True),
+    ids=lambda p: p.relative_to(PACKAGE_DIR / "wire").as_posix(),
+)
 def test_wire_engines_import_no_event_loop(path: Path) -> None:
     assert _hits(_imports(path), EVENT_LOOPS) == []
     # and no textual import hidden from the AST walk (e.g. in a string exec)
@@ -300,7 +305,11 @@ def test_wire_engines_import_no_event_loop(path: Path) -> None:
     assert not re.search(r"^\s*(import|from)\s+(anyio|asyncio|trio)\b", source, re.MULTILINE)
 
 
-@pytest.mark.parametrize("path", _modules_in("wire"), ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "path",
+    _modules_in("wire", nested=True),
+    ids=lambda p: p.relative_to(PACKAGE_DIR / "wire").as_posix(),
+)
 def test_wire_engines_do_no_io_and_know_no_other_layer(path: Path) -> None:
     forbidden = (
         "socket",
