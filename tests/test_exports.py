@@ -337,3 +337,87 @@ def test_flow_knows_no_protocol(path: Path) -> None:
         "zenoh",
     )
     assert _hits(_imports(path), forbidden) == []
+
+
+# -- the house: layers, each importing only what stands below it ------------------------
+
+LAYERS: tuple[frozenset[str], ...] = (
+    frozenset({"_errors", "_types", "_slots", "_limits", "_version", "_checks", "_jsonable"}),
+    frozenset({"wire", "codec", "flow", "transport", "_signals"}),
+    frozenset({"_options", "lag"}),
+    frozenset({"adapters"}),
+    frozenset({"_serve", "_outbound", "_action", "_published_types"}),
+    frozenset({"_router"}),
+    frozenset({"_connection"}),
+    frozenset({"_record"}),
+    frozenset({"_client"}),
+    frozenset({"_connect"}),
+    frozenset({"_sync", "_background", "demo"}),
+    frozenset({"_cli", "cli", "__main__", "__init__"}),
+)
+"""The package's units (a top-level module or subpackage), bottom first: a
+unit may import units of its own layer or below, never above (see
+docs/architecture.md)."""
+
+
+def _unit(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def _unit_of_path(path: Path) -> str:
+    rel = path.relative_to(PACKAGE_DIR).with_suffix("")
+    return rel.parts[0] if len(rel.parts) > 1 or rel.name != "__init__" else "__init__"
+
+
+def test_every_unit_has_a_layer() -> None:
+    units = {_unit_of_path(p) for p in PACKAGE_DIR.rglob("*.py")}
+    placed = set().union(*LAYERS)
+    assert units - placed == set(), "add the new module to LAYERS"
+
+
+@pytest.mark.parametrize(
+    "path", sorted(PACKAGE_DIR.rglob("*.py")), ids=lambda p: str(p.relative_to(PACKAGE_DIR))
+)
+def test_nothing_imports_a_layer_above_it(path: Path) -> None:
+    rank = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
+    mine = _unit_of_path(path)
+    if mine == "__init__":
+        return  # the package face re-exports everything
+    above = sorted(
+        name
+        for name in _imports(path)
+        if name.startswith(PACKAGE + ".") and rank.get(_unit(name), -1) > rank[mine]
+    )
+    assert above == []
+
+
+def test_no_import_circles_between_modules() -> None:
+    """Every import counts (lazy and TYPE_CHECKING ones too); package faces
+    (``__init__`` re-exports) are not part of a circle."""
+    modules = {
+        ".".join(p.relative_to(PACKAGE_DIR.parent).with_suffix("").parts): p
+        for p in PACKAGE_DIR.rglob("*.py")
+        if p.name != "__init__.py"
+    }
+    graph = {
+        name: {m for m in _imports(path) if m in modules and m != name}
+        for name, path in modules.items()
+    }
+    done: set[str] = set()
+    path_: list[str] = []
+
+    def visit(node: str) -> None:
+        if node in done:
+            return
+        assert node not in path_, "import circle: " + " -> ".join(
+            [*path_[path_.index(node) :], node]
+        )
+        path_.append(node)
+        for nxt in sorted(graph[node]):
+            visit(nxt)
+        path_.pop()
+        done.add(node)
+
+    for name in sorted(graph):
+        visit(name)
