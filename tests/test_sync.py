@@ -479,10 +479,10 @@ def test_close_logs_a_subscription_that_fails_to_leave_and_still_tears_down(
     sub = client.subscribe("/odom", timeout=5).__enter__()
     assert sub.get().topic == "/odom"
 
-    def broken_leave(timeout: float) -> None:
+    def broken_exit(timeout: float) -> None:
         raise RuntimeError("leaving broke")
 
-    monkeypatch.setattr(sub, "_leave", broken_leave)
+    monkeypatch.setattr(sub._held, "exit", broken_exit)  # the async block's leaving
     client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.45}}, priority="control")
     with caplog.at_level(logging.WARNING, logger="ros_mobile_bridge"):
         client.close()
@@ -509,3 +509,24 @@ def test_wait_active_defaults_to_the_subscriptions_timeout(robot: DemoRobot, bac
         with client.subscribe("/odom", timeout=5) as odom:
             odom.wait_active()
             assert odom.state == "active"
+
+
+def test_fetch_definition_runs_the_async_one_in_the_worker(
+    robot: DemoRobot, backend: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the plumbing, with a stand-in for Client.fetch_definition (whether or
+    # not Client has its own yet): the call, its result, the thread it ran in
+    calls: list[tuple[str, str]] = []
+
+    async def fetch_definition(self: rmb.Client, name: str) -> bool:
+        calls.append((name, threading.current_thread().name))
+        await anyio.sleep(0)
+        return name == TWIST
+
+    monkeypatch.setattr(rmb.Client, "fetch_definition", fetch_definition, raising=False)
+    with rmb.connect_sync(robot.url, backend=backend, options=options()) as client:
+        assert client.fetch_definition(TWIST, timeout=5) is True
+        assert client.fetch_definition("pkg/msg/Unknown") is False
+    assert calls == [(TWIST, f"rmb-sync-{backend}"), ("pkg/msg/Unknown", f"rmb-sync-{backend}")]
+    with pytest.raises(rmb.NotConnected, match="closed"):
+        client.fetch_definition(TWIST)

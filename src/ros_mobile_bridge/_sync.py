@@ -19,6 +19,8 @@ from __future__ import annotations
 import atexit
 import concurrent.futures
 import contextlib
+import dataclasses
+import inspect
 import logging
 import threading
 import time
@@ -26,7 +28,7 @@ import weakref
 from collections.abc import Awaitable, Callable, Iterator, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, Final, Generic, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Final, Generic, Literal, Protocol, TypeVar, cast
 
 import anyio
 
@@ -59,6 +61,8 @@ if TYPE_CHECKING:
 __all__ = ["SyncActionGoal", "SyncClient", "SyncSubscription", "connect_sync"]
 
 T = TypeVar("T")
+T_ = TypeVar("T_")
+F = TypeVar("F", bound=Callable[..., Any])
 SyncBackend = Literal["asyncio", "trio"]
 
 #: How long ``close()`` waits for the worker thread to end after its loop
@@ -275,18 +279,79 @@ async def _set_event(event: anyio.Event) -> None:
     event.set()
 
 
+class _Children:
+    """The :class:`SyncSubscription` and :class:`SyncActionGoal` blocks a
+    :class:`SyncClient` has entered and not yet left, each with the
+    :class:`_Held` it keeps open; :meth:`SyncClient.close` leaves them first.
+    Keyed weakly: a block dropped without being left is forgotten (stopping
+    the worker ends its task). The lock guards the map, which threads
+    entering and leaving blocks change concurrently."""
+
+    def __init__(self) -> None:
+        self._open: weakref.WeakKeyDictionary[_SyncBlock[Any], _Held[Any]] = (
+            weakref.WeakKeyDictionary()
+        )
+        self._lock = threading.Lock()
+
+    def add(self, child: _SyncBlock[Any], held: _Held[Any]) -> None:
+        with self._lock:
+            self._open[child] = held
+
+    def entered(self) -> list[_SyncBlock[Any]]:
+        """A snapshot of the blocks still open."""
+        with self._lock:
+            return list(self._open)
+
+    def leave(self, child: _SyncBlock[Any], timeout: float) -> None:
+        """Leave ``child``'s block (its ``__aexit__`` runs in the worker),
+        waiting up to ``timeout`` (``TimeoutError``); a no-op once it was
+        left. ``NotConnected`` (the worker has stopped) means there is
+        nothing left to leave."""
+        with self._lock:
+            held = self._open.pop(child, None)
+        if held is not None:
+            with contextlib.suppress(NotConnected):
+                held.exit(timeout)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Parent:
+    """What a :class:`SyncClient` gives each block it makes: the worker
+    whose loop runs it, the registry its ``close()`` leaves, and how long
+    leaving one may take (``options.teardown_timeout`` + slack)."""
+
+    worker: _Worker
+    children: _Children
+    leave_timeout: float
+
+
+def _mirrors(sync: F) -> F:
+    """Carry the docstring of :class:`Client`'s namesake of ``sync`` (a
+    method, or a property's getter) into ``sync``'s, at import: the async
+    text, then ``sync``'s own note (what differs when blocking). The own
+    note is what static readers (the API reference, IDEs) show, so it names
+    the async member. Nothing is carried while ``Client`` has no such name.
+    ``tests/test_sync_surface.py`` checks that every mirror carries it."""
+    original = getattr(Client, sync.__name__, None)
+    text = None if original is None else original.__doc__
+    if text and sync.__doc__:
+        sync.__doc__ = f"{inspect.cleandoc(text)}\n\n{inspect.cleandoc(sync.__doc__)}"
+    return sync
+
+
 # Sync clients still open at interpreter exit are closed (teardown included)
-# by this hook; the daemon worker threads would otherwise just stop.
-_open_clients: set[SyncClient] = set()
+# by this hook; the daemon worker threads would otherwise just stop. Each
+# maps to the logger of the options it was connected with.
+_open_clients: dict[SyncClient, logging.Logger] = {}
 
 
 @atexit.register
 def _close_at_exit() -> None:
-    for client in list(_open_clients):
+    for client, log in list(_open_clients.items()):
         try:
             client.close()
         except Exception as exc:  # the next client must still be closed
-            client._log.warning("closing %r at interpreter exit failed: %r", client, exc)
+            log.warning("closing %r at interpreter exit failed: %r", client, exc)
 
 
 def connect_sync(
@@ -396,21 +461,11 @@ class SyncClient:
         self._client = client
         self._teardown_timeout = teardown_timeout
         self._log = log
-        # entered subscriptions and goals, left by close(); the lock guards
-        # the set, which threads entering and leaving them change concurrently
-        self._children: weakref.WeakSet[SyncSubscription | SyncActionGoal] = weakref.WeakSet()
-        self._children_lock = threading.Lock()
+        self._children = _Children()  # entered subscriptions and goals, left by close()
+        self._parent = _Parent(worker, self._children, teardown_timeout + CLOSE_SLACK_S)
         self._closed = False
         self._close_lock = threading.Lock()
-        _open_clients.add(self)
-
-    def _track(self, child: SyncSubscription | SyncActionGoal) -> None:
-        with self._children_lock:
-            self._children.add(child)
-
-    def _untrack(self, child: SyncSubscription | SyncActionGoal) -> None:
-        with self._children_lock:
-            self._children.discard(child)
+        _open_clients[self] = log
 
     # -- lifecycle ----------------------------------------------------------
     def __enter__(self) -> SyncClient:
@@ -456,12 +511,10 @@ class SyncClient:
                 return
             self._closed = True
         try:
-            _open_clients.discard(self)
-            with self._children_lock:
-                children = list(self._children)
-            for child in children:
+            _open_clients.pop(self, None)
+            for child in self._children.entered():
                 try:
-                    child._leave(max(0.0, deadline - _now()))
+                    self._children.leave(child, max(0.0, deadline - _now()))
                 except Exception as exc:  # the connection's teardown must still run
                     self._log.warning("close: leaving %r failed: %r", child, exc)
             try:
@@ -481,40 +534,56 @@ class SyncClient:
         """True once :meth:`close` was called."""
         return self._closed
 
+    # The properties below read the async client's namesakes from the
+    # calling thread (each is one attribute read). @_mirrors carries their
+    # docstrings from Client; the note here is what the API reference shows.
     @property
+    @_mirrors
     def status(self) -> Status:
-        """The client's status (:attr:`Client.status`); ``"closed"`` after close."""
+        """The client's status, :attr:`Client.status`: ``"closed"`` after :meth:`close`."""
         return self._client.status
 
     @property
+    @_mirrors
     def last_error(self) -> BaseException | None:
-        """Why the connection was lost, or None."""
+        """Why the connection was lost, or None: :attr:`Client.last_error`."""
         return self._client.last_error
 
     @property
+    @_mirrors
     def connected(self) -> bool:
-        """True while the connection is up."""
+        """True while the connection is up: :attr:`Client.connected`."""
         return self._client.connected
 
     @property
+    @_mirrors
     def protocol(self) -> str:
-        """The transport in use: ``"foxglove-ws"``, ``"rosbridge"`` or ``"zenoh"``."""
+        """The transport in use: :attr:`Client.protocol`."""
         return self._client.protocol
 
     @property
+    @_mirrors
     def server_info(self) -> ServerInfo:
-        """What the server said about itself."""
+        """What the server said about itself: :attr:`Client.server_info`."""
         return self._client.server_info
 
     @property
+    @_mirrors
     def topics(self) -> list[TopicInfo]:
-        """The topics the server offers now (a snapshot)."""
+        """:attr:`Client.topics`, as a list of its own (a snapshot)."""
         return list(self._client.topics)
 
     @property
+    @_mirrors
     def services(self) -> list[ServiceInfo]:
-        """The services the server offers now (a snapshot)."""
+        """:attr:`Client.services`, as a list of its own (a snapshot)."""
         return list(self._client.services)
+
+    @property
+    @_mirrors
+    def rejections(self) -> dict[str, int]:
+        """Inbound frames skipped or refused, per reason: :attr:`Client.rejections`."""
+        return self._client.rejections
 
     @property
     def worker_thread(self) -> threading.Thread:
@@ -551,6 +620,7 @@ class SyncClient:
         return self._call(wait, self._client, timeout=timeout, what=f"wait_for_topic({topic})")
 
     # -- publishing ---------------------------------------------------------
+    @_mirrors
     def publish(
         self,
         topic: str,
@@ -576,6 +646,7 @@ class SyncClient:
             what=f"publish to {topic}",
         )
 
+    @_mirrors
     def publish_zero_twist(
         self, topic: str = "/cmd_vel", schema: str | None = None, *, timeout: float | None = None
     ) -> None:
@@ -588,6 +659,7 @@ class SyncClient:
             what=f"zero Twist to {topic}",
         )
 
+    @_mirrors
     def advertise(
         self, topic: str, schema: str, *, latch: bool = False, timeout: float | None = None
     ) -> None:
@@ -596,11 +668,13 @@ class SyncClient:
             _advertise, self._client, topic, schema, latch, timeout=timeout, what="advertise"
         )
 
+    @_mirrors
     def unadvertise(self, topic: str, *, timeout: float | None = None) -> None:
         """:meth:`Client.unadvertise`, blocking."""
         self._call(self._client.unadvertise, topic, timeout=timeout, what="unadvertise")
 
     # -- services and parameters -------------------------------------------
+    @_mirrors
     def call_service(
         self, name: str, request: Mapping[str, Any] | None = None, *, timeout: float | None = None
     ) -> Any:
@@ -610,6 +684,7 @@ class SyncClient:
             _call_service, self._client, name, request, timeout, timeout=None, what=name
         )
 
+    @_mirrors
     def get_parameters(
         self, names: Sequence[str], *, timeout: float | None = None
     ) -> dict[str, Any]:
@@ -618,6 +693,7 @@ class SyncClient:
             _get_parameters, self._client, names, timeout, timeout=None, what="get_parameters"
         )
 
+    @_mirrors
     def set_parameters(
         self, values: Mapping[str, Any], *, timeout: float | None = None
     ) -> dict[str, Any]:
@@ -626,6 +702,7 @@ class SyncClient:
             _set_parameters, self._client, values, timeout, timeout=None, what="set_parameters"
         )
 
+    @_mirrors
     def list_parameters(self, *, timeout: float | None = None) -> dict[str, Any]:
         """:meth:`Client.list_parameters`, blocking."""
         return self._call(
@@ -633,12 +710,14 @@ class SyncClient:
         )
 
     # -- schemas ------------------------------------------------------------
+    @_mirrors
     def schema_template(self, name: str) -> dict[str, Any]:
         """:meth:`Client.schema_template`."""
         return self._call(
             _sync_call, self._client.schema_template, (name,), timeout=None, what="schema_template"
         )
 
+    @_mirrors
     def schema_definition(self, name: str) -> list[FieldDef]:
         """:meth:`Client.schema_definition`."""
         return self._call(
@@ -649,6 +728,7 @@ class SyncClient:
             what="schema_definition",
         )
 
+    @_mirrors
     def register_type(
         self, name: str, definition: str | bytes, *, encoding: str = "ros2msg"
     ) -> None:
@@ -659,7 +739,17 @@ class SyncClient:
 
         self._call(_sync_call, register, (), timeout=None, what="register_type")
 
+    @_mirrors
+    def fetch_definition(self, name: str, *, timeout: float | None = None) -> bool:
+        """:meth:`Client.fetch_definition`, blocking: asks the server for the
+        definition of message type ``name`` where the protocol can; True
+        when the type is known. ``timeout`` bounds the wait."""
+        return self._call(
+            _fetch_definition, self._client, name, timeout=timeout, what=f"fetch_definition({name})"
+        )
+
     # -- subscriptions and actions -------------------------------------------
+    @_mirrors
     def subscribe(
         self,
         topic: str,
@@ -696,8 +786,9 @@ class SyncClient:
 
         ctx = self._worker.run(_sync_call, make, (), what=f"subscribe to {topic}")
         held = _Held(self._worker, ctx, f"the subscription to {topic}")
-        return SyncSubscription(self, held, topic, timeout)
+        return SyncSubscription(held, self._parent, topic, timeout)
 
+    @_mirrors
     def send_action_goal(
         self, action: str, action_type: str, goal: Mapping[str, Any]
     ) -> SyncActionGoal:
@@ -707,29 +798,34 @@ class SyncClient:
         if self._closed:
             raise NotConnected("send_action_goal: the client is closed")
         cm = self._client.send_action_goal(action, action_type, goal)
-        return SyncActionGoal(self, _Held(self._worker, cm, f"the goal to {action}"), action)
+        return SyncActionGoal(
+            _Held(self._worker, cm, f"the goal to {action}"), self._parent, action
+        )
 
 
-class SyncSubscription:
-    """A subscription of a :class:`SyncClient`: ``for msg in sub`` blocks
-    for each :class:`~ros_mobile_bridge.Message`; :meth:`get` takes one with
-    a timeout. Iteration ends when the subscription or the client closes;
-    a lost connection raises ``NotConnected``."""
+_B = TypeVar("_B", bound="_SyncBlock[Any]")
 
-    def __init__(
-        self, owner: SyncClient, held: _Held[Subscription], topic: str, timeout: float | None
-    ) -> None:
-        self._owner = owner
+
+class _SyncBlock(Generic[T]):
+    """The shape :class:`SyncSubscription` and :class:`SyncActionGoal` share:
+    a plain ``with`` block over an async context manager that one task of
+    the worker enters and later leaves (:class:`_Held`). Entered once; while
+    open it is in its client's :class:`_Children`, so ``close()`` leaves it;
+    leaving waits up to the client's teardown time."""
+
+    #: How to enter it, for the error raised when it is used before.
+    _how_to_enter: ClassVar[str]
+
+    def __init__(self, held: _Held[T], parent: _Parent) -> None:
         self._held = held
-        self._sub: Subscription | None = None
-        self.topic = topic
-        self._timeout = timeout
+        self._parent = parent
+        self._value: T | None = None
 
-    def __enter__(self) -> SyncSubscription:
-        if self._sub is not None:
-            raise RuntimeError("a SyncSubscription can be entered once")
-        self._sub = self._held.enter()
-        self._owner._track(self)
+    def __enter__(self: _B) -> _B:
+        if self._value is not None:
+            raise RuntimeError(f"a {type(self).__name__} can be entered once")
+        self._value = self._held.enter()
+        self._parent.children.add(self, self._held)
         return self
 
     def __exit__(
@@ -738,24 +834,41 @@ class SyncSubscription:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.close()
+        self._leave()
+
+    def _leave(self) -> None:
+        self._parent.children.leave(self, self._parent.leave_timeout)
+
+    def _entered(self) -> T:
+        if self._value is None:
+            raise RuntimeError(self._how_to_enter)
+        return self._value
+
+    def _run(self, fn: Callable[[], Awaitable[T_]], timeout: float | None, what: str) -> T_:
+        return self._parent.worker.run_bounded(fn, (), timeout, what)
+
+
+class SyncSubscription(_SyncBlock[Subscription]):
+    """A subscription of a :class:`SyncClient`: ``for msg in sub`` blocks
+    for each :class:`~ros_mobile_bridge.Message`; :meth:`get` takes one with
+    a timeout. Iteration ends when the subscription or the client closes;
+    a lost connection raises ``NotConnected``."""
+
+    _how_to_enter = "enter the subscription first: with robot.subscribe(...) as sub"
+
+    def __init__(
+        self, held: _Held[Subscription], parent: _Parent, topic: str, timeout: float | None
+    ) -> None:
+        super().__init__(held, parent)
+        self.topic = topic
+        self._timeout = timeout
 
     def close(self) -> None:
         """Unsubscribe (idempotent)."""
-        self._leave(self._owner._teardown_timeout + CLOSE_SLACK_S)
-
-    def _leave(self, timeout: float) -> None:
-        self._owner._untrack(self)
-        with contextlib.suppress(NotConnected):
-            self._held.exit(timeout)
+        self._leave()
 
     def __repr__(self) -> str:
         return f"<SyncSubscription {self.topic}>"
-
-    def _require(self) -> Subscription:
-        if self._sub is None:
-            raise RuntimeError("enter the subscription first: with robot.subscribe(...) as sub")
-        return self._sub
 
     def get(self, timeout: float | None = None) -> Message:
         """The next message. ``timeout`` (default: the one given to
@@ -773,15 +886,13 @@ class SyncSubscription:
         in order, for one hand-over between threads instead of one per
         message: :meth:`Subscription.batches`' step. Waits, times out and
         ends as :meth:`get` does."""
-        sub = self._require()
+        sub = self._entered()
         batches = sub.batches(max_size)  # checks max_size at once
         limit = self._timeout if timeout is None else _check_timeout(timeout)
         if not self._held.open:
             raise NotConnected(f"the subscription to {self.topic} has ended")
         try:
-            return self._owner._worker.run_bounded(
-                batches.__anext__, (), limit, f"receive on {self.topic}"
-            )
+            return self._run(batches.__anext__, limit, f"receive on {self.topic}")
         except StopAsyncIteration:
             raise NotConnected(f"the subscription to {self.topic} has ended") from None
 
@@ -795,102 +906,74 @@ class SyncSubscription:
             raise StopIteration from None
 
     def _next(self, timeout: float | None) -> Message:
-        sub = self._require()
+        sub = self._entered()
         limit = self._timeout if timeout is None else _check_timeout(timeout)
         if not self._held.open:
             raise StopAsyncIteration
-        return self._owner._worker.run_bounded(sub.__anext__, (), limit, f"receive on {self.topic}")
+        return self._run(sub.__anext__, limit, f"receive on {self.topic}")
 
     def wait_active(self, timeout: float | None = None) -> None:
         """Return once the topic is carried (``state == "active"``);
         ``TimeoutError`` after ``timeout`` seconds (default: the one given
         to ``subscribe``; with neither, it waits until the topic is carried
         or the subscription ends, ``NotConnected``)."""
-        sub = self._require()
+        sub = self._entered()
         limit = self._timeout if timeout is None else _check_timeout(timeout)
-        self._owner._worker.run_bounded(sub.wait_active, (), limit, "wait_active")
+        self._run(sub.wait_active, limit, "wait_active")
 
     @property
     def state(self) -> SubscriptionState:
         """``"pending"`` or ``"active"``."""
-        return self._require().state
+        return self._entered().state
 
     @property
     def stats(self) -> SubscriptionStats:
         """A snapshot of the subscription's counters."""
-        return self._require().stats
+        return self._entered().stats
 
 
-class SyncActionGoal:
+class SyncActionGoal(_SyncBlock[ActionGoal]):
     """An action goal of a :class:`SyncClient`, with blocking waits."""
 
-    def __init__(self, owner: SyncClient, held: _Held[ActionGoal], action: str) -> None:
-        self._owner = owner
-        self._held = held
-        self._goal: ActionGoal | None = None
+    _how_to_enter = "enter the goal first: with robot.send_action_goal(...) as goal"
+
+    def __init__(self, held: _Held[ActionGoal], parent: _Parent, action: str) -> None:
+        super().__init__(held, parent)
         self._feedback: Any = None
         self.action = action
-
-    def __enter__(self) -> SyncActionGoal:
-        if self._goal is not None:
-            raise RuntimeError("a SyncActionGoal can be entered once")
-        self._goal = self._held.enter()
-        self._owner._track(self)
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self._leave(self._owner._teardown_timeout + CLOSE_SLACK_S)
-
-    def _leave(self, timeout: float) -> None:
-        self._owner._untrack(self)
-        with contextlib.suppress(NotConnected):
-            self._held.exit(timeout)
 
     def __repr__(self) -> str:
         return f"<SyncActionGoal {self.action}>"
 
-    def _require(self) -> ActionGoal:
-        if self._goal is None:
-            raise RuntimeError("enter the goal first: with robot.send_action_goal(...) as goal")
-        return self._goal
-
-    def _wait(self, fn: Callable[..., Awaitable[T]], timeout: float | None, what: str) -> T:
-        return self._owner._worker.run_bounded(fn, (), timeout, what)
-
     @property
     def state(self) -> GoalState:
         """The goal's state (:attr:`ActionGoal.state`)."""
-        return self._require().state
+        return self._entered().state
 
     @property
     def done(self) -> bool:
         """True once the goal reached a terminal state."""
-        return self._require().done
+        return self._entered().done
 
     def accepted(self, timeout: float | None = None) -> None:
         """:meth:`ActionGoal.accepted`, blocking; without ``timeout`` it
         waits until the goal is accepted or fails."""
-        self._wait(self._require().accepted, timeout, "accepted")
+        self._run(self._entered().accepted, timeout, "accepted")
 
     def result(self, timeout: float | None = None) -> ActionOutcome:
         """:meth:`ActionGoal.result`, blocking; without ``timeout`` it waits
         until the goal ends, however long the action runs."""
-        return self._wait(self._require().result, timeout, "result")
+        return self._run(self._entered().result, timeout, "result")
 
     def cancel(self, timeout: float | None = None) -> None:
         """:meth:`ActionGoal.cancel`, blocking."""
-        self._wait(self._require().cancel, timeout, "cancel")
+        self._run(self._entered().cancel, timeout, "cancel")
 
     def next_feedback(self, timeout: float | None = None) -> Any:
         """The newest feedback not yet seen (waits for one: without
         ``timeout``, until one comes or the goal ends); ``StopIteration``
         is never raised: ``NotConnected`` once the goal has ended."""
-        goal = self._require()
+        goal = self._entered()
 
         async def step() -> Any:
             if self._feedback is None:  # made in the loop: it holds anyio events
@@ -900,7 +983,7 @@ class SyncActionGoal:
             except StopAsyncIteration:
                 raise NotConnected(f"the goal to {self.action} has ended") from None
 
-        return self._wait(step, timeout, "feedback")
+        return self._run(step, timeout, "feedback")
 
 
 # -- coroutines run in the worker's loop ---------------------------------------
@@ -943,6 +1026,17 @@ async def _set_parameters(
 
 async def _list_parameters(client: Client, timeout: float | None) -> dict[str, Any]:
     return await client.list_parameters(timeout=timeout)
+
+
+class _FetchesDefinitions(Protocol):
+    async def fetch_definition(self, name: str) -> bool: ...
+
+
+async def _fetch_definition(client: Client, name: str) -> bool:
+    # Client gains fetch_definition in a refactor landing separately; until
+    # then the type checker does not see it on Client (and calling it raises
+    # AttributeError). Once it has landed, this is client.fetch_definition(name).
+    return await cast(_FetchesDefinitions, client).fetch_definition(name)
 
 
 def _now() -> float:
