@@ -15,7 +15,6 @@ from typing import Any
 import pytest
 
 from ros_mobile_bridge import Client, SyncClient
-from ros_mobile_bridge.backends import BackendEvents
 
 #: Public members of Client with no blocking namesake, and why.
 NOT_MIRRORED: dict[str, str] = {
@@ -44,12 +43,7 @@ SYNC_ONLY: dict[str, str] = {
     "worker_thread": "the thread the async client runs in",
     "run": "runs `await fn(client)` in the worker: the way to everything not mirrored",
     "wait_for_topic": "the blocking use of `watch_topics()`",
-    "fetch_definition": "until Client gains it (a refactor landing separately adds it)",
 }
-
-#: The callbacks the wire backend makes into its Client (the BackendEvents
-#: protocol): public on Client because the backend calls them, not user API.
-BACKEND_CALLBACKS = frozenset(name for name in vars(BackendEvents) if not name.startswith("_"))
 
 
 def public(cls: type) -> dict[str, Any]:
@@ -59,7 +53,7 @@ def public(cls: type) -> dict[str, Any]:
 
 
 def mirrored() -> list[str]:
-    skip = NOT_MIRRORED.keys() | BACKEND_CALLBACKS
+    skip = NOT_MIRRORED.keys()
     return sorted(name for name in public(Client) if name not in skip)
 
 
@@ -82,7 +76,6 @@ def test_the_allow_lists_name_real_members() -> None:
     assert not NOT_MIRRORED.keys() & sync.keys(), "mirrored now: drop it from NOT_MIRRORED"
     assert RESHAPED.keys() <= set(MIRRORED)
     assert SYNC_ONLY.keys() <= sync.keys(), "SYNC_ONLY names what SyncClient lacks"
-    assert BACKEND_CALLBACKS, "BackendEvents has no callbacks: is it still the protocol?"
 
 
 # -- one mirror ------------------------------------------------------------------

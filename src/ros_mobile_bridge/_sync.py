@@ -28,7 +28,7 @@ import weakref
 from collections.abc import Awaitable, Callable, Iterator, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, ClassVar, Final, Generic, Literal, Protocol, TypeVar, cast
+from typing import TYPE_CHECKING, Any, ClassVar, Final, Generic, Literal, TypeVar
 
 import anyio
 
@@ -1028,15 +1028,8 @@ async def _list_parameters(client: Client, timeout: float | None) -> dict[str, A
     return await client.list_parameters(timeout=timeout)
 
 
-class _FetchesDefinitions(Protocol):
-    async def fetch_definition(self, name: str) -> bool: ...
-
-
 async def _fetch_definition(client: Client, name: str) -> bool:
-    # Client gains fetch_definition in a refactor landing separately; until
-    # then the type checker does not see it on Client (and calling it raises
-    # AttributeError). Once it has landed, this is client.fetch_definition(name).
-    return await cast(_FetchesDefinitions, client).fetch_definition(name)
+    return await client.fetch_definition(name)
 
 
 def _now() -> float:
