@@ -456,7 +456,7 @@ async def test_fail_raises_the_error_after_the_queued_messages() -> None:
     sub = Subscription("/t", q, logger=LOGGER)
     q.offer(frame(1, CountingDecoder()))
     error = NotConnected("connection lost")
-    sub._fail(error)
+    q.fail(error)  # the router fails the queue when the connection is gone
     assert (await sub.__anext__()).data == 1
     with pytest.raises(NotConnected) as info:
         await sub.__anext__()
@@ -480,7 +480,7 @@ async def test_fail_wakes_a_waiting_iteration_with_the_error() -> None:
     async with anyio.create_task_group() as tg:
         tg.start_soon(consume)
         await anyio.wait_all_tasks_blocked()
-        sub._fail(NotConnected("gone"))
+        q.fail(NotConnected("gone"))
     assert len(raised) == 1
 
 
@@ -499,7 +499,7 @@ async def test_wait_active_returns_on_activation_and_raises_once_closed() -> Non
         tg.start_soon(wait)
         await anyio.wait_all_tasks_blocked()
         assert not done
-        sub._set_state("active")
+        q.set_state("active")  # as the router does
     assert done
     assert sub.state == "active"
     await sub.wait_active()  # already active: returns at once

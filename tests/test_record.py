@@ -210,14 +210,15 @@ async def test_a_refused_topic_is_counted_and_the_others_go_on(
 ) -> None:
     path = tmp_path / "refused.mcap"
     async with rmb.connect(demo.url, options=options()) as robot:
-        subscribe = robot.subscribe
+        router = robot._conn.router  # where the recorder's subscriptions are routed
+        add = router.add
 
-        def refusing(topic: str, **kw: Any) -> Any:
-            if topic == "/battery":  # as a bridge refusing the type would
+        async def refusing(route: Any) -> None:
+            if route.sub.topic == "/battery":  # as a bridge refusing the type would
                 raise rmb.SchemaError("no definition of sensor_msgs/msg/BatteryState")
-            return subscribe(topic, **kw)
+            await add(route)
 
-        monkeypatch.setattr(robot, "subscribe", refusing)
+        monkeypatch.setattr(router, "add", refusing)
         async with robot.record(path, topics=["/odom", "/battery", "/pose"]) as rec:
             await wait_until(lambda: "/battery" in rec.stats.failed, 10)
             await wait_until(
