@@ -56,15 +56,7 @@ from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, type_hash
 from ..flow import Decoder, PendingRequests, RawFrame, TopicMessage, WireMessage
-from ..transport._zenoh import (
-    DATA,
-    LIVELINESS,
-    LOST,
-    QUERY_DONE,
-    REPLY,
-    Item,
-    ZenohSession,
-)
+from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ._seam import EventSink, GoalEvents, GraphChanged, SubscribeHints, TopicState
 from ._shared import Advertisement, Advertisements, CannotServe, EventSource
@@ -245,7 +237,7 @@ class ZenohAdapter(EventSource, CannotServe):
         with anyio.move_on_after(max(deadline - anyio.current_time(), 0.0)):
             while not done:
                 for item in await session.inbox.get_batch():
-                    if item[0] == QUERY_DONE and item[1] == query_id:
+                    if type(item) is rz.QueryDone and item.query_id == query_id:
                         done = True
                     else:
                         self._handle_early(item)
@@ -255,14 +247,12 @@ class ZenohAdapter(EventSource, CannotServe):
         self._rebuild_graph()
         self._bootstrapped = True
 
-    def _handle_early(self, item: Item) -> None:
-        kind = item[0]
-        if kind == REPLY:
-            ok, _attachment = item[4]
-            if ok and item[2] is not None:
-                self._on_token(item[2], True)
-        elif kind == LIVELINESS:
-            self._on_token(item[2], item[3])
+    def _handle_early(self, item: rz.InboxItem) -> None:
+        if type(item) is rz.Reply:
+            if item.ok and item.key is not None:
+                self._on_token(item.key, True)
+        elif type(item) is rz.LivelinessChange:
+            self._on_token(item.key, item.alive)
 
     def _on_token(self, key: str, alive: bool) -> bool:
         """Follow one liveliness change; True when the graph changed."""
@@ -343,26 +333,24 @@ class ZenohAdapter(EventSource, CannotServe):
             batch = await inbox.get_batch()
             graph_changed = False
             for item in batch:
-                kind = item[0]
-                if kind == DATA:
-                    sub = by_tag.get(item[1])
+                if type(item) is rz.Sample:
+                    sub = by_tag.get(item.tag)
                     if sub is None:
                         pass
                     elif sub.feedback_of is not None:
-                        self._on_feedback(sub, item[3], item[4])
+                        self._on_feedback(sub, item.payload, item.attachment)
                     else:
-                        self._on_sample(sub, item[2], item[3], item[4])
-                elif kind == LIVELINESS:
-                    graph_changed |= self._on_token(item[2], item[3])
-                elif kind == REPLY:
-                    query = self._queries.get(item[1])
+                        self._on_sample(sub, item.key, item.payload, item.attachment)
+                elif type(item) is rz.LivelinessChange:
+                    graph_changed |= self._on_token(item.key, item.alive)
+                elif type(item) is rz.Reply:
+                    query = self._queries.get(item.query_id)
                     if query is not None:
-                        ok, attachment = item[4]
-                        query.replies.append((ok, item[3], attachment))
-                elif kind == QUERY_DONE:
-                    self._on_query_done(item[1])
-                elif kind == LOST:
-                    self._lost = str(item[3])
+                        query.replies.append((item.ok, item.payload, item.attachment))
+                elif type(item) is rz.QueryDone:
+                    self._on_query_done(item.query_id)
+                elif type(item) is rz.SessionLost:
+                    self._lost = item.reason
             overflowed = inbox.overflowed
             if overflowed:
                 inbox.overflowed = 0
@@ -889,7 +877,7 @@ class ZenohAdapter(EventSource, CannotServe):
             if missing_since is None:
                 missing_since = now
             elif now - missing_since >= self._options.keepalive_timeout:
-                self._session.inbox.push((LOST, 0, None, "the router is gone", None))
+                self._session.inbox.push(rz.SessionLost("the router is gone"))
                 return
 
     @property
