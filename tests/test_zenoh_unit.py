@@ -19,7 +19,8 @@ from ros_mobile_bridge.adapters._zenoh import (
     parameter_to_ros,
 )
 from ros_mobile_bridge.codec import CodecRegistry
-from ros_mobile_bridge.transport._zenoh import DATA, LIVELINESS, Inbox
+from ros_mobile_bridge.transport._zenoh import Inbox
+from ros_mobile_bridge.wire.rmw_zenoh import LivelinessChange, Sample
 
 # -- the inbox: zenoh's threads to the event loop, in batches ---------------------
 
@@ -39,8 +40,8 @@ async def test_inbox_hands_over_every_item_in_order_in_few_batches() -> None:
 
     def produce() -> None:
         for i in range(count):
-            inbox.push_data((DATA, 1, "k", i, None), 1)
-        inbox.push((LIVELINESS, 0, "end", True, None))
+            inbox.push_data(Sample(1, "k", i.to_bytes(4, "big"), None), 1)
+        inbox.push(LivelinessChange(0, "end", True))
 
     thread = threading.Thread(target=produce)
     thread.start()
@@ -52,10 +53,11 @@ async def test_inbox_hands_over_every_item_in_order_in_few_batches() -> None:
             batches += 1
             done = False
             for item in batch:
-                if item[0] == LIVELINESS:
+                if type(item) is LivelinessChange:
                     done = True
                 else:
-                    seen.append(item[3])
+                    assert type(item) is Sample
+                    seen.append(int.from_bytes(item.payload, "big"))
             if done:
                 break
     thread.join()
@@ -68,25 +70,25 @@ async def test_inbox_hands_over_every_item_in_order_in_few_batches() -> None:
 
 async def test_inbox_bounds_samples_and_bytes_and_counts_the_rest() -> None:
     inbox = Inbox(max_items=10, max_bytes=1000)
-    accepted = [inbox.push_data((DATA, 7, "k", i, None), 10) for i in range(15)]
+    accepted = [inbox.push_data(Sample(7, "k", b"x", None), 10) for _ in range(15)]
     assert accepted == [True] * 10 + [False] * 5
     assert inbox.overflowed == 5
     assert inbox.overflowed_by_tag == {7: 5}
-    inbox.push((LIVELINESS, 0, "k", True, None))  # control items are never dropped
+    inbox.push(LivelinessChange(0, "k", True))  # control items are never dropped
     batch = await inbox.get_batch()
     assert len(batch) == 11
     # by bytes: one large sample passes alone, a second does not
-    assert inbox.push_data((DATA, 8, "k", 0, None), 5000)
-    assert not inbox.push_data((DATA, 8, "k", 1, None), 1)
+    assert inbox.push_data(Sample(8, "k", b"x", None), 5000)
+    assert not inbox.push_data(Sample(8, "k", b"y", None), 1)
     assert inbox.overflowed_by_tag == {7: 5, 8: 1}
 
 
 async def test_a_closed_inbox_takes_nothing_more() -> None:
     inbox = Inbox(max_items=10, max_bytes=1000)
-    inbox.push_data((DATA, 1, "k", 0, None), 1)
+    inbox.push_data(Sample(1, "k", b"x", None), 1)
     inbox.close()
-    inbox.push((LIVELINESS, 0, "k", True, None))
-    assert not inbox.push_data((DATA, 1, "k", 1, None), 1)
+    inbox.push(LivelinessChange(0, "k", True))
+    assert not inbox.push_data(Sample(1, "k", b"y", None), 1)
     with anyio.move_on_after(0.2) as scope:
         await inbox.get_batch()
     assert scope.cancelled_caught  # nothing was queued before or after close

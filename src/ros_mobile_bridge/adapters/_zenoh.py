@@ -33,60 +33,51 @@ from __future__ import annotations
 import contextlib
 import itertools
 import logging
-import os
 import time
-import uuid
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, Final
 
 import anyio
 
 from .._errors import (
-    ActionGoalError,
     ConnectError,
-    DecodeError,
     NotSupportedError,
     RosBridgeError,
     SchemaError,
-    ServiceError,
 )
 from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, type_hash
 from ..flow import Decoder, PendingRequests, RawFrame, TopicMessage, WireMessage
-from ..transport._zenoh import (
-    DATA,
-    LIVELINESS,
-    LOST,
-    QUERY_DONE,
-    REPLY,
-    Item,
-    ZenohSession,
-)
+from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
-from ._seam import EventSink, GoalEvents, GraphChanged, SubscribeHints, TopicState
+from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
 from ._shared import Advertisement, Advertisements, CannotServe, EventSource
+from ._zenoh_calls import ZenohCalls
+from ._zenoh_values import (
+    Goal,
+    Query,
+    Subscription,
+    default_domain,
+    parameter_from_ros,
+    parameter_to_ros,
+    valid_attachment,
+)
 
-__all__ = ["ZenohAdapter", "open_zenoh"]
+__all__ = [
+    "ZenohAdapter",
+    "default_domain",
+    "open_zenoh",
+    "parameter_from_ros",
+    "parameter_to_ros",
+]
 
 _GRAPH_TAG: Final = 0
-_ATTACHMENT_SIZE: Final = rz.ATTACHMENT_SIZE
 _MAX_KEYS_PER_TOPIC: Final = 16
 """Distinct (type, hash) keys remembered per subscribed topic; a sample on a
 further key is decoded without the cache (a hostile peer cannot grow it)."""
-_RESULT_TIMEOUT: Final = 24 * 3600.0
-"""How long a goal's ``get_result`` query may wait (the goal's own life)."""
-_GOAL_SUCCEEDED: Final = 4
-
-
-def default_domain() -> int:
-    """``$ROS_DOMAIN_ID`` when it is a valid domain id, else 0."""
-    raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if raw.isdigit() and 0 <= int(raw) <= 232:
-        return int(raw)
-    return 0
 
 
 @dataclass(slots=True)
@@ -98,33 +89,6 @@ class _Publisher(Advertisement):
     publisher: Any
     token: int
     seq: int = 0
-
-
-@dataclass(slots=True)
-class _Subscription:
-    topic: str
-    tag: int
-    handle: int
-    token: int | None = None
-    feedback_of: str | None = None  # the action whose feedback topic this is
-    # sample key -> (type name, decoder); bounded by _MAX_KEYS_PER_TOPIC
-    keys: dict[str, tuple[str, Decoder | None]] = field(default_factory=dict)
-
-
-@dataclass(slots=True)
-class _Query:
-    name: str
-    replies: list[tuple[bool, bytes, bytes | None]] = field(default_factory=list)
-    on_done: Callable[[list[tuple[bool, bytes, bytes | None]]], None] | None = None
-
-
-@dataclass(slots=True)
-class _Goal:
-    action: str
-    action_type: str
-    uuid: bytes
-    events: GoalEvents
-    feedback_decode: Decoder | None
 
 
 async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
@@ -148,7 +112,7 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     return backend
 
 
-class ZenohAdapter(EventSource, CannotServe):
+class ZenohAdapter(ZenohCalls, EventSource, CannotServe):
     """One zenoh session to one router (see :class:`~.Adapter`)."""
 
     protocol = "zenoh"
@@ -183,15 +147,15 @@ class ZenohAdapter(EventSource, CannotServe):
         self._service_infos: list[ServiceInfo] = []
         self._publishers_of: dict[str, int] = {}  # topic -> publisher tokens seen
         self._wanted: dict[str, SubscribeHints] = {}
-        self._subs: dict[str, _Subscription] = {}
-        self._by_tag: dict[int, _Subscription] = {}
+        self._subs: dict[str, Subscription] = {}
+        self._by_tag: dict[int, Subscription] = {}
         self._pubs: Advertisements[_Publisher] = Advertisements()
         self._client_gids: dict[str, tuple[bytes, int]] = {}  # service -> (gid, token)
         self._call_seq = itertools.count(1)
-        self._queries: dict[int, _Query] = {}
+        self._queries: dict[int, Query] = {}
         self._calls: PendingRequests[list[tuple[bool, bytes, bytes | None]]] = PendingRequests()
-        self._goals: dict[bytes, _Goal] = {}
-        self._feedback_subs: dict[str, _Subscription] = {}
+        self._goals: dict[bytes, Goal] = {}
+        self._feedback_subs: dict[str, Subscription] = {}
         self._lost: str | None = None
         self._bootstrapped = False
         self._node_key = self._token_key(rz.EntityKind.NODE, self._node_id)
@@ -245,7 +209,7 @@ class ZenohAdapter(EventSource, CannotServe):
         with anyio.move_on_after(max(deadline - anyio.current_time(), 0.0)):
             while not done:
                 for item in await session.inbox.get_batch():
-                    if item[0] == QUERY_DONE and item[1] == query_id:
+                    if type(item) is rz.QueryDone and item.query_id == query_id:
                         done = True
                     else:
                         self._handle_early(item)
@@ -255,14 +219,12 @@ class ZenohAdapter(EventSource, CannotServe):
         self._rebuild_graph()
         self._bootstrapped = True
 
-    def _handle_early(self, item: Item) -> None:
-        kind = item[0]
-        if kind == REPLY:
-            ok, _attachment = item[4]
-            if ok and item[2] is not None:
-                self._on_token(item[2], True)
-        elif kind == LIVELINESS:
-            self._on_token(item[2], item[3])
+    def _handle_early(self, item: rz.InboxItem) -> None:
+        if type(item) is rz.Reply:
+            if item.ok and item.key is not None:
+                self._on_token(item.key, True)
+        elif type(item) is rz.LivelinessChange:
+            self._on_token(item.key, item.alive)
 
     def _on_token(self, key: str, alive: bool) -> bool:
         """Follow one liveliness change; True when the graph changed."""
@@ -343,26 +305,24 @@ class ZenohAdapter(EventSource, CannotServe):
             batch = await inbox.get_batch()
             graph_changed = False
             for item in batch:
-                kind = item[0]
-                if kind == DATA:
-                    sub = by_tag.get(item[1])
+                if type(item) is rz.Sample:
+                    sub = by_tag.get(item.tag)
                     if sub is None:
                         pass
                     elif sub.feedback_of is not None:
-                        self._on_feedback(sub, item[3], item[4])
+                        self._on_feedback(sub, item.payload, item.attachment)
                     else:
-                        self._on_sample(sub, item[2], item[3], item[4])
-                elif kind == LIVELINESS:
-                    graph_changed |= self._on_token(item[2], item[3])
-                elif kind == REPLY:
-                    query = self._queries.get(item[1])
+                        self._on_sample(sub, item.key, item.payload, item.attachment)
+                elif type(item) is rz.LivelinessChange:
+                    graph_changed |= self._on_token(item.key, item.alive)
+                elif type(item) is rz.Reply:
+                    query = self._queries.get(item.query_id)
                     if query is not None:
-                        ok, attachment = item[4]
-                        query.replies.append((ok, item[3], attachment))
-                elif kind == QUERY_DONE:
-                    self._on_query_done(item[1])
-                elif kind == LOST:
-                    self._lost = str(item[3])
+                        query.replies.append((item.ok, item.payload, item.attachment))
+                elif type(item) is rz.QueryDone:
+                    self._on_query_done(item.query_id)
+                elif type(item) is rz.SessionLost:
+                    self._lost = item.reason
             overflowed = inbox.overflowed
             if overflowed:
                 inbox.overflowed = 0
@@ -381,45 +341,14 @@ class ZenohAdapter(EventSource, CannotServe):
                 self._emit(GraphChanged(self.topics, self.services))
             await self._deliver()
 
-    def _on_feedback(
-        self,
-        sub: _Subscription,
-        payload: bytes,
-        attachment: bytes | None,
-    ) -> None:
-        """One ``_action/feedback`` sample: to the goal its uuid names (the
-        topic carries every client's goals; others' are ignored)."""
-        if not _valid_attachment(attachment):
-            self._reject("attachment", f"{sub.topic}: a sample without a valid attachment")
-            return
-        goals = [g for g in self._goals.values() if g.action == sub.feedback_of]
-        if not goals:
-            return
-        decode = goals[0].feedback_decode
-        if decode is None:
-            return
-        try:
-            message = decode(memoryview(payload))
-        except DecodeError as exc:
-            self._reject("decode", f"{sub.topic}: {exc}")
-            return
-        raw = _field(_field(message, "goal_id"), "uuid")
-        try:
-            goal_uuid = bytes(raw) if raw is not None else b""
-        except (TypeError, ValueError):
-            goal_uuid = b""
-        goal = self._goals.get(goal_uuid)
-        if goal is not None:
-            goal.events.on_feedback(_field(message, "feedback"))
-
     def _on_sample(
         self,
-        sub: _Subscription,
+        sub: Subscription,
         key: str,
         payload: bytes,
         attachment: bytes | None,
     ) -> None:
-        if attachment is None or not _valid_attachment(attachment):
+        if attachment is None or not valid_attachment(attachment):
             self._reject(
                 "attachment",
                 f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
@@ -507,7 +436,7 @@ class ZenohAdapter(EventSource, CannotServe):
         tag = next(self._tags)
         selector = f"{self.domain}/{topic.lstrip('/')}/*/*"
         handle = self._session.subscribe(selector, tag)
-        sub = _Subscription(topic, tag, handle)
+        sub = Subscription(topic, tag, handle)
         self._subs[topic] = sub
         self._by_tag[tag] = sub
         if type_name is not None:
@@ -530,7 +459,7 @@ class ZenohAdapter(EventSource, CannotServe):
 
         await anyio.to_thread.run_sync(build)
 
-    def _declare_subscription_token(self, sub: _Subscription, type_name: str) -> None:
+    def _declare_subscription_token(self, sub: Subscription, type_name: str) -> None:
         try:
             hash_ = self._type_hash(type_name)
         except SchemaError:
@@ -618,224 +547,6 @@ class ZenohAdapter(EventSource, CannotServe):
         except Exception as exc:  # a closed session
             raise ConnectError(f"zenoh: put failed: {exc}") from exc
 
-    # -- services ---------------------------------------------------------------------------
-    def _client_identity(self, service: str, srv_type: str, hash_: str) -> bytes:
-        known = self._client_gids.get(service)
-        if known is not None:
-            return known[0]
-        key = self._token_key(
-            rz.EntityKind.CLIENT,
-            next(self._ids),
-            name=service,
-            type_name=srv_type,
-            hash_=hash_,
-            qos=rz.Qos(),
-        )
-        gid = rz.entity_gid(key)
-        self._client_gids[service] = (gid, self._session.declare_token(key))
-        return gid
-
-    def _check_pending(self, what: str, *, goal: bool = False) -> None:
-        limit = self._options.max_pending_requests
-        if len(self._calls) + len(self._goals) >= limit:
-            reason = f"{limit} requests already wait for an answer (max_pending_requests)"
-            raise ActionGoalError(what, reason) if goal else ServiceError(what, reason)
-
-    def _start_query(
-        self,
-        service: str,
-        srv_type: str,
-        payload: bytes,
-        timeout: float,
-        on_done: Callable[[list[tuple[bool, bytes, bytes | None]]], None] | None = None,
-    ) -> int:
-        try:
-            hash_ = self._type_hash(srv_type)
-        except SchemaError as exc:
-            raise ServiceError(service, f"cannot compute the type hash: {exc}") from exc
-        key = rz.format_key(rz.TopicKey(self.domain, service, srv_type, hash_))
-        gid = self._client_identity(service, srv_type, hash_)
-        attachment = rz.encode_attachment(next(self._call_seq), time.time_ns(), gid)
-        query_id = self._session.query(key, payload=payload, attachment=attachment, timeout=timeout)
-        self._queries[query_id] = _Query(service, on_done=on_done)
-        return query_id
-
-    async def _request(self, service: str, srv_type: str, request: Any, timeout: float) -> Any:
-        """Call ``service`` (of type ``srv_type``) and return the decoded
-        response; ``ServiceError`` with the reason otherwise."""
-        req_name, res_name = CodecRegistry.service_type_names(srv_type)
-        try:
-            payload = self.codecs.encoder(req_name, "cdr")(request if request is not None else {})
-            decode = self.codecs.decoder(res_name, "cdr")
-        except SchemaError as exc:
-            raise ServiceError(service, f"no definition of {srv_type}: {exc}") from exc
-        self._check_pending(service)
-        query_id = self._start_query(service, srv_type, payload, timeout)
-        replies = await self._calls.request(query_id, _noop)
-        for ok, body, _attachment in replies:
-            if not ok:
-                text = body.decode("utf-8", "replace")
-                raise ServiceError(service, f"the server replied with an error: {text}")
-            try:
-                return decode(memoryview(body))
-            except DecodeError as exc:
-                raise ServiceError(service, f"the response does not decode: {exc}") from exc
-        raise ServiceError(service, f"no reply within {timeout:g} s")
-
-    async def call_service(self, name: str, request: Any, timeout: float) -> Any:
-        srv_type = self._service_type(name)
-        if srv_type is None:
-            raise ServiceError(name, "no server offers this service on this domain")
-        return await self._request(name, srv_type, request, timeout)
-
-    # -- actions ----------------------------------------------------------------------------
-    async def send_action_goal(
-        self, action: str, action_type: str, goal: Any, events: GoalEvents
-    ) -> str:
-        pkg, _, name = _split_type(action_type, "action")
-        base = f"{pkg}/action/{name}"
-        send_goal = f"{action}/_action/send_goal"
-        if self._service_type(send_goal) is None:
-            raise ActionGoalError(action, "no action server offers it")
-        self._check_pending(action, goal=True)
-        try:
-            feedback_decode: Decoder | None = self.codecs.decoder(f"{base}_FeedbackMessage", "cdr")
-        except SchemaError as exc:
-            raise ActionGoalError(action, f"no definition of {action_type}: {exc}") from exc
-        goal_uuid = uuid.uuid4().bytes
-        uuid_msg = {"uuid": list(goal_uuid)}
-        await self._ensure_feedback(action, base)
-        handle = _Goal(action, base, goal_uuid, events, feedback_decode)
-        self._goals[goal_uuid] = handle
-        try:
-            answer = await self._request(
-                send_goal,
-                f"{base}_SendGoal",
-                {"goal_id": uuid_msg, "goal": goal},
-                self._options.service_timeout,
-            )
-        except ServiceError as exc:
-            self._goals.pop(goal_uuid, None)
-            raise ActionGoalError(action, exc.reason) from exc
-        except BaseException:
-            self._goals.pop(goal_uuid, None)
-            raise
-        if not _field(answer, "accepted"):
-            self._goals.pop(goal_uuid, None)
-            raise ActionGoalError(action, "the action server rejected the goal")
-        self._ask_result(handle)
-        return goal_uuid.hex()
-
-    def _ask_result(self, goal: _Goal) -> None:
-        srv_type = f"{goal.action_type}_GetResult"
-        _req, res_name = CodecRegistry.service_type_names(srv_type)
-        try:
-            payload = self.codecs.encoder(_req, "cdr")({"goal_id": {"uuid": list(goal.uuid)}})
-            decode = self.codecs.decoder(res_name, "cdr")
-        except SchemaError as exc:
-            self._goals.pop(goal.uuid, None)
-            goal.events.on_failed(f"no definition of {srv_type}: {exc}")
-            return
-
-        def done(replies: list[tuple[bool, bytes, bytes | None]]) -> None:
-            if self._goals.pop(goal.uuid, None) is None:
-                return
-            for ok, body, _attachment in replies:
-                if not ok:
-                    goal.events.on_failed(body.decode("utf-8", "replace"))
-                    return
-                try:
-                    answer = decode(memoryview(body))
-                except DecodeError as exc:
-                    goal.events.on_failed(f"the result does not decode: {exc}")
-                    return
-                status = _field(answer, "status")
-                code = status if isinstance(status, int) else None
-                goal.events.on_result(code, _field(answer, "result"), code == _GOAL_SUCCEEDED)
-                return
-            goal.events.on_failed("the action server sent no result")
-
-        self._start_query(
-            f"{goal.action}/_action/get_result", srv_type, payload, _RESULT_TIMEOUT, done
-        )
-
-    async def _ensure_feedback(self, action: str, base: str) -> None:
-        if action in self._feedback_subs:
-            return
-        topic = f"{action}/_action/feedback"
-        tag = next(self._tags)
-        handle = self._session.subscribe(f"{self.domain}/{topic.lstrip('/')}/*/*", tag)
-        sub = _Subscription(topic, tag, handle, feedback_of=action)
-        self._feedback_subs[action] = sub
-        self._by_tag[tag] = sub
-
-    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
-        request = {"goal_info": {"goal_id": {"uuid": list(bytes.fromhex(goal_id))}}}
-        await self._request(
-            f"{action}/_action/cancel_goal",
-            "action_msgs/srv/CancelGoal",
-            request,
-            self._options.service_timeout,
-        )
-
-    # -- parameters --------------------------------------------------------------------------
-    # Each ROS node serves its own parameters (rcl_interfaces services under
-    # its name); names are written "/node:param" as over rosbridge.
-    async def _node_call(self, node: str, service: str, request: Any) -> Any:
-        name = f"{node}/{service}"
-        srv_type = self._service_type(name)
-        if srv_type is None:
-            raise ServiceError(name, f"node {node} offers no {service} service")
-        return await self._request(name, srv_type, request, self._options.service_timeout)
-
-    def _parameter_nodes(self) -> list[str]:
-        suffix = "/list_parameters"
-        return sorted(
-            info.name[: -len(suffix)]
-            for info in self._service_infos
-            if info.name.endswith(suffix) and info.type.endswith("/ListParameters")
-        )
-
-    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
-        if not names:
-            listed: list[str] = []
-            for node in self._parameter_nodes():
-                answer = await self._node_call(node, "list_parameters", {})
-                found = _field(_field(answer, "result"), "names") or []
-                listed.extend(f"{node}:{param}" for param in found)
-            names = listed
-        values: dict[str, Any] = {}
-        for node, params in _by_node(names).items():
-            if self._service_type(f"{node}/get_parameters") is None:
-                continue  # no such node: its parameters are absent from the result
-            answer = await self._node_call(node, "get_parameters", {"names": params})
-            for param, value in zip(params, _field(answer, "values") or (), strict=False):
-                known, plain = parameter_from_ros(value)
-                if known:
-                    values[f"{node}:{param}"] = plain
-        return values
-
-    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
-        for node, params in _by_node(list(values)).items():
-            request = {
-                "parameters": [
-                    {"name": param, "value": parameter_to_ros(values[f"{node}:{param}"])}
-                    for param in params
-                ]
-            }
-            answer = await self._node_call(node, "set_parameters", request)
-            for param, result in zip(params, _field(answer, "results") or (), strict=False):
-                if not _field(result, "successful"):
-                    reason = _field(result, "reason") or "refused"
-                    raise ServiceError(f"{node}/set_parameters", f"{param}: {reason}")
-        return await self.get_parameters(list(values))
-
-    async def subscribe_parameters(self, names: Sequence[str]) -> None:
-        raise NotSupportedError("parameter updates over zenoh are not implemented yet")
-
-    async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
-        return None
-
     # -- lifecycle -----------------------------------------------------------------------------
     async def fetch_definition(self, schema: str) -> bool:
         return self.codecs.resolves(schema)  # zenoh carries no definitions
@@ -847,7 +558,7 @@ class ZenohAdapter(EventSource, CannotServe):
         self._check_alive()
         query_id = self._session.query_liveliness(self._node_key, timeout=timeout)
         finished = anyio.Event()
-        self._queries[query_id] = _Query("round trip", on_done=lambda _r: finished.set())
+        self._queries[query_id] = Query("round trip", on_done=lambda _r: finished.set())
         with anyio.move_on_after(timeout):
             await finished.wait()
         return finished.is_set()
@@ -889,7 +600,7 @@ class ZenohAdapter(EventSource, CannotServe):
             if missing_since is None:
                 missing_since = now
             elif now - missing_since >= self._options.keepalive_timeout:
-                self._session.inbox.push((LOST, 0, None, "the router is gone", None))
+                self._session.inbox.push(rz.SessionLost("the router is gone"))
                 return
 
     @property
@@ -898,95 +609,3 @@ class ZenohAdapter(EventSource, CannotServe):
 
     async def aclose(self) -> None:
         await self._session.aclose()
-
-
-async def _noop() -> None:
-    return None
-
-
-def _valid_attachment(attachment: bytes | None) -> bool:
-    """rmw_zenoh's 33-byte layout (see ``wire.rmw_zenoh``): checked by size
-    and the gid length byte only, on the hot path."""
-    return attachment is not None and len(attachment) == _ATTACHMENT_SIZE and attachment[16] == 0x10
-
-
-def _field(value: Any, name: str) -> Any:
-    if isinstance(value, Mapping):
-        return value.get(name)
-    return getattr(value, name, None)
-
-
-def _by_node(names: Sequence[str]) -> dict[str, list[str]]:
-    """``["/a:x", "/a:y", "/b:z"]`` -> ``{"/a": ["x", "y"], "/b": ["z"]}``;
-    ``ValueError`` for a name that is not ``/node:param``."""
-    out: dict[str, list[str]] = {}
-    for name in names:
-        node, sep, param = name.partition(":")
-        if not sep or not node.startswith("/") or not param:
-            raise ValueError(f"a parameter name is /node:param, got {name!r}")
-        out.setdefault(node, []).append(param)
-    return out
-
-
-# rcl_interfaces/msg/ParameterType codes and the ParameterValue field of each
-_PARAM_FIELDS: Final = {
-    1: "bool_value",
-    2: "integer_value",
-    3: "double_value",
-    4: "string_value",
-    5: "byte_array_value",
-    6: "bool_array_value",
-    7: "integer_array_value",
-    8: "double_array_value",
-    9: "string_array_value",
-}
-
-
-def parameter_from_ros(value: Any) -> tuple[bool, Any]:
-    """A decoded ``rcl_interfaces/msg/ParameterValue`` as ``(set, plain)``:
-    ``(False, None)`` for PARAMETER_NOT_SET."""
-    code = _field(value, "type")
-    name = _PARAM_FIELDS.get(code) if isinstance(code, int) else None
-    if name is None:
-        return False, None
-    plain = _field(value, name)
-    if code == 5 and not isinstance(plain, bytes | bytearray):
-        plain = bytes(plain or ())
-    elif code >= 6 and plain is not None and not isinstance(plain, list):
-        plain = list(plain)
-    return True, plain
-
-
-def parameter_to_ros(value: Any) -> dict[str, Any]:
-    """A Python value as an ``rcl_interfaces/msg/ParameterValue`` dict;
-    ``ValueError`` for a value no parameter type holds."""
-    if isinstance(value, bool):
-        return {"type": 1, "bool_value": value}
-    if isinstance(value, int):
-        return {"type": 2, "integer_value": value}
-    if isinstance(value, float):
-        return {"type": 3, "double_value": value}
-    if isinstance(value, str):
-        return {"type": 4, "string_value": value}
-    if isinstance(value, bytes | bytearray):
-        return {"type": 5, "byte_array_value": list(value)}
-    if isinstance(value, list | tuple):
-        items = list(value)
-        if all(isinstance(v, bool) for v in items):
-            return {"type": 6, "bool_array_value": items}
-        if all(isinstance(v, int) and not isinstance(v, bool) for v in items):
-            return {"type": 7, "integer_array_value": items}
-        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
-            return {"type": 8, "double_array_value": [float(v) for v in items]}
-        if all(isinstance(v, str) for v in items):
-            return {"type": 9, "string_array_value": items}
-    raise ValueError(f"no ROS parameter type holds {value!r}")
-
-
-def _split_type(type_name: str, namespace: str) -> tuple[str, str, str]:
-    parts = type_name.split("/")
-    if len(parts) == 2:
-        return parts[0], namespace, parts[1]
-    if len(parts) == 3 and parts[1] == namespace:
-        return parts[0], parts[1], parts[2]
-    raise ValueError(f"not a {namespace} type: {type_name!r}")

@@ -36,34 +36,16 @@ import anyio.to_thread
 import sniffio
 
 from .._errors import ConnectError, NotSupportedError
+from ..wire.rmw_zenoh import InboxItem, LivelinessChange, QueryDone, Reply, Sample
 
 if TYPE_CHECKING:
     import zenoh
 
 __all__ = [
-    "DATA",
-    "LIVELINESS",
-    "LOST",
-    "QUERY_DONE",
-    "REPLY",
     "Inbox",
     "ZenohSession",
     "load_zenoh",
 ]
-
-# Inbox item kinds: (kind, tag, key, payload, attachment)
-DATA: Final = 0
-"""A data sample: ``(DATA, tag, key, payload bytes, attachment bytes | None)``."""
-LIVELINESS: Final = 1
-"""A liveliness change: ``(LIVELINESS, tag, key, alive: bool, None)``."""
-REPLY: Final = 2
-"""A query reply: ``(REPLY, query id, key | None, payload or error bytes, (ok, attachment))``."""
-QUERY_DONE: Final = 3
-"""A query will get no more replies: ``(QUERY_DONE, query id, None, None, None)``."""
-LOST: Final = 4
-"""The session lost its router: ``(LOST, 0, None, reason str, None)``."""
-
-Item = tuple[int, int, Any, Any, Any]
 
 _EXTRA_HINT: Final = "pip install 'ros-mobile-bridge[zenoh]'"
 
@@ -105,7 +87,7 @@ class Inbox:
 
     def __init__(self, max_items: int, max_bytes: int) -> None:
         self._lock = threading.Lock()
-        self._items: list[Item] = []
+        self._items: list[InboxItem] = []
         self._bytes = 0
         self._max_items = max_items
         self._max_bytes = max_bytes
@@ -128,7 +110,7 @@ class Inbox:
             except Exception:  # the loop is gone: nobody will read any more
                 self._closed = True
 
-    def push(self, item: Item) -> None:
+    def push(self, item: InboxItem) -> None:
         """Queue a control item (never dropped while the inbox is open)."""
         with self._lock:
             if self._closed:
@@ -136,7 +118,7 @@ class Inbox:
             self._items.append(item)
             self._schedule_wake()
 
-    def push_data(self, item: Item, size: int) -> bool:
+    def push_data(self, item: Sample, size: int) -> bool:
         """Queue a data sample of ``size`` payload bytes, unless the inbox is
         full (then count it and return False)."""
         with self._lock:
@@ -146,7 +128,7 @@ class Inbox:
                 self._bytes and self._bytes + size > self._max_bytes
             ):
                 self.overflowed += 1
-                tag = item[1]
+                tag = item.tag
                 self.overflowed_by_tag[tag] = self.overflowed_by_tag.get(tag, 0) + 1
                 return False
             self._items.append(item)
@@ -154,7 +136,7 @@ class Inbox:
             self._schedule_wake()
             return True
 
-    async def get_batch(self) -> list[Item]:
+    async def get_batch(self) -> list[InboxItem]:
         """Everything queued, oldest first; waits until there is something."""
         while True:
             with self._lock:
@@ -260,7 +242,8 @@ class ZenohSession:
 
     # -- declarations ----------------------------------------------------------
     def subscribe(self, key_expr: str, tag: int) -> int:
-        """Declare a data subscriber; its samples arrive as ``DATA`` items
+        """Declare a data subscriber; its samples arrive as
+        :class:`~ros_mobile_bridge.wire.rmw_zenoh.Sample` items
         tagged ``tag``. Returns a handle for :meth:`undeclare`."""
         inbox = self.inbox
 
@@ -268,8 +251,7 @@ class ZenohSession:
             payload = sample.payload.to_bytes()
             attachment = sample.attachment
             inbox.push_data(
-                (
-                    DATA,
+                Sample(
                     tag,
                     str(sample.key_expr),
                     payload,
@@ -282,13 +264,13 @@ class ZenohSession:
 
     def subscribe_liveliness(self, key_expr: str, tag: int) -> int:
         """Declare a liveliness subscriber with history (the tokens alive now
-        are reported first); changes arrive as ``LIVELINESS`` items."""
+        are reported first); changes arrive as ``LivelinessChange`` items."""
         z = load_zenoh()
         inbox = self.inbox
         put = z.SampleKind.PUT
 
         def on_change(sample: zenoh.Sample) -> None:
-            inbox.push((LIVELINESS, tag, str(sample.key_expr), sample.kind == put, None))
+            inbox.push(LivelinessChange(tag, str(sample.key_expr), sample.kind == put))
 
         sub = self._session.liveliness().declare_subscriber(key_expr, on_change, history=True)
         return self._keep(sub)
@@ -307,21 +289,21 @@ class ZenohSession:
             if ok is not None:
                 attachment = ok.attachment
                 inbox.push(
-                    (
-                        REPLY,
+                    Reply(
                         query_id,
                         str(ok.key_expr),
                         ok.payload.to_bytes(),
-                        (True, None if attachment is None else attachment.to_bytes()),
+                        True,
+                        None if attachment is None else attachment.to_bytes(),
                     )
                 )
             else:
                 err = reply.err
                 text = err.payload.to_bytes() if err is not None else b""
-                inbox.push((REPLY, query_id, None, text, (False, None)))
+                inbox.push(Reply(query_id, None, text, False, None))
 
         def on_done() -> None:
-            inbox.push((QUERY_DONE, query_id, None, None, None))
+            inbox.push(QueryDone(query_id))
 
         return z.handlers.Callback(on_reply, on_done)
 
@@ -333,8 +315,8 @@ class ZenohSession:
         attachment: bytes | None = None,
         timeout: float,
     ) -> int:
-        """Send a query; its replies arrive as ``REPLY`` items with the
-        returned query id, then one ``QUERY_DONE`` (after the last reply or
+        """Send a query; its replies arrive as ``Reply`` items with the
+        returned query id, then one ``QueryDone`` (after the last reply or
         the timeout). Replies from every matching queryable are awaited
         (target ALL_COMPLETE), as rmw_zenoh's service clients do."""
         z = load_zenoh()
@@ -352,7 +334,7 @@ class ZenohSession:
 
     def query_liveliness(self, selector: str, *, timeout: float) -> int:
         """A liveliness query: each alive token matching ``selector`` comes
-        back as a ``REPLY`` (its key), then ``QUERY_DONE``."""
+        back as a ``Reply`` (its key), then ``QueryDone``."""
         self._queries += 1
         query_id = self._queries
         self._session.liveliness().get(

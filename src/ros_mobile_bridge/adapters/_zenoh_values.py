@@ -1,0 +1,152 @@
+"""Plain values of the Zenoh adapter (``adapters/_zenoh.py``): its records of
+subscriptions, queries and goals, and the helpers that read and write ROS
+values (parameters, action type names, decoded fields, attachments)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Final
+
+from ..flow import Decoder
+from ..wire import rmw_zenoh as rz
+from ._seam import GoalEvents
+
+__all__ = [
+    "Goal",
+    "Query",
+    "Subscription",
+    "by_node",
+    "default_domain",
+    "parameter_from_ros",
+    "parameter_to_ros",
+    "ros_field",
+    "split_type",
+    "valid_attachment",
+]
+
+_ATTACHMENT_SIZE: Final = rz.ATTACHMENT_SIZE
+
+
+def default_domain() -> int:
+    """``$ROS_DOMAIN_ID`` when it is a valid domain id, else 0."""
+    raw = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if raw.isdigit() and 0 <= int(raw) <= 232:
+        return int(raw)
+    return 0
+
+
+@dataclass(slots=True)
+class Subscription:
+    topic: str
+    tag: int
+    handle: int
+    token: int | None = None
+    feedback_of: str | None = None  # the action whose feedback topic this is
+    # sample key -> (type name, decoder); bounded by _zenoh._MAX_KEYS_PER_TOPIC
+    keys: dict[str, tuple[str, Decoder | None]] = field(default_factory=dict)
+
+
+@dataclass(slots=True)
+class Query:
+    name: str
+    replies: list[tuple[bool, bytes, bytes | None]] = field(default_factory=list)
+    on_done: Callable[[list[tuple[bool, bytes, bytes | None]]], None] | None = None
+
+
+@dataclass(slots=True)
+class Goal:
+    action: str
+    action_type: str
+    uuid: bytes
+    events: GoalEvents
+    feedback_decode: Decoder | None
+
+
+def valid_attachment(attachment: bytes | None) -> bool:
+    """rmw_zenoh's 33-byte layout (see ``wire.rmw_zenoh``): checked by size
+    and the gid length byte only, on the hot path."""
+    return attachment is not None and len(attachment) == _ATTACHMENT_SIZE and attachment[16] == 0x10
+
+
+def ros_field(value: Any, name: str) -> Any:
+    if isinstance(value, Mapping):
+        return value.get(name)
+    return getattr(value, name, None)
+
+
+def by_node(names: Sequence[str]) -> dict[str, list[str]]:
+    """``["/a:x", "/a:y", "/b:z"]`` -> ``{"/a": ["x", "y"], "/b": ["z"]}``;
+    ``ValueError`` for a name that is not ``/node:param``."""
+    out: dict[str, list[str]] = {}
+    for name in names:
+        node, sep, param = name.partition(":")
+        if not sep or not node.startswith("/") or not param:
+            raise ValueError(f"a parameter name is /node:param, got {name!r}")
+        out.setdefault(node, []).append(param)
+    return out
+
+
+# rcl_interfaces/msg/ParameterType codes and the ParameterValue field of each
+_PARAM_FIELDS: Final = {
+    1: "bool_value",
+    2: "integer_value",
+    3: "double_value",
+    4: "string_value",
+    5: "byte_array_value",
+    6: "bool_array_value",
+    7: "integer_array_value",
+    8: "double_array_value",
+    9: "string_array_value",
+}
+
+
+def parameter_from_ros(value: Any) -> tuple[bool, Any]:
+    """A decoded ``rcl_interfaces/msg/ParameterValue`` as ``(set, plain)``:
+    ``(False, None)`` for PARAMETER_NOT_SET."""
+    code = ros_field(value, "type")
+    name = _PARAM_FIELDS.get(code) if isinstance(code, int) else None
+    if name is None:
+        return False, None
+    plain = ros_field(value, name)
+    if code == 5 and not isinstance(plain, bytes | bytearray):
+        plain = bytes(plain or ())
+    elif code >= 6 and plain is not None and not isinstance(plain, list):
+        plain = list(plain)
+    return True, plain
+
+
+def parameter_to_ros(value: Any) -> dict[str, Any]:
+    """A Python value as an ``rcl_interfaces/msg/ParameterValue`` dict;
+    ``ValueError`` for a value no parameter type holds."""
+    if isinstance(value, bool):
+        return {"type": 1, "bool_value": value}
+    if isinstance(value, int):
+        return {"type": 2, "integer_value": value}
+    if isinstance(value, float):
+        return {"type": 3, "double_value": value}
+    if isinstance(value, str):
+        return {"type": 4, "string_value": value}
+    if isinstance(value, bytes | bytearray):
+        return {"type": 5, "byte_array_value": list(value)}
+    if isinstance(value, list | tuple):
+        items = list(value)
+        if all(isinstance(v, bool) for v in items):
+            return {"type": 6, "bool_array_value": items}
+        if all(isinstance(v, int) and not isinstance(v, bool) for v in items):
+            return {"type": 7, "integer_array_value": items}
+        if all(isinstance(v, int | float) and not isinstance(v, bool) for v in items):
+            return {"type": 8, "double_array_value": [float(v) for v in items]}
+        if all(isinstance(v, str) for v in items):
+            return {"type": 9, "string_array_value": items}
+    raise ValueError(f"no ROS parameter type holds {value!r}")
+
+
+def split_type(type_name: str, namespace: str) -> tuple[str, str, str]:
+    parts = type_name.split("/")
+    if len(parts) == 2:
+        return parts[0], namespace, parts[1]
+    if len(parts) == 3 and parts[1] == namespace:
+        return parts[0], parts[1], parts[2]
+    raise ValueError(f"not a {namespace} type: {type_name!r}")
