@@ -10,6 +10,7 @@ import logging
 import signal
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from signal import Signals  # in SignalScope's body, its ``signal`` property hides the module
 
 import anyio
 import anyio.abc
@@ -30,7 +31,6 @@ class SignalScope:
 
     def __init__(self) -> None:
         self._signal: signal.Signals | None = None
-        self._body = anyio.CancelScope()
 
     @property
     def signal(self) -> signal.Signals | None:
@@ -42,28 +42,30 @@ class SignalScope:
         """``128 + signal`` once a signal cancelled the scope, else ``None``."""
         return None if self._signal is None else 128 + int(self._signal)
 
-
-async def _watch(
-    signals: tuple[signal.Signals, ...],
-    scope: SignalScope,
-    log: logging.Logger,
-    *,
-    task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
-) -> None:
-    with anyio.open_signal_receiver(*signals) as received:
-        task_status.started()
-        async for signum in received:
-            sig = signal.Signals(signum)
-            if scope._signal is None:
-                scope._signal = sig
-                log.warning("%s received: stopping (send it again to exit at once)", sig.name)
-                scope._body.cancel()
-                continue
-            # The teardown is taking too long for whoever sends this: give the
-            # signal its default action (for these three: end the process).
-            log.error("%s received again: exiting at once, without the teardown", sig.name)
-            signal.signal(signum, signal.SIG_DFL)
-            signal.raise_signal(signum)
+    async def _watch(
+        self,
+        signals: tuple[Signals, ...],
+        body: anyio.CancelScope,
+        log: logging.Logger,
+        *,
+        task_status: anyio.abc.TaskStatus[None] = anyio.TASK_STATUS_IGNORED,
+    ) -> None:
+        """Wait for ``signals``: the first one is recorded here and cancels
+        ``body``; a second one ends the process."""
+        with anyio.open_signal_receiver(*signals) as received:
+            task_status.started()
+            async for signum in received:
+                sig = signal.Signals(signum)
+                if self._signal is None:
+                    self._signal = sig
+                    log.warning("%s received: stopping (send it again to exit at once)", sig.name)
+                    body.cancel()
+                    continue
+                # The teardown is taking too long for whoever sends this: give the
+                # signal its default action (for these three: end the process).
+                log.error("%s received again: exiting at once, without the teardown", sig.name)
+                signal.signal(signum, signal.SIG_DFL)
+                signal.raise_signal(signum)
 
 
 @asynccontextmanager
@@ -95,12 +97,14 @@ async def cancel_on_signals(
     chosen = tuple(signal.Signals(s) for s in signals) if signals else DEFAULT_SIGNALS
     log = logger if logger is not None else logging.getLogger("ros_mobile_bridge")
     scope = SignalScope()
+    body = anyio.CancelScope()
     body_error: BaseException | None = None
     cancelled = anyio.get_cancelled_exc_class()
     async with anyio.create_task_group() as tg:
-        await tg.start(_watch, chosen, scope, log)
+        # the scope records the signal and cancels the body itself (a method of this module's class)
+        await tg.start(scope._watch, chosen, body, log)
         try:
-            with scope._body:
+            with body:
                 yield scope
         except cancelled:
             raise  # an outer scope's cancellation: the task group passes it on

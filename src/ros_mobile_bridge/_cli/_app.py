@@ -17,16 +17,13 @@ import re
 import signal
 import sys
 import traceback
-from collections.abc import Awaitable, Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Any
 
-import anyio
-
 from .._errors import DecodeError, RosBridgeError, SchemaError
-from .._signals import cancel_on_signals
 from .._version import __version__
 from ._format import UsageError
+from ._verb import Verb, run_signalled
 
 if sys.version_info < (3, 11):  # pragma: no cover - the backport anyio installs there
     from exceptiongroup import BaseExceptionGroup
@@ -36,51 +33,9 @@ __all__ = ["ENV_URL", "Verb", "main"]
 ENV_URL = "RMB_URL"
 """The environment variable holding the robot's address when none is given."""
 
-AsyncRun = Callable[[argparse.Namespace], Awaitable[int]]
-
-
-@dataclass(frozen=True)
-class Verb:
-    """One command: ``path`` its words (``("param", "get")``), ``args`` its
-    positional arguments (``"NAME"``, ``"NAME?"`` optional, ``"NAME*"`` any
-    number), ``build`` adds its options, and exactly one of ``run`` (async,
-    connected to a robot) or ``run_sync`` (no robot address) runs it.
-    ``graph_names``: its first argument is a ROS graph name (topic, service,
-    action), so a bare host name before it is read as the address."""
-
-    path: tuple[str, ...]
-    help: str
-    args: tuple[str, ...] = ()
-    build: Callable[[argparse.ArgumentParser], None] | None = None
-    run: AsyncRun | None = None
-    run_sync: Callable[[argparse.Namespace], int] | None = None
-    graph_names: bool = True
-    hidden: bool = False
-
-    @property
-    def bounds(self) -> tuple[int, float]:
-        low = sum(1 for a in self.args if not a.endswith(("?", "*")))
-        high = float("inf") if any(a.endswith(("*", "+")) for a in self.args) else len(self.args)
-        return low, high
-
-    @property
-    def usage_args(self) -> str:
-        parts = []
-        for a in self.args:
-            name = a.rstrip("?*+")
-            if a.endswith("?"):
-                parts.append(f"[{name}]")
-            elif a.endswith("*"):
-                parts.append(f"[{name} ...]")
-            elif a.endswith("+"):
-                parts.append(f"{name} [{name} ...]")
-            else:
-                parts.append(name)
-        return " ".join(parts)
-
 
 def _verbs() -> list[Verb]:
-    from . import _demo, _record, _ros, _topic
+    from . import _demo, _record, _ros, _topic  # they import _verb, never this module
 
     return [*_demo.VERBS, *_topic.VERBS, *_ros.VERBS, *_record.VERBS]
 
@@ -282,23 +237,6 @@ def parse(argv: Sequence[str]) -> tuple[Verb, argparse.Namespace]:
 
 
 # -- running ---------------------------------------------------------------------------------
-
-
-def run_signalled(fn: Callable[..., Awaitable[Any]], *args: Any, backend: str) -> int:
-    """Run ``fn(*args)`` on ``backend``, cancelled by SIGINT, SIGTERM or
-    SIGHUP (so every ``connect()`` block runs its teardown); the exit status
-    is 128 + signal then, else what ``fn`` returned (None: 0). A second
-    signal ends the process at once."""
-
-    async def signalled() -> int:
-        code: Any = 0
-        async with cancel_on_signals() as stop:
-            code = await fn(*args)
-        if stop.exit_code is not None:
-            return stop.exit_code
-        return int(code or 0)
-
-    return int(anyio.run(signalled, backend=backend))
 
 
 def _stdout_closed() -> int:

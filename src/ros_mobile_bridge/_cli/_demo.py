@@ -18,7 +18,7 @@ import anyio
 
 from .. import _connect
 from .._options import ClientOptions
-from ._app import Verb, run_signalled
+from ._verb import Verb, run_signalled
 
 __all__ = ["VERBS"]
 

@@ -13,8 +13,8 @@ import anyio
 
 from .._client import Client
 from .._record import Recording
-from ._app import Verb
 from ._common import NOTICE_AFTER_S, missing_line, open_robot, warn
+from ._verb import Verb
 
 __all__ = ["VERBS"]
 

@@ -12,7 +12,6 @@ from .._action import ActionGoal
 from .._client import Client
 from .._errors import RosBridgeError, SchemaError
 from ..codec import FieldDef
-from ._app import Verb
 from ._common import missing_line, open_robot, out, warn
 from ._format import (
     UsageError,
@@ -24,6 +23,7 @@ from ._format import (
     parse_yaml_value,
     plain,
 )
+from ._verb import Verb
 
 __all__ = ["VERBS"]
 

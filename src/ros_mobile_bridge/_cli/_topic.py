@@ -15,7 +15,6 @@ import anyio
 from .._client import Client
 from .._errors import NotConnected
 from .._types import Message, Priority
-from ._app import Verb
 from ._common import missing_line, notice_if_missing, open_robot, out, warn
 from ._format import (
     UsageError,
@@ -27,6 +26,7 @@ from ._format import (
     plain,
     select_field,
 )
+from ._verb import Verb
 
 __all__ = ["VERBS"]
 

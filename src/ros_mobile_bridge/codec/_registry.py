@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import threading
 from collections import OrderedDict
-from collections.abc import Callable, Hashable, Mapping
+from collections.abc import Callable, Hashable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Final, cast
 
@@ -384,6 +386,16 @@ class CodecRegistry:
         except (TypeError, ValueError):
             return False
         return found is not None and same_type_name(found[0], name)
+
+    @contextmanager
+    def ros_lookup(self) -> Iterator[Callable[[str], tuple[str, MsgDef | _JsonSchema] | None]]:
+        """Internal, for :func:`~ros_mobile_bridge.codec.type_hash`: holds the
+        registry's lock for the block, which gets the function that finds a
+        ROS definition by name (``(the name found, its definition)`` or
+        ``None``; server schemas, then built-in ones, looked up tolerantly),
+        so that every lookup in the block sees the same definitions."""
+        with self._lock:
+            yield functools.partial(self._find, ros_only=True)
 
     def _find(self, name: str, *, ros_only: bool) -> tuple[str, MsgDef | _JsonSchema] | None:
         layers: tuple[Mapping[str, MsgDef | _JsonSchema], ...] = (

@@ -45,8 +45,9 @@ import hashlib
 import json
 import threading
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 from .._errors import SchemaError
 from ._model import ARRAY, DUMMY_FIELD, SCALAR, FieldSpec, MsgDef
@@ -56,6 +57,10 @@ if TYPE_CHECKING:
     from ._registry import CodecRegistry
 
 __all__ = ["type_hash"]
+
+_Find: TypeAlias = Callable[[str], "tuple[str, object] | None"]
+"""A registry's ROS definition lookup (:meth:`CodecRegistry.ros_lookup`):
+``(the name found, its definition)`` or ``None``."""
 
 FIELD_TYPE_NESTED_TYPE = 1
 """``type_description_interfaces/msg/FieldType.FIELD_TYPE_NESTED_TYPE``."""
@@ -227,21 +232,21 @@ def _synthesised(name: str) -> tuple[_Field, ...] | None:
     )
 
 
-def _registered(registry: CodecRegistry, name: str) -> MsgDef | None:
+def _registered(find: _Find, name: str) -> MsgDef | None:
     """The registry's ROS definition of exactly ``name`` (server schemas, then
     built-in ones; the same type under another kind does not count)."""
-    found = registry._find(name, ros_only=True)
+    found = find(name)
     if found is None or found[0] != name or not isinstance(found[1], MsgDef):
         return None
     return found[1]
 
 
-def _describe(registry: CodecRegistry, name: str, memo: dict[str, _Desc]) -> _Desc | None:
+def _describe(find: _Find, name: str, memo: dict[str, _Desc]) -> _Desc | None:
     """The description of ``name``: the registry's definition, else the
     synthesised one of a derived type, else ``None``. ``memo`` keeps earlier
     descriptions; one made from a definition is reused only while the registry
     still holds that very definition object."""
-    msgdef = _registered(registry, name)
+    msgdef = _registered(find, name)
     desc = memo.get(name)
     if desc is not None and desc.source is msgdef:
         return desc
@@ -256,7 +261,7 @@ def _describe(registry: CodecRegistry, name: str, memo: dict[str, _Desc]) -> _De
     return desc
 
 
-def _top_name(registry: CodecRegistry, type_name: str) -> str:
+def _top_name(find: _Find, type_name: str) -> str:
     """The canonical name ``type_name`` refers to. A name without a kind
     segment (``std_srvs/SetBool``) is the first candidate kind that the
     registry defines (or, for a derived type, whose first part it defines)."""
@@ -265,22 +270,22 @@ def _top_name(registry: CodecRegistry, type_name: str) -> str:
         name = canonical_name(type_name)
     else:
         candidates = lookup_candidates(type_name)
-        name = next((c for c in candidates if _defined(registry, c)), candidates[0])
+        name = next((c for c in candidates if _defined(find, c)), candidates[0])
     if not is_valid_type_name(name):
         raise ValueError(f"{type_name!r} is not a valid ROS type name (package/kind/Type)")
     return name
 
 
-def _defined(registry: CodecRegistry, name: str) -> bool:
-    if _registered(registry, name) is not None:
+def _defined(find: _Find, name: str) -> bool:
+    if _registered(find, name) is not None:
         return True
     fields = _synthesised(name)
-    return fields is not None and _registered(registry, fields[0][4]) is not None
+    return fields is not None and _registered(find, fields[0][4]) is not None
 
 
-def _closure(registry: CodecRegistry, name: str, memo: dict[str, _Desc]) -> dict[str, _Desc]:
+def _closure(find: _Find, name: str, memo: dict[str, _Desc]) -> dict[str, _Desc]:
     """``name`` and every type it uses, directly or not, by name."""
-    top = _describe(registry, name, memo)
+    top = _describe(find, name, memo)
     if top is None:
         raise SchemaError(
             f"cannot compute the type hash of {name!r}: unknown type (no ROS definition "
@@ -293,7 +298,7 @@ def _closure(registry: CodecRegistry, name: str, memo: dict[str, _Desc]) -> dict
         for ref in current.refs:
             if ref in closure:
                 continue
-            desc = _describe(registry, ref, memo)
+            desc = _describe(find, ref, memo)
             if desc is None:
                 raise SchemaError(
                     f"cannot compute the type hash of {name!r}: it needs {ref!r} (used by "
@@ -361,9 +366,9 @@ def type_hash(registry: CodecRegistry, type_name: str) -> str:
     registry and recomputed when a definition they used has been replaced.
     """
     memo = _memo(registry)
-    with registry._lock:
-        name = _top_name(registry, type_name)
-        closure = _closure(registry, name, memo.descs)
+    with registry.ros_lookup() as find:
+        name = _top_name(find, type_name)
+        closure = _closure(find, name, memo.descs)
         descs = tuple(closure.values())
         cached = memo.hashes.get(name)
         if (

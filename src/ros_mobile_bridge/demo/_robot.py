@@ -26,7 +26,7 @@ import math
 import socket
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -392,7 +392,13 @@ class DemoRobot:
                         Capability.Parameters,
                         Capability.Time,
                     ],
-                    server_listener=_Listener(self),
+                    server_listener=_Listener(
+                        advertise=self._on_client_advertise,
+                        unadvertise=self._on_client_unadvertise,
+                        message=self._on_message_data,
+                        get_parameters=self._get_parameters,
+                        set_parameters=self._set_parameters,
+                    ),
                     supported_encodings=["json", "cdr"],
                     services=services,
                     context=context,
@@ -828,10 +834,23 @@ def _decode_twist(data: bytes, encoding: str, *, stamped: bool) -> tuple[float, 
 
 
 class _Listener:
-    """Foxglove ServerListener forwarding to the robot. Called from the SDK's threads."""
+    """Foxglove ServerListener forwarding to the robot's handlers, which the
+    robot hands it. Called from the SDK's threads."""
 
-    def __init__(self, robot: DemoRobot) -> None:
-        self._robot = robot
+    def __init__(
+        self,
+        *,
+        advertise: Callable[[int, ClientChannel], None],
+        unadvertise: Callable[[int, int], None],
+        message: Callable[[int, int, bytes], None],
+        get_parameters: Callable[[Sequence[str]], list[Parameter]],
+        set_parameters: Callable[[Sequence[Parameter]], list[Parameter]],
+    ) -> None:
+        self._advertise = advertise
+        self._unadvertise = unadvertise
+        self._message = message
+        self._get_parameters = get_parameters
+        self._set_parameters = set_parameters
 
     def on_subscribe(self, client: Client, channel: ChannelView) -> None:
         _log.debug("client %d subscribed to %s", client.id, channel.topic)
@@ -840,23 +859,23 @@ class _Listener:
         _log.debug("client %d unsubscribed from %s", client.id, channel.topic)
 
     def on_client_advertise(self, client: Client, channel: ClientChannel) -> None:
-        self._robot._on_client_advertise(client.id, channel)
+        self._advertise(client.id, channel)
 
     def on_client_unadvertise(self, client: Client, client_channel_id: int) -> None:
-        self._robot._on_client_unadvertise(client.id, client_channel_id)
+        self._unadvertise(client.id, client_channel_id)
 
     def on_message_data(self, client: Client, client_channel_id: int, data: bytes) -> None:
-        self._robot._on_message_data(client.id, client_channel_id, data)
+        self._message(client.id, client_channel_id, data)
 
     def on_get_parameters(
         self, client: Client, param_names: list[str], request_id: str | None = None
     ) -> list[Parameter]:
-        return self._robot._get_parameters(param_names)
+        return self._get_parameters(param_names)
 
     def on_set_parameters(
         self, client: Client, parameters: list[Parameter], request_id: str | None = None
     ) -> list[Parameter]:
-        return self._robot._set_parameters(parameters)
+        return self._set_parameters(parameters)
 
     def on_parameters_subscribe(self, param_names: list[str]) -> None:
         _log.debug("parameters subscribed: %s", param_names)

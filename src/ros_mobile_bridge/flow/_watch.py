@@ -11,34 +11,50 @@ __all__ = ["Watchable", "Watcher"]
 T = TypeVar("T")
 
 
+class WatchCell(Generic[T]):
+    """Internal, for :class:`Watchable` and its :class:`Watcher`: the state
+    they share. The Watchable writes it (in :meth:`Watchable.set` and
+    :meth:`Watchable.close`); a Watcher only reads it. Plain slots, so a
+    watcher's wake-up reads attributes and calls nothing."""
+
+    __slots__ = ("changed", "closed", "value", "version")
+
+    def __init__(self, value: T) -> None:
+        self.value = value
+        self.version = 0
+        self.changed = anyio.Event()
+        self.closed = False
+
+
 class Watchable(Generic[T]):
     """Holds a value; :meth:`watch` yields the current value at once, then
     every change. A slow watcher sees the newest value (changes in between
-    are coalesced), never a backlog. :meth:`close` ends every watcher."""
+    are coalesced), never a backlog. :meth:`close` ends every watcher.
+
+    ``cell``: internal, for :class:`Watcher` (the state it reads)."""
 
     def __init__(self, value: T) -> None:
-        self._value = value
-        self._version = 0
-        self._changed = anyio.Event()
-        self._closed = False
+        self.cell: WatchCell[T] = WatchCell(value)
 
     @property
     def value(self) -> T:
-        return self._value
+        return self.cell.value
 
     def set(self, value: T) -> bool:
         """Store ``value``; wakes watchers if it differs. Returns whether it did."""
-        if value == self._value:
+        cell = self.cell
+        if value == cell.value:
             return False
-        self._value = value
-        self._version += 1
-        changed, self._changed = self._changed, anyio.Event()
+        cell.value = value
+        cell.version += 1
+        changed, cell.changed = cell.changed, anyio.Event()
         changed.set()
         return True
 
     def close(self) -> None:
-        self._closed = True
-        self._changed.set()
+        cell = self.cell
+        cell.closed = True
+        cell.changed.set()
 
     def watch(self) -> Watcher[T]:
         return Watcher(self)
@@ -48,17 +64,17 @@ class Watcher(Generic[T]):
     """Async iterator over a :class:`Watchable`'s values."""
 
     def __init__(self, source: Watchable[T]) -> None:
-        self._source = source
+        self._cell = source.cell
         self._seen: int | None = None
 
     def __aiter__(self) -> Watcher[T]:
         return self
 
     async def __anext__(self) -> T:
-        source = self._source
-        while self._seen == source._version:
-            if source._closed:
+        cell = self._cell
+        while self._seen == cell.version:
+            if cell.closed:
                 raise StopAsyncIteration
-            await source._changed.wait()
-        self._seen = source._version
-        return source._value
+            await cell.changed.wait()
+        self._seen = cell.version
+        return cell.value

@@ -37,6 +37,12 @@ _LOW_WATER: Final = 1024 * 1024
 
 
 class _Protocol(asyncio.Protocol):
+    """The asyncio side of one :class:`ProtocolStream`: what the event loop
+    calls fills the buffer and wakes the waiting reader or writers. Its
+    attributes and :meth:`wake_reader`/:meth:`wake_drainers` are internal,
+    for ProtocolStream (which reads and sets them directly: no call layer
+    per read)."""
+
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self.loop = loop
         self.transport: asyncio.Transport | None = None
@@ -59,36 +65,39 @@ class _Protocol(asyncio.Protocol):
         if self.buffered > _HIGH_WATER and not self.read_paused and self.transport is not None:
             self.read_paused = True
             self.transport.pause_reading()
-        self._wake_reader()
+        self.wake_reader()
 
     def eof_received(self) -> bool:
         self.eof = True
-        self._wake_reader()
+        self.wake_reader()
         return True  # half-closed, as a socket: our close reply may still go out
 
     def connection_lost(self, exc: Exception | None) -> None:
         self.eof = True
         if exc is not None and self.error is None:
             self.error = exc
-        self._wake_reader()
+        self.wake_reader()
         self.write_paused = False
-        self._wake_drainers()
+        self.wake_drainers()
 
     def pause_writing(self) -> None:
         self.write_paused = True
 
     def resume_writing(self) -> None:
         self.write_paused = False
-        self._wake_drainers()
+        self.wake_drainers()
 
-    def _wake_reader(self) -> None:
+    def wake_reader(self) -> None:
+        """Resume the task waiting in :meth:`ProtocolStream.receive`, if any."""
         reader = self.reader
         if reader is not None:
             self.reader = None
             if not reader.done():
                 reader.set_result(None)
 
-    def _wake_drainers(self) -> None:
+    def wake_drainers(self) -> None:
+        """Resume the tasks waiting in :meth:`ProtocolStream.send` for the
+        socket's buffer to drain."""
         drainers, self.drainers = self.drainers, []
         for fut in drainers:
             if not fut.done():
@@ -187,8 +196,8 @@ class ProtocolStream(anyio.abc.ByteStream):
                 self._transport.write_eof()
             self._transport.close()
         self._transport.abort()
-        self._protocol._wake_reader()
-        self._protocol._wake_drainers()
+        self._protocol.wake_reader()
+        self._protocol.wake_drainers()
 
 
 async def connect_tcp(host: str, port: int) -> ProtocolStream:

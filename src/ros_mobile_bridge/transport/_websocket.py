@@ -13,7 +13,7 @@ import os
 import ssl as _ssl
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -89,10 +89,18 @@ class _Pending:
 
 
 class WebSocket:
-    """An open client WebSocket. Create it with :func:`connect_websocket`."""
+    """An open client WebSocket. Create it with :func:`connect_websocket`.
+
+    ``frames``: frames ``protocol`` already parsed (those that came in with
+    the handshake response), taken as the first ones received."""
 
     def __init__(
-        self, stream: anyio.abc.ByteStream, protocol: ClientProtocol, max_size: int | None
+        self,
+        stream: anyio.abc.ByteStream,
+        protocol: ClientProtocol,
+        max_size: int | None,
+        *,
+        frames: Iterable[Frame] = (),
     ) -> None:
         self._stream = stream
         self._proto = protocol
@@ -124,6 +132,8 @@ class WebSocket:
         handshake is done (or we failed the connection) before the client
         closes it: a server that sends a close frame and keeps the socket
         open cannot hold the reader."""
+        for frame in frames:
+            self._on_frame(frame)
 
     # -- receiving ---------------------------------------------------------
     async def receive(self) -> str | bytes | bytearray:
@@ -654,10 +664,8 @@ async def connect_websocket(
         with anyio.CancelScope(shield=True):
             await stream.aclose()
         raise handshake_error(url, proto.handshake_exc) from proto.handshake_exc
-    ws = WebSocket(stream, proto, max_size)
+    ws = WebSocket(stream, proto, max_size, frames=leftover)
     ws.read_coalesce = read_coalesce
-    for frame in leftover:
-        ws._on_frame(frame)
     return ws
 
 

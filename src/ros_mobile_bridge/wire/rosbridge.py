@@ -55,6 +55,7 @@ __all__ = [
     "ServiceRequest",
     "ServiceResponse",
     "Status",
+    "as_text",
     "decode_cbor_msg",
     "decode_json_msg",
 ]
@@ -439,7 +440,7 @@ def _json(value: Any) -> str:
     return json.dumps(value, separators=(",", ":"), allow_nan=True)
 
 
-def _as_text(value: Any) -> str:
+def as_text(value: Any) -> str:
     """A server value as text for an id or a message: JSON when it is JSON,
     else a bounded description (CBOR can carry bytes, tags, integers too
     long for ``str``). Never raises."""
@@ -447,6 +448,9 @@ def _as_text(value: Any) -> str:
         return _json(value)
     except Exception:
         return truncate_for_log(value, 1000)
+
+
+_as_text = as_text  # the former name, which callers outside this module still use
 
 
 def _check_str(name: str, value: object) -> str:
@@ -631,9 +635,9 @@ class RosbridgeEngine:
     @staticmethod
     def _status(obj: dict[str, Any]) -> Status:
         level = obj.get("level", "")
-        level = level if isinstance(level, str) else _as_text(level)
+        level = level if isinstance(level, str) else as_text(level)
         msg = obj.get("msg", "")
-        return Status(level, msg if isinstance(msg, str) else _as_text(msg), _opt_id(obj))
+        return Status(level, msg if isinstance(msg, str) else as_text(msg), _opt_id(obj))
 
     @staticmethod
     def _action_result(obj: dict[str, Any]) -> ActionResult:
@@ -931,7 +935,7 @@ def _opt_id(obj: Mapping[str, Any]) -> str | None:
     value = obj.get("id")
     if value is None:
         return None
-    return value if isinstance(value, str) else _as_text(value)
+    return value if isinstance(value, str) else as_text(value)
 
 
 def _str(obj: Mapping[str, Any], key: str, default: str | None = None) -> str:
