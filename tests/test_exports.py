@@ -352,7 +352,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"_record"}),
     frozenset({"_client"}),
     frozenset({"_connect"}),
-    frozenset({"_sync", "_background", "demo"}),
+    frozenset({"_sync", "_sync_worker", "_background", "demo"}),
     frozenset({"_cli", "cli", "__main__", "__init__"}),
 )
 """The package's units (a top-level module or subpackage), bottom first: a

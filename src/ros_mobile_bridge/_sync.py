@@ -17,20 +17,14 @@ is failed as the thread ends). Not every wait has a bound of its own: see
 from __future__ import annotations
 
 import atexit
-import concurrent.futures
-import contextlib
-import dataclasses
 import inspect
 import logging
 import threading
 import time
-import weakref
 from collections.abc import Awaitable, Callable, Iterator, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, ClassVar, Final, Generic, Literal, TypeVar
-
-import anyio
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
 from ._action import ActionGoal
 from ._checks import check_timeout as _check_timeout
@@ -38,6 +32,7 @@ from ._client import Client
 from ._connect import ProtocolArg, connect
 from ._errors import NotConnected
 from ._options import CLOSE_SLACK_S, ClientOptions
+from ._sync_worker import JOIN_S, Children, Held, Parent, SyncBackend, Worker
 from ._types import (
     ActionOutcome,
     Compression,
@@ -56,273 +51,13 @@ from .codec import FieldDef
 from .flow import Subscription
 
 if TYPE_CHECKING:
-    from anyio.from_thread import BlockingPortal
+    pass
 
 __all__ = ["SyncActionGoal", "SyncClient", "SyncSubscription", "connect_sync"]
 
 T = TypeVar("T")
 T_ = TypeVar("T_")
 F = TypeVar("F", bound=Callable[..., Any])
-SyncBackend = Literal["asyncio", "trio"]
-
-#: How long ``close()`` waits for the worker thread to end after its loop
-#: was told to stop.
-_JOIN_S: Final = 5.0
-
-
-class _Worker:
-    """One event loop in one daemon thread, reached through a blocking portal.
-
-    :meth:`start` hands a coroutine function to the loop and returns a
-    ``concurrent.futures.Future``; every future still waiting when the
-    thread ends is failed with ``NotConnected``, so no caller waits on a
-    dead loop."""
-
-    def __init__(
-        self,
-        backend: SyncBackend,
-        backend_options: Mapping[str, Any] | None,
-        name: str,
-        log: logging.Logger,
-    ) -> None:
-        self._log = log
-        self._backend = backend
-        self._backend_options = dict(backend_options) if backend_options else None
-        self._ready: concurrent.futures.Future[BlockingPortal] = concurrent.futures.Future()
-        self._lock = threading.Lock()
-        self._pending: set[concurrent.futures.Future[Any]] = set()
-        self._ended = False
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._main, name=name, daemon=True)
-        self._thread.start()
-        try:
-            self._portal = self._ready.result()
-        except BaseException:
-            self._thread.join(_JOIN_S)
-            raise
-
-    @property
-    def thread(self) -> threading.Thread:
-        return self._thread
-
-    @property
-    def alive(self) -> bool:
-        return not self._ended
-
-    def _main(self) -> None:
-        try:
-            anyio.run(self._serve, backend=self._backend, backend_options=self._backend_options)
-        except BaseException as exc:  # the thread's end is reported to every waiter
-            self._error = exc
-            if not self._ready.done():
-                self._ready.set_exception(exc)
-            else:
-                self._log.error("the sync client's event loop failed: %r", exc)
-        finally:
-            with self._lock:
-                self._ended = True
-                pending, self._pending = self._pending, set()
-            for future in pending:
-                with contextlib.suppress(concurrent.futures.InvalidStateError):
-                    future.set_exception(self._gone())
-
-    async def _serve(self) -> None:
-        from anyio.from_thread import BlockingPortal  # imported when first used
-
-        async with BlockingPortal() as portal:
-            self._ready.set_result(portal)
-            await portal.sleep_until_stopped()
-
-    def _gone(self) -> NotConnected:
-        why = f": {self._error!r}" if self._error is not None else ""
-        return NotConnected(f"the sync client's worker thread has stopped{why}")
-
-    def _check_caller(self) -> None:
-        if threading.get_ident() == self._thread.ident:
-            raise RuntimeError(
-                "a blocking method of the sync client was called from its own event loop "
-                "(inside SyncClient.run): await the async Client there instead"
-            )
-
-    def start(self, fn: Callable[..., Awaitable[T]], *args: Any) -> concurrent.futures.Future[T]:
-        """Start ``fn(*args)`` in the loop; ``NotConnected`` if it has stopped."""
-        self._check_caller()
-        try:
-            future: concurrent.futures.Future[T] = self._portal.start_task_soon(fn, *args)
-        except RuntimeError as exc:  # the portal stopped, or its loop is gone
-            raise self._gone() from exc
-        with self._lock:
-            if self._ended:
-                future.cancel()
-                raise self._gone()
-            self._pending.add(future)
-        future.add_done_callback(self._forget)
-        return future
-
-    def _forget(self, future: concurrent.futures.Future[Any]) -> None:
-        with self._lock:
-            self._pending.discard(future)
-
-    def wait(self, future: concurrent.futures.Future[T], what: str) -> T:
-        """The result of ``future``. A ``KeyboardInterrupt`` (or any exception)
-        raised in this thread while waiting cancels the call in the loop
-        and propagates."""
-        try:
-            return future.result()
-        except concurrent.futures.CancelledError:
-            raise NotConnected(f"{what}: the sync client closed while it was running") from None
-        except BaseException:
-            future.cancel()  # a no-op once it finished; else cancels the task's scope
-            raise
-
-    def run(self, fn: Callable[..., Awaitable[T]], *args: Any, what: str = "call") -> T:
-        """Run ``fn(*args)`` in the loop and wait for its result."""
-        return self.wait(self.start(fn, *args), what)
-
-    def run_bounded(
-        self,
-        fn: Callable[..., Awaitable[T]],
-        args: tuple[Any, ...],
-        timeout: float | None,
-        what: str,
-    ) -> T:
-        """:meth:`run`, cancelled in the loop after ``timeout`` seconds
-        (``TimeoutError``); None: no bound of its own."""
-        limit = _check_timeout(timeout)
-        if limit is None:
-            return self.run(fn, *args, what=what)
-
-        async def bounded() -> T:
-            with anyio.move_on_after(limit):
-                return await fn(*args)
-            raise TimeoutError(f"{what}: no result within {limit:.3g} s")
-
-        return self.run(bounded, what=what)
-
-    def stop(self, join_timeout: float) -> bool:
-        """Stop the loop (cancelling what still runs there) and join the
-        thread within ``join_timeout``. Returns whether the thread ended."""
-        if threading.get_ident() == self._thread.ident:
-            return False
-        if not self._ended:
-            try:
-                stopping = self._portal.start_task_soon(self._portal.stop, True)
-            except RuntimeError:
-                pass  # already stopping or stopped
-            else:
-                with contextlib.suppress(BaseException):
-                    stopping.result(timeout=join_timeout)
-        self._thread.join(join_timeout)
-        return not self._thread.is_alive()
-
-
-class _Held(Generic[T]):
-    """An async context manager held open by one task of the worker: entered,
-    then left when :meth:`exit` is called, both in that task."""
-
-    def __init__(self, worker: _Worker, cm: AbstractAsyncContextManager[T], what: str) -> None:
-        self._worker = worker
-        self._cm = cm
-        self._what = what
-        self._release: anyio.Event | None = None
-        self._owner: concurrent.futures.Future[None] | None = None
-        self._left = False
-
-    async def _hold(self, entered: concurrent.futures.Future[T]) -> None:
-        self._release = anyio.Event()
-        async with self._cm as value:
-            entered.set_result(value)
-            await self._release.wait()
-
-    def enter(self) -> T:
-        entered: concurrent.futures.Future[T] = concurrent.futures.Future()
-        owner = self._owner = self._worker.start(self._hold, entered)
-        try:
-            both: list[concurrent.futures.Future[Any]] = [entered, owner]
-            concurrent.futures.wait(both, return_when=concurrent.futures.FIRST_COMPLETED)
-        except BaseException:  # KeyboardInterrupt while entering: abandon it
-            owner.cancel()
-            raise
-        if entered.done():
-            return entered.result()
-        self._left = True
-        self._worker.wait(owner, self._what)  # raises why it failed
-        raise NotConnected(f"{self._what} ended before it was entered")  # pragma: no cover
-
-    @property
-    def open(self) -> bool:
-        return self._owner is not None and not self._left
-
-    def exit(self, timeout: float) -> None:
-        """Leave the block: the task's ``__aexit__`` runs; wait up to
-        ``timeout`` for it. Idempotent."""
-        owner = self._owner
-        if owner is None or self._left:
-            return
-        self._left = True
-        release = self._release
-        if not owner.done() and release is not None:
-            with contextlib.suppress(NotConnected):
-                self._worker.run(_set_event, release, what=self._what)
-        try:
-            owner.result(timeout=timeout)
-        except concurrent.futures.TimeoutError:
-            owner.cancel()
-            raise TimeoutError(
-                f"{self._what} did not finish closing within {timeout:.3g} s"
-            ) from None
-        except concurrent.futures.CancelledError:
-            pass  # cancelled by the loop stopping: its __aexit__ ran then
-
-
-async def _set_event(event: anyio.Event) -> None:
-    event.set()
-
-
-class _Children:
-    """The :class:`SyncSubscription` and :class:`SyncActionGoal` blocks a
-    :class:`SyncClient` has entered and not yet left, each with the
-    :class:`_Held` it keeps open; :meth:`SyncClient.close` leaves them first.
-    Keyed weakly: a block dropped without being left is forgotten (stopping
-    the worker ends its task). The lock guards the map, which threads
-    entering and leaving blocks change concurrently."""
-
-    def __init__(self) -> None:
-        self._open: weakref.WeakKeyDictionary[_SyncBlock[Any], _Held[Any]] = (
-            weakref.WeakKeyDictionary()
-        )
-        self._lock = threading.Lock()
-
-    def add(self, child: _SyncBlock[Any], held: _Held[Any]) -> None:
-        with self._lock:
-            self._open[child] = held
-
-    def entered(self) -> list[_SyncBlock[Any]]:
-        """A snapshot of the blocks still open."""
-        with self._lock:
-            return list(self._open)
-
-    def leave(self, child: _SyncBlock[Any], timeout: float) -> None:
-        """Leave ``child``'s block (its ``__aexit__`` runs in the worker),
-        waiting up to ``timeout`` (``TimeoutError``); a no-op once it was
-        left. ``NotConnected`` (the worker has stopped) means there is
-        nothing left to leave."""
-        with self._lock:
-            held = self._open.pop(child, None)
-        if held is not None:
-            with contextlib.suppress(NotConnected):
-                held.exit(timeout)
-
-
-@dataclasses.dataclass(frozen=True)
-class _Parent:
-    """What a :class:`SyncClient` gives each block it makes: the worker
-    whose loop runs it, the registry its ``close()`` leaves, and how long
-    leaving one may take (``options.teardown_timeout`` + slack)."""
-
-    worker: _Worker
-    children: _Children
-    leave_timeout: float
 
 
 def _mirrors(sync: F) -> F:
@@ -402,12 +137,12 @@ def connect_sync(
         raise TypeError("options must be a ClientOptions")
     cm = connect(target, protocol=protocol, port=port, secure=secure, options=options)
     opts = options or ClientOptions()
-    worker = _Worker(backend, backend_options, f"rmb-sync-{backend}", opts.logger)
-    held = _Held(worker, cm, "the connection")
+    worker = Worker(backend, backend_options, f"rmb-sync-{backend}", opts.logger)
+    held = Held(worker, cm, "the connection")
     try:
         client = held.enter()
     except BaseException:
-        worker.stop(_JOIN_S)
+        worker.stop(JOIN_S)
         raise
     return SyncClient(worker, held, client, opts.teardown_timeout, opts.logger)
 
@@ -450,8 +185,8 @@ class SyncClient:
 
     def __init__(
         self,
-        worker: _Worker,
-        held: _Held[Client],
+        worker: Worker,
+        held: Held[Client],
         client: Client,
         teardown_timeout: float,
         log: logging.Logger,
@@ -461,8 +196,8 @@ class SyncClient:
         self._client = client
         self._teardown_timeout = teardown_timeout
         self._log = log
-        self._children = _Children()  # entered subscriptions and goals, left by close()
-        self._parent = _Parent(worker, self._children, teardown_timeout + CLOSE_SLACK_S)
+        self._children = Children()  # entered subscriptions and goals, left by close()
+        self._parent = Parent(worker, self._children, teardown_timeout + CLOSE_SLACK_S)
         self._closed = False
         self._close_lock = threading.Lock()
         _open_clients[self] = log
@@ -524,7 +259,7 @@ class SyncClient:
             except NotConnected:
                 pass  # the worker had stopped: nothing left to tear down
         finally:
-            if not self._worker.stop(max(_JOIN_S, deadline - _now())):
+            if not self._worker.stop(max(JOIN_S, deadline - _now())):
                 self._log.warning(
                     "close: the worker thread %s did not end in time", self._worker.thread.name
                 )
@@ -785,7 +520,7 @@ class SyncClient:
             )
 
         ctx = self._worker.run(_sync_call, make, (), what=f"subscribe to {topic}")
-        held = _Held(self._worker, ctx, f"the subscription to {topic}")
+        held = Held(self._worker, ctx, f"the subscription to {topic}")
         return SyncSubscription(held, self._parent, topic, timeout)
 
     @_mirrors
@@ -798,9 +533,7 @@ class SyncClient:
         if self._closed:
             raise NotConnected("send_action_goal: the client is closed")
         cm = self._client.send_action_goal(action, action_type, goal)
-        return SyncActionGoal(
-            _Held(self._worker, cm, f"the goal to {action}"), self._parent, action
-        )
+        return SyncActionGoal(Held(self._worker, cm, f"the goal to {action}"), self._parent, action)
 
 
 _B = TypeVar("_B", bound="_SyncBlock[Any]")
@@ -809,14 +542,14 @@ _B = TypeVar("_B", bound="_SyncBlock[Any]")
 class _SyncBlock(Generic[T]):
     """The shape :class:`SyncSubscription` and :class:`SyncActionGoal` share:
     a plain ``with`` block over an async context manager that one task of
-    the worker enters and later leaves (:class:`_Held`). Entered once; while
-    open it is in its client's :class:`_Children`, so ``close()`` leaves it;
+    the worker enters and later leaves (:class:`Held`). Entered once; while
+    open it is in its client's :class:`Children`, so ``close()`` leaves it;
     leaving waits up to the client's teardown time."""
 
     #: How to enter it, for the error raised when it is used before.
     _how_to_enter: ClassVar[str]
 
-    def __init__(self, held: _Held[T], parent: _Parent) -> None:
+    def __init__(self, held: Held[T], parent: Parent) -> None:
         self._held = held
         self._parent = parent
         self._value: T | None = None
@@ -857,7 +590,7 @@ class SyncSubscription(_SyncBlock[Subscription]):
     _how_to_enter = "enter the subscription first: with robot.subscribe(...) as sub"
 
     def __init__(
-        self, held: _Held[Subscription], parent: _Parent, topic: str, timeout: float | None
+        self, held: Held[Subscription], parent: Parent, topic: str, timeout: float | None
     ) -> None:
         super().__init__(held, parent)
         self.topic = topic
@@ -937,7 +670,7 @@ class SyncActionGoal(_SyncBlock[ActionGoal]):
 
     _how_to_enter = "enter the goal first: with robot.send_action_goal(...) as goal"
 
-    def __init__(self, held: _Held[ActionGoal], parent: _Parent, action: str) -> None:
+    def __init__(self, held: Held[ActionGoal], parent: Parent, action: str) -> None:
         super().__init__(held, parent)
         self._feedback: Any = None
         self.action = action
