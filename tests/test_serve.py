@@ -302,8 +302,10 @@ async def test_a_serve_cancelled_while_confirming_answers_its_calls_and_unadvert
         rmb.connect(rosbridge.url, protocol="rosbridge", options=options()) as caller,
     ):
         confirming = anyio.Event()
+        handlers: list[Any] = []  # the serve() block's engine, as the adapter holds it
 
         async def never_confirmed(service: str, served: Any) -> None:
+            handlers.append(served.handler)
             confirming.set()
             await anyio.sleep(3600)
 
@@ -325,7 +327,7 @@ async def test_a_serve_cancelled_while_confirming_answers_its_calls_and_unadvert
             tg.start_soon(enter)
             with anyio.fail_after(10):
                 await confirming.wait()
-            requests = server._served[name]
+            (requests,) = handlers
             tg.start_soon(call)
             await wait_until(lambda: requests.stats.received == 1, 10)
             entering.cancel()

@@ -16,7 +16,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from ros_mobile_bridge._serve import ServedServices, ServiceRequests
+from ros_mobile_bridge._serve import ServedServices, Serving
 from ros_mobile_bridge.adapters import _rosbridge
 from ros_mobile_bridge.wire import rosbridge as rb
 
@@ -44,8 +44,10 @@ class StubBackend:
             self.written.append((request_id, values, result))
 
 
-def served(backend: Any, *, timeout: float = 30.0, buffer: int = 16) -> ServiceRequests:
-    return ServiceRequests(
+def served(backend: Any, *, timeout: float = 30.0, buffer: int = 16) -> Serving:
+    """The engine of one ``serve()`` block; ``.requests`` is what the
+    consumer iterates."""
+    return Serving(
         NAME,
         SETBOOL,
         timeout=timeout,
@@ -66,52 +68,52 @@ async def cancelled_while_blocked(call: Any) -> None:
 
 async def test_moving_on_cancelled_before_the_write_leaves_the_request_to_close() -> None:
     backend = StubBackend()
-    requests = served(backend)
-    await requests.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
-    await requests.on_service_request(backend, "b", {"data": False})  # type: ignore[arg-type]
-    first = await requests.__anext__()
+    serving = served(backend)
+    await serving.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
+    await serving.on_service_request(backend, "b", {"data": False})  # type: ignore[arg-type]
+    first = await serving.requests.__anext__()
     async with backend.lock:  # the automatic answer to "a" waits for the socket
-        await cancelled_while_blocked(requests.__anext__)
+        await cancelled_while_blocked(serving.requests.__anext__)
     assert not first.answered  # not claimed for good: nothing was written
-    await requests._close("closing")
+    await serving.close("closing")
     assert backend.written == [("a", "closing", False), ("b", "closing", False)]
-    stats = requests.stats
+    stats = serving.requests.stats
     assert (stats.received, stats.unanswered, stats.lost, stats.pending) == (2, 2, 0, 0)
 
 
 async def test_a_reply_cancelled_before_the_write_stays_open() -> None:
     backend = StubBackend()
-    requests = served(backend)
-    await requests.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
-    req = await requests.__anext__()
+    serving = served(backend)
+    await serving.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
+    req = await serving.requests.__anext__()
     async with backend.lock:
         await cancelled_while_blocked(lambda: req.reply({"success": True}))
-    assert req.outcome is None and requests.stats.lost == 0
+    assert req.outcome is None and serving.requests.stats.lost == 0
     await req.reply({"success": True, "message": "second try"})  # still the handler's
     assert backend.written == [("a", {"success": True, "message": "second try"}, True)]
-    stats = requests.stats
+    stats = serving.requests.stats
     assert (stats.replied, stats.lost, stats.pending) == (1, 0, 0)
 
 
 async def test_a_reply_cancelled_before_the_write_is_answered_when_the_block_ends() -> None:
     backend = StubBackend()
-    requests = served(backend)
-    await requests.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
-    req = await requests.__anext__()
+    serving = served(backend)
+    await serving.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
+    req = await serving.requests.__anext__()
     async with backend.lock:
         await cancelled_while_blocked(lambda: req.reply({"success": True}))
-    await requests._close("closing")
+    await serving.close("closing")
     assert backend.written == [("a", "closing", False)]
     assert req.outcome == "unanswered"
-    stats = requests.stats
+    stats = serving.requests.stats
     assert (stats.unanswered, stats.lost, stats.pending) == (1, 0, 0)
 
 
 async def test_a_reply_written_counts_as_replied_though_cancelled_meanwhile() -> None:
     backend = StubBackend(slow_write=True)
-    requests = served(backend)
-    await requests.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
-    req = await requests.__anext__()
+    serving = served(backend)
+    await serving.on_service_request(backend, "a", {"data": True})  # type: ignore[arg-type]
+    req = await serving.requests.__anext__()
     returned: list[bool] = []
 
     async def reply() -> None:
@@ -127,32 +129,32 @@ async def test_a_reply_written_counts_as_replied_though_cancelled_meanwhile() ->
     assert returned == [True]
     assert backend.written == [("a", {"success": True}, True)]
     assert req.outcome == "replied"
-    await requests._close("closing")
-    stats = requests.stats
+    await serving.close("closing")
+    stats = serving.requests.stats
     assert (stats.replied, stats.unanswered, stats.lost, stats.pending) == (1, 0, 0, 0)
 
 
 async def test_requests_expired_while_queued_do_not_fill_the_buffer() -> None:
     backend = StubBackend()
-    requests = served(backend, timeout=0.05, buffer=2)
+    serving = served(backend, timeout=0.05, buffer=2)
     async with anyio.create_task_group() as tg:
-        tg.start_soon(requests._expire)
-        await requests.on_service_request(backend, "a", {})  # type: ignore[arg-type]
-        await requests.on_service_request(backend, "b", {})  # type: ignore[arg-type]
+        tg.start_soon(serving.expire)
+        await serving.on_service_request(backend, "a", {})  # type: ignore[arg-type]
+        await serving.on_service_request(backend, "b", {})  # type: ignore[arg-type]
         with anyio.fail_after(5):
-            while requests.stats.unanswered < 2:  # the consumer stalls past the deadline
+            while serving.requests.stats.unanswered < 2:  # the consumer stalls past the deadline
                 await anyio.sleep(0.01)
-        await requests.on_service_request(backend, "c", {})  # type: ignore[arg-type]
-        await requests.on_service_request(backend, "d", {})  # type: ignore[arg-type]
-        assert requests.stats.overflowed == 0
+        await serving.on_service_request(backend, "c", {})  # type: ignore[arg-type]
+        await serving.on_service_request(backend, "d", {})  # type: ignore[arg-type]
+        assert serving.requests.stats.overflowed == 0
         with anyio.fail_after(5):
-            first = await requests.__anext__()  # the expired ones are not handed out
+            first = await serving.requests.__anext__()  # the expired ones are not handed out
         await first.reply({"success": True})
         tg.cancel_scope.cancel()
     assert first.id == "c"
-    await requests._close("closing")
+    await serving.close("closing")
     assert [w[0] for w in backend.written] == ["a", "b", "c", "d"]
-    stats = requests.stats
+    stats = serving.requests.stats
     assert (stats.received, stats.replied, stats.unanswered, stats.overflowed) == (4, 1, 3, 0)
 
 
@@ -188,23 +190,23 @@ async def test_a_refusal_after_the_advertisement_ends_the_iteration(
         pass  # the graph showed it (a real bridge may refuse only later)
 
     monkeypatch.setattr(backend, "_confirm_served", confirmed)
-    requests = served(backend)
-    await backend.advertise_service(NAME, "nosuch_pkg/srv/Nope", requests, confirm=confirm)
+    serving = served(backend)
+    await backend.advertise_service(NAME, "nosuch_pkg/srv/Nope", serving, confirm=confirm)
     served_id = backend._served[NAME].id
     backend._on_status(rb.Status("error", "unknown service type nosuch_pkg/srv/Nope", served_id))
     with anyio.fail_after(5), pytest.raises(rmb.SchemaError, match="nosuch_pkg"):
-        await requests.__anext__()
+        await serving.requests.__anext__()
     assert NAME not in backend._served  # refused: nothing to unadvertise
 
 
 async def test_another_client_refusal_after_a_restore_is_a_service_error() -> None:
     backend, _ws = rosbridge_backend()
-    requests = served(backend)
-    await backend.advertise_service(NAME, SETBOOL, requests, confirm=False)
+    serving = served(backend)
+    await backend.advertise_service(NAME, SETBOOL, serving, confirm=False)
     served_id = backend._served[NAME].id
     backend._on_status(rb.Status("error", "served by another client", served_id))
     with anyio.fail_after(5), pytest.raises(rmb.ServiceError, match="another client"):
-        await requests.__anext__()
+        await serving.requests.__anext__()
 
 
 @pytest.mark.parametrize("how", ["timeout", "cancelled"])
@@ -220,7 +222,7 @@ async def test_an_advertisement_failing_after_its_frame_is_unadvertised(
 
     monkeypatch.setattr(backend, "_confirm_served", unconfirmed)
     monkeypatch.setattr(backend, "_round_trip", no_round_trip)
-    requests = served(backend)
+    serving = served(backend)
     backend_ids: list[str] = []
     advertise = backend._engine.advertise_service
 
@@ -231,15 +233,15 @@ async def test_an_advertisement_failing_after_its_frame_is_unadvertised(
     monkeypatch.setattr(backend._engine, "advertise_service", remember)
     if how == "timeout":
         with pytest.raises(rmb.ServiceError):
-            await backend.advertise_service(NAME, SETBOOL, requests)
+            await backend.advertise_service(NAME, SETBOOL, serving)
     else:
         with anyio.move_on_after(0.05):
-            await backend.advertise_service(NAME, SETBOOL, requests)
+            await backend.advertise_service(NAME, SETBOOL, serving)
     # maybe served: calls still reach the handler until the caller (the
     # client, after answering them) unadvertises
     await backend._handle(rb.ServiceRequest("q1", NAME, {"data": True}))
-    assert requests.stats.received == 1
-    await requests._close("closing")
+    assert serving.requests.stats.received == 1
+    await serving.close("closing")
     await backend.unadvertise_service(NAME)
     assert [(m["op"], m.get("id"), m.get("values")) for m in ws.sent][1:] == [
         ("service_response", "q1", "closing"),
@@ -274,6 +276,7 @@ class ClientStub:
         self.topics: list[Any] = []
         self.services: list[Any] = []
         self.advertised: list[str] = []
+        self.handlers: dict[str, Any] = {}  # what the reader hands calls to
         self.unadvertised: list[str] = []
         self.gate: anyio.Event | None = None
 
@@ -284,6 +287,7 @@ class ClientStub:
         self, name: str, service_type: str, handler: Any, *, confirm: bool = True
     ) -> None:
         self.advertised.append(name)
+        self.handlers[name] = handler
         if self.gate is not None:
             await self.gate.wait()
 
@@ -305,7 +309,7 @@ async def test_leaving_the_block_unadvertises_though_the_answers_take_the_whole_
     services = services_of(teardown_timeout=0.3)
     current: Any = lambda: backend  # noqa: E731
     async with services.serve(NAME, SETBOOL, 30.0, 16, current) as requests:
-        await requests.on_service_request(backend, "q", {"data": True})  # type: ignore[arg-type]
+        await backend.handlers[NAME].on_service_request(backend, "q", {"data": True})
     assert backend.unadvertised == [NAME]
     stats = requests.stats
     assert (stats.received, stats.lost, stats.pending) == (1, 1, 0)  # never written

@@ -117,6 +117,24 @@ class Recording:
     the file; :attr:`stats` what was written; :attr:`topics` the topics
     recorded so far."""
 
+    def __init__(self, recorder: _Recorder) -> None:
+        self._recorder = recorder
+        self.path = recorder.path
+
+    @property
+    def stats(self) -> RecordStats:
+        return self._recorder.stats
+
+    @property
+    def topics(self) -> list[str]:
+        return self._recorder.topics
+
+
+class _Recorder:
+    """The engine behind a :class:`Recording`: the writer, the counters and
+    one task per topic (started by :meth:`start` in the recording's task
+    group). ``disk_error`` is the ``OSError`` that ended it, if one did."""
+
     def __init__(self, conn: Connection, path: str, writer: Writer, logger: logging.Logger) -> None:
         self._conn = conn
         self.path = path
@@ -130,7 +148,7 @@ class Recording:
         self._sequence = 0
         self._topics: list[str] = []
         self._failed: dict[str, str] = {}
-        self._disk_error: OSError | None = None
+        self.disk_error: OSError | None = None
         self._stop: anyio.CancelScope | None = None  # the recording's task group
 
     @property
@@ -142,6 +160,23 @@ class Recording:
     @property
     def topics(self) -> list[str]:
         return list(self._topics)
+
+    def start(
+        self,
+        tg: anyio.abc.TaskGroup,
+        topics: Sequence[str] | None,
+        max_hz: float | None,
+        adaptive: bool,
+        compression: Compression | None,
+    ) -> None:
+        """Record ``topics`` (every topic, now and later, when None) in
+        ``tg``, which a disk error cancels."""
+        self._stop = tg.cancel_scope
+        if topics is None:
+            tg.start_soon(self._follow_graph, tg, max_hz, adaptive, compression)
+        else:
+            for topic in topics:
+                tg.start_soon(self._record_topic, topic, max_hz, adaptive, compression)
 
     # -- writing ---------------------------------------------------------------------
     def _schema_id(self, name: str, encoding: str, data: bytes) -> int:
@@ -273,8 +308,8 @@ class Recording:
             self._failed[topic] = str(exc)
             self._log.error("record: %s is not recorded: %s (see stats.failed)", topic, exc)
         except OSError as exc:  # the disk: the whole recording ends
-            if self._disk_error is None:
-                self._disk_error = exc
+            if self.disk_error is None:
+                self.disk_error = exc
                 self._log.error("record: writing %s failed: %s; the recording ends", self.path, exc)
             if self._stop is not None:
                 self._stop.cancel()
@@ -324,17 +359,12 @@ async def open_recording(
     except BaseException:
         stream.close()
         raise
-    recording = Recording(conn, name, writer, log)
+    recorder = _Recorder(conn, name, writer, log)
     try:
         async with anyio.create_task_group() as tg:
-            recording._stop = tg.cancel_scope
-            if topics is None:
-                tg.start_soon(recording._follow_graph, tg, max_hz, adaptive, compression)
-            else:
-                for topic in topics:
-                    tg.start_soon(recording._record_topic, topic, max_hz, adaptive, compression)
+            recorder.start(tg, topics, max_hz, adaptive, compression)
             try:
-                yield recording
+                yield Recording(recorder)
             finally:
                 tg.cancel_scope.cancel()
     finally:
@@ -344,14 +374,14 @@ async def open_recording(
         try:
             writer.finish()
         except OSError as exc:
-            if recording._disk_error is None:
+            if recorder.disk_error is None:
                 raise
             log.error("record: %s could not be finished: %s", name, exc)
         finally:
             stream.close()
-    if recording._disk_error is not None:
+    if recorder.disk_error is not None:
         # the task group's cancellation ended the body; the disk is the news
-        raise recording._disk_error
+        raise recorder.disk_error
 
 
 def _compression(mcap_writer: Any) -> Any:

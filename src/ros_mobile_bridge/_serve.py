@@ -1,8 +1,9 @@
 """Serving a service: the objects :meth:`Client.serve` hands out.
 
-The backend's reader hands each forwarded call to :class:`ServiceRequests`
-(``on_service_request``), which queues it (bounded) for the consumer's
-``async for``. Every request is answered exactly once: by the consumer
+The backend's reader hands each forwarded call to :class:`Serving`
+(``on_service_request``), the engine of one ``serve()`` block, which queues
+it (bounded) for the consumer's ``async for`` over :class:`ServiceRequests`,
+its face. Every request is answered exactly once: by the consumer
 (:meth:`ServiceRequest.reply` / :meth:`ServiceRequest.fail`), or with
 ``result: false`` and a reason when the queue is full, when its deadline
 passes, when the consumer moves on to the next request without answering, or
@@ -14,7 +15,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import deque
-from collections.abc import AsyncIterator, Callable, Mapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from typing import Any, Final, Literal
@@ -24,7 +25,7 @@ import anyio
 from ._errors import ConnectError, DecodeError, NotConnected, RosBridgeError, ServiceError
 from .adapters import Adapter
 
-__all__ = ["ServeStats", "ServedServices", "ServiceRequest", "ServiceRequests"]
+__all__ = ["ServeStats", "ServedServices", "ServiceRequest", "ServiceRequests", "Serving"]
 
 DEFAULT_SERVE_TIMEOUT: Final = 10.0
 DEFAULT_SERVE_BUFFER: Final = 16
@@ -59,6 +60,33 @@ class ServeStats:
         )
 
 
+class _Call:
+    """One forwarded call, as the engine (:class:`Serving`) tracks it: the
+    connection that carried it, the server's id, the deadline, how it was
+    answered (None while open) and the user's face, :attr:`request`."""
+
+    __slots__ = ("adapter", "deadline", "id", "outcome", "request")
+
+    def __init__(
+        self,
+        adapter: Adapter,
+        request_id: str,
+        args: dict[str, Any],
+        deadline: float,
+        service: str,
+        answer: Answer,
+    ) -> None:
+        self.adapter = adapter
+        self.id = request_id
+        self.deadline = deadline
+        self.outcome: Outcome | None = None
+        self.request = ServiceRequest(self, service, args, answer)
+
+
+Answer = Callable[[_Call, Outcome, Any, bool], Awaitable[None]]
+"""The engine's answering step: (call, outcome, values, result)."""
+
+
 class ServiceRequest:
     """One call to a service this client serves. ``args`` is the decoded
     request (a dict), ``id`` the server's id for the call, ``service`` the
@@ -67,23 +95,15 @@ class ServiceRequest:
 
     Answer it once, with :meth:`reply` or :meth:`fail`."""
 
-    __slots__ = ("_backend", "_outcome", "_owner", "args", "deadline", "id", "service")
+    __slots__ = ("_answer", "_call", "args", "deadline", "id", "service")
 
-    def __init__(
-        self,
-        owner: ServiceRequests,
-        backend: Adapter,
-        request_id: str,
-        args: dict[str, Any],
-        deadline: float,
-    ) -> None:
-        self._owner = owner
-        self._backend = backend
-        self._outcome: Outcome | None = None
-        self.id = request_id
-        self.service = owner.name
+    def __init__(self, call: _Call, service: str, args: dict[str, Any], answer: Answer) -> None:
+        self._call = call
+        self._answer = answer
+        self.id = call.id
+        self.service = service
         self.args = args
-        self.deadline = deadline
+        self.deadline = call.deadline
 
     def __repr__(self) -> str:
         return f"ServiceRequest({self.service!r}, id={self.id!r}, args={self.args!r})"
@@ -91,12 +111,12 @@ class ServiceRequest:
     @property
     def answered(self) -> bool:
         """Whether this request has been answered (by anyone)."""
-        return self._outcome is not None
+        return self._call.outcome is not None
 
     @property
     def outcome(self) -> Outcome | None:
         """How it was answered (a :class:`ServeStats` counter name), or None."""
-        return self._outcome
+        return self._call.outcome
 
     async def reply(self, values: Mapping[str, Any] | None = None) -> None:
         """Answer with the response ``values`` (a dict; missing fields are
@@ -113,7 +133,7 @@ class ServiceRequest:
             values = {}
         if not isinstance(values, Mapping):
             raise TypeError(f"values must be a mapping (dict), not {type(values).__name__}")
-        await self._owner._answer(self, "replied", dict(values), True)
+        await self._answer(self._call, "replied", dict(values), True)
 
     async def fail(self, message: str = "the service failed") -> None:
         """Answer with ``result: false`` and ``message``. The rosbridge
@@ -122,7 +142,7 @@ class ServiceRequest:
         docs/serving.md). Raises like :meth:`reply`."""
         if not isinstance(message, str):
             raise TypeError(f"message must be a str, not {type(message).__name__}")
-        await self._owner._answer(self, "failed", message, False)
+        await self._answer(self._call, "failed", message, False)
 
 
 class ServiceRequests:
@@ -132,6 +152,31 @@ class ServiceRequests:
     Moving on to the next request answers the previous one ``result: false``
     if the loop body did not. The iteration raises ``NotConnected`` when the
     connection is lost for good, and ends when the ``serve()`` block ends."""
+
+    def __init__(self, serving: Serving) -> None:
+        self._serving = serving
+        self.name = serving.name
+        self.service_type = serving.service_type
+        self.timeout = serving.timeout
+        self.buffer = serving.buffer
+
+    @property
+    def stats(self) -> ServeStats:
+        """The counters so far (see :class:`ServeStats`)."""
+        return self._serving.stats
+
+    def __aiter__(self) -> ServiceRequests:
+        return self
+
+    async def __anext__(self) -> ServiceRequest:
+        return await self._serving.next()
+
+
+class Serving:
+    """The engine behind one ``serve()`` block: the adapter's
+    :class:`~ros_mobile_bridge.adapters.ServiceHandler` for the service, the
+    bounded queue the consumer reads (through :attr:`requests`, the face
+    :meth:`Client.serve` yields), the deadlines and the answers."""
 
     def __init__(
         self,
@@ -151,11 +196,11 @@ class ServiceRequests:
         self._current = current
         self._teardown_timeout = teardown_timeout
         self._log = logger
-        self._queue: deque[ServiceRequest] = deque()  # not read yet (some answered)
+        self._queue: deque[_Call] = deque()  # not read yet (some answered)
         # every request received and not counted yet, in arrival order: the
         # deadline and the block's end answer these, wherever they are
-        self._unsettled: dict[ServiceRequest, None] = {}
-        self._taken: ServiceRequest | None = None
+        self._unsettled: dict[_Call, None] = {}
+        self._taken: _Call | None = None
         self._wake = anyio.Event()
         self._changed = anyio.Event()
         self._closed = False
@@ -163,6 +208,7 @@ class ServiceRequests:
         self._counts: dict[str, int] = dict.fromkeys(
             ("received", "replied", "failed", "unanswered", "overflowed", "lost"), 0
         )
+        self.requests = ServiceRequests(self)
 
     @property
     def stats(self) -> ServeStats:
@@ -181,7 +227,7 @@ class ServiceRequests:
             )
             return
         if len(self._queue) >= self.buffer:  # drop the ones answered while queued
-            self._queue = deque(r for r in self._queue if r._outcome is None)
+            self._queue = deque(c for c in self._queue if c.outcome is None)
         if len(self._queue) >= self.buffer:
             self._counts["overflowed"] += 1
             self._log.warning(
@@ -197,33 +243,39 @@ class ServiceRequests:
             )
             return
         deadline = anyio.current_time() + self.timeout
-        request = ServiceRequest(self, backend, request_id, args, deadline)
-        self._queue.append(request)
-        self._unsettled[request] = None
+        call = _Call(backend, request_id, args, deadline, self.name, self.answer)
+        self._queue.append(call)
+        self._unsettled[call] = None
         self._wake.set()
         self._changed.set()
 
-    # -- the consumer --------------------------------------------------------------
-    def __aiter__(self) -> ServiceRequests:
-        return self
+    def on_service_failed(self, error: RosBridgeError) -> None:
+        """The backend's word that the bridge refused the service after it
+        was advertised (a refusal arriving after confirmation, or after a
+        restore that could not wait for one): the iteration raises it."""
+        self._log.error("%s is not served: %s", self.name, error)
+        self.fail(error)
 
-    async def __anext__(self) -> ServiceRequest:
+    # -- the consumer --------------------------------------------------------------
+    async def next(self) -> ServiceRequest:
+        """The next request for the consumer (``ServiceRequests.__anext__``),
+        answering the one handed out before if the loop body did not."""
         previous, self._taken = self._taken, None
-        if previous is not None and not previous.answered:
+        if previous is not None and previous.outcome is None:
             await self._auto_fail(previous, "the handler moved on without answering")
         while True:
             while self._queue:
-                request = self._queue.popleft()
-                if request.answered:
+                call = self._queue.popleft()
+                if call.outcome is not None:
                     # expired while queued (or being answered now: if that
                     # answer is cancelled unsent, the deadline or the block's
                     # end answers it, never the consumer)
                     continue
-                if request._backend is not self._current():
-                    self._settle(request, "lost")
+                if call.adapter is not self._current():
+                    self._settle(call, "lost")
                     continue
-                self._taken = request
-                return request
+                self._taken = call
+                return call.request
             if self._error is not None:
                 raise self._error
             if self._closed:
@@ -232,95 +284,95 @@ class ServiceRequests:
             await self._wake.wait()
 
     # -- answering -----------------------------------------------------------------
-    def _settle(self, request: ServiceRequest, outcome: Outcome) -> None:
-        request._outcome = outcome
+    def _settle(self, call: _Call, outcome: Outcome) -> None:
+        call.outcome = outcome
         self._counts[outcome] += 1
-        self._unsettled.pop(request, None)
+        self._unsettled.pop(call, None)
         self._changed.set()
 
-    def _unclaim(self, request: ServiceRequest) -> None:
+    def _unclaim(self, call: _Call) -> None:
         """An answer was not sent (cancelled before the write): the request
         is open again, for the deadline or the block's end to answer."""
-        request._outcome = None
+        call.outcome = None
         self._changed.set()  # the deadline task may have left it out
 
-    async def _answer(
-        self, request: ServiceRequest, outcome: Outcome, values: Any, result: bool
-    ) -> None:
-        if request._outcome is not None:
+    async def answer(self, call: _Call, outcome: Outcome, values: Any, result: bool) -> None:
+        """The consumer's answer (:meth:`ServiceRequest.reply` /
+        :meth:`ServiceRequest.fail`), raising as those document."""
+        if call.outcome is not None:
             raise ServiceError(
-                self.name, f"request {request.id} was answered already ({request._outcome})"
+                self.name, f"request {call.id} was answered already ({call.outcome})"
             )
-        backend = request._backend
+        backend = call.adapter
         if backend is not self._current():
-            self._settle(request, "lost")
+            self._settle(call, "lost")
             raise NotConnected(
-                f"the connection that carried request {request.id} to {self.name} is gone;"
+                f"the connection that carried request {call.id} to {self.name} is gone;"
                 " the caller got no answer"
             )
-        request._outcome = outcome  # claimed: the deadline cannot answer it too
+        call.outcome = outcome  # claimed: the deadline cannot answer it too
         # respond_service writes the frame as its last step (the write itself
         # shielded): when it raises, nothing was sent; once it returns, the
         # answer is out, whatever cancellation lands next
         try:
-            await backend.respond_service(self.name, request.id, values, result)
+            await backend.respond_service(self.name, call.id, values, result)
         except DecodeError as exc:
-            self._unclaim(request)  # still the caller's to answer
+            self._unclaim(call)  # still the caller's to answer
             raise ValueError(f"{self.name}: {exc}") from exc
         except ConnectError as exc:
-            self._settle(request, "lost")
+            self._settle(call, "lost")
             raise NotConnected(
-                f"disconnected: {exc} (the answer to {request.id} was not sent)"
+                f"disconnected: {exc} (the answer to {call.id} was not sent)"
             ) from exc
         except BaseException:
             # cancelled before the write: the connection is fine and the
             # request still open; the deadline or the block's end answers it
-            self._unclaim(request)
+            self._unclaim(call)
             raise
-        self._settle(request, outcome)
+        self._settle(call, outcome)
 
-    async def _auto_fail(self, request: ServiceRequest, reason: str) -> None:
+    async def _auto_fail(self, call: _Call, reason: str) -> None:
         """Answer ``result: false`` with ``reason`` on the consumer's behalf
         (never raises; a lost connection counts the request as lost)."""
-        if request._outcome is not None:
+        if call.outcome is not None:
             return
-        backend = request._backend
+        backend = call.adapter
         if backend is not self._current():
-            self._settle(request, "lost")
+            self._settle(call, "lost")
             return
-        self._log.info("%s: request %s answered result false: %s", self.name, request.id, reason)
-        request._outcome = "unanswered"  # claimed, as in _answer
+        self._log.info("%s: request %s answered result false: %s", self.name, call.id, reason)
+        call.outcome = "unanswered"  # claimed, as in answer
         try:
-            await backend.respond_service(self.name, request.id, reason, False)
+            await backend.respond_service(self.name, call.id, reason, False)
         except RosBridgeError as exc:
-            self._settle(request, "lost")
-            self._log.debug("%s: could not answer %s: %s", self.name, request.id, exc)
+            self._settle(call, "lost")
+            self._log.debug("%s: could not answer %s: %s", self.name, call.id, exc)
             return
         except BaseException:
             # cancelled before the write: open again, so the deadline or
-            # _close answers it (a claim left behind would make them skip it)
-            self._unclaim(request)
+            # close answers it (a claim left behind would make them skip it)
+            self._unclaim(call)
             raise
-        self._settle(request, "unanswered")
+        self._settle(call, "unanswered")
 
-    async def _expire(self) -> None:
+    async def expire(self) -> None:
         """Answer every request whose deadline passed (a task in the
         ``serve()`` block's task group)."""
         while True:
             now = anyio.current_time()
-            waiting = [r for r in self._unsettled if r._outcome is None]
-            expired = [r for r in waiting if r.deadline <= now]
-            for request in expired:
-                await self._auto_fail(request, f"no answer within {self.timeout:g} s")
+            waiting = [c for c in self._unsettled if c.outcome is None]
+            expired = [c for c in waiting if c.deadline <= now]
+            for call in expired:
+                await self._auto_fail(call, f"no answer within {self.timeout:g} s")
             if expired:
                 continue  # requests may have come meanwhile: look again
             # no await from here to the wait: an arrival sets this very event
             self._changed = anyio.Event()
-            nearest = min((r.deadline for r in waiting), default=math.inf)
+            nearest = min((c.deadline for c in waiting), default=math.inf)
             with anyio.move_on_after(nearest - now):
                 await self._changed.wait()
 
-    async def _close(self, reason: str, budget: float | None = None) -> None:
+    async def close(self, reason: str, budget: float | None = None) -> None:
         """End serving: answer every request not answered yet (shielded,
         within ``budget`` seconds, the teardown deadline by default) and end
         the iteration. What the budget leaves unanswered counts as lost."""
@@ -328,35 +380,28 @@ class ServiceRequests:
         self._wake.set()
         limit = self._teardown_timeout if budget is None else budget
         with anyio.CancelScope(shield=True), anyio.move_on_after(limit):
-            for request in list(self._unsettled):
-                await self._auto_fail(request, reason)
-        for request in list(self._unsettled):
-            if request._outcome is None:  # else an answer is being written now
-                self._settle(request, "lost")
+            for call in list(self._unsettled):
+                await self._auto_fail(call, reason)
+        for call in list(self._unsettled):
+            if call.outcome is None:  # else an answer is being written now
+                self._settle(call, "lost")
         self._queue.clear()
 
-    def _fail(self, error: RosBridgeError) -> None:
+    def fail(self, error: RosBridgeError) -> None:
         """Serving ended in error (the connection is lost for good, or the
         bridge refused the service): the iteration raises ``error`` once the
         requests already queued are read."""
         self._error = error
         self._wake.set()
 
-    def on_service_failed(self, error: RosBridgeError) -> None:
-        """The backend's word that the bridge refused the service after it
-        was advertised (a refusal arriving after confirmation, or after a
-        restore that could not wait for one): the iteration raises it."""
-        self._log.error("%s is not served: %s", self.name, error)
-        self._fail(error)
-
 
 class ServedServices:
     """The services one client serves, by name, across reconnects: each
-    ``serve()`` block's :class:`ServiceRequests`, advertised again after a
+    ``serve()`` block's :class:`Serving`, advertised again after a
     reconnect and failed when the connection is lost for good."""
 
     def __init__(self, teardown_timeout: float, logger: logging.Logger) -> None:
-        self._served: dict[str, ServiceRequests] = {}
+        self._served: dict[str, Serving] = {}
         self._teardown_timeout = teardown_timeout
         self._log = logger
 
@@ -377,7 +422,7 @@ class ServedServices:
         adapter = current()
         if adapter is None:
             raise NotConnected("the connection is not up")
-        served = ServiceRequests(
+        served = Serving(
             name,
             service_type,
             timeout=timeout,
@@ -398,9 +443,9 @@ class ServedServices:
             raise
         try:
             async with anyio.create_task_group() as tg:
-                tg.start_soon(served._expire, name=f"rmb-serve-{name}")
+                tg.start_soon(served.expire, name=f"rmb-serve-{name}")
                 try:
-                    yield served
+                    yield served.requests
                 finally:
                     tg.cancel_scope.cancel()
         finally:
@@ -410,7 +455,7 @@ class ServedServices:
     async def _end(
         self,
         name: str,
-        served: ServiceRequests,
+        served: Serving,
         reason: str,
         current: Callable[[], Adapter | None],
     ) -> None:
@@ -419,7 +464,7 @@ class ServedServices:
         unadvertise always has the other half."""
         budget = self._teardown_timeout
         with anyio.CancelScope(shield=True), anyio.move_on_after(budget):
-            await served._close(reason, budget / 2)
+            await served.close(reason, budget / 2)
             adapter = current()
             if adapter is not None:
                 try:
@@ -440,7 +485,7 @@ class ServedServices:
         """Every ``serve()`` iteration raises ``error`` (once the requests
         already queued are read)."""
         for served in self._served.values():
-            served._fail(error)
+            served.fail(error)
 
     def names(self) -> list[str]:
         """The names served now."""
