@@ -47,6 +47,8 @@ from ._shared import Advertisement, Advertisements, EventSource, open_websocket,
 
 __all__ = ["RosbridgeAdapter", "open_rosbridge", "start_rosbridge"]
 
+# _rosapi and _round_trip read this module's _INTERNAL_TIMEOUT (a test patches it)
+
 _WIRE_SLACK: Final = 0.5
 """The client's deadline for a call runs this long past the forwarded one,
 so the server's own timeout answer arrives first."""
