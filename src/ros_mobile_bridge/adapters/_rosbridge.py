@@ -7,11 +7,10 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-import json
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -23,7 +22,6 @@ from .._errors import (
     ConnectError,
     DecodeError,
     NotConnected,
-    NotSupportedError,
     ProtocolMismatchError,
     RosBridgeError,
     SchemaError,
@@ -32,36 +30,31 @@ from .._errors import (
 )
 from .._limits import truncate_for_log
 from .._options import ClientOptions
-from .._types import ServerInfo, ServiceInfo, TopicInfo
+from .._types import ServerInfo
 from ..codec import CodecRegistry, SchemaTooLarge, same_type_name
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
-from ._seam import EventSink, GoalEvents, GraphChanged, ServiceHandler, SubscribeHints, TopicState
+from ._rosbridge_definitions import RosbridgeDefinitions
+from ._rosbridge_definitions import _typedefs_to_msg as _typedefs_to_msg
+from ._rosbridge_discovery import _INTERNAL_TIMEOUT as _INTERNAL_TIMEOUT
+from ._rosbridge_discovery import RosbridgeDiscovery, _names
+from ._rosbridge_parameters import RosbridgeParameters
+from ._rosbridge_serving import RosbridgeServing, _Served
+from ._seam import EventSink, GoalEvents, SubscribeHints, TopicState
 from ._shared import Advertisement, Advertisements, EventSource, open_websocket, socket_frame
 
 __all__ = ["RosbridgeAdapter", "open_rosbridge", "start_rosbridge"]
 
-_INTERNAL_TIMEOUT: Final = 5.0
-"""Seconds for the backend's own rosapi requests (discovery, parameters)."""
+# _rosapi and _round_trip read this module's _INTERNAL_TIMEOUT (a test patches it)
+
 _WIRE_SLACK: Final = 0.5
 """The client's deadline for a call runs this long past the forwarded one,
 so the server's own timeout answer arrives first."""
-_EMPTY_RETRY_DELAY: Final = 0.25
-_TYPE_LOOKUPS_PER_POLL: Final = 4
-"""Service types looked up per discovery poll: a burst of rosapi calls makes
-rosbridge_server_rs drop messages of busy topics (measured at 5 kHz)."""
 COMPRESSIONS: Final = ("cbor", "cbor-raw")
 _STRAY_LOGGED: Final = 256
 """Topics never subscribed whose messages are each logged once."""
-_IDL_TO_MSG: Final[Mapping[str, str]] = {
-    "boolean": "bool",
-    "octet": "byte",
-    "float": "float32",
-    "double": "float64",
-}
-"""``/rosapi/message_details`` names some primitives as IDL does."""
 
 _ENCODING: Final[Mapping[str, str]] = {
     "json": "json",
@@ -83,13 +76,6 @@ def _decode_cbor(payload: memoryview) -> Any:
         return rb.decode_cbor_msg(payload)
     except ValueError as exc:
         raise DecodeError(f"invalid CBOR publish frame: {exc}") from None
-
-
-def _refusal(name: str, service_type: str, text: str) -> RosBridgeError:
-    """The error for the bridge's refusal to serve ``name``."""
-    if "another client" in text:
-        return ServiceError(name, f"the bridge refused to serve it: {text}")
-    return SchemaError(f"the bridge refused to serve {name} as {service_type}: {text}")
 
 
 def _is_foxglove_rejection(exc: HandshakeRejected) -> bool:
@@ -182,22 +168,11 @@ class _Publisher(Advertisement):
     error: str | None = None
 
 
-@dataclass(slots=True)
-class _Served:
-    """A service this connection serves (``advertise_service``)."""
-
-    type: str
-    handler: ServiceHandler
-    id: str
-    error: str | None = None
-    confirmed: bool = False  # nobody waits for the answer: a refusal goes to the handler
-
-
-_FAILED_ANSWERS_KEPT: Final = 256
-
-
-class RosbridgeAdapter(EventSource):
-    """One rosbridge v2 connection (see :class:`~.Adapter`)."""
+class RosbridgeAdapter(
+    EventSource, RosbridgeDiscovery, RosbridgeDefinitions, RosbridgeServing, RosbridgeParameters
+):
+    """One rosbridge v2 connection (see :class:`~.Adapter`). Discovery,
+    definitions, serving and parameters are its mixins' (sibling modules)."""
 
     protocol = "rosbridge"
     wire_timeout_slack = _WIRE_SLACK
@@ -452,29 +427,7 @@ class RosbridgeAdapter(EventSource):
                 if pub.ready.is_set():  # nobody waits for it (restored unconfirmed)
                     self._log.error("the bridge refused to advertise a topic: %s", event.msg)
                 return
-        for name, served in self._served.items():
-            if served.id == key and error:
-                served.error = event.msg
-                self._log.error("the bridge refused to serve %s: %s", name, event.msg)
-                if served.confirmed:  # nobody waits for it: end that serve() block
-                    del self._served[name]  # refused: not ours to unadvertise
-                    served.handler.on_service_failed(_refusal(name, served.type, event.msg))
-                return
-        if error and key.startswith("service_request:"):
-            service = self._failed_answers.pop(key, None)
-            if service is not None:
-                # rosbridge_server_rs: "ROS services cannot carry an error
-                # response; request will time out"
-                self._log.info(
-                    "%s: answered %s with result false; the bridge says: %s",
-                    service,
-                    key,
-                    truncate_for_log(event.msg),
-                )
-            else:
-                self._log.warning(
-                    "the bridge refused the answer to %s: %s", key, truncate_for_log(event.msg)
-                )
+        if self._on_serving_status(event):
             return
         topic = self._sub_topics.get(key)
         if topic is not None and error:
@@ -494,14 +447,6 @@ class RosbridgeAdapter(EventSource):
         self._log.log(level, "server status: %s", truncate_for_log(event.msg))
 
     # -- discovery ---------------------------------------------------------------
-    @property
-    def topics(self) -> list[TopicInfo]:
-        return [TopicInfo(name, schema) for name, schema in sorted(self._topics.items())]
-
-    @property
-    def services(self) -> list[ServiceInfo]:
-        return [ServiceInfo(name, schema) for name, schema in sorted(self._services.items())]
-
     def topic_active(self, topic: str) -> bool:
         return topic in self._live
 
@@ -511,89 +456,6 @@ class RosbridgeAdapter(EventSource):
         else:
             self._live.discard(topic)
         self._emit(TopicState(topic, live))
-
-    async def _discover(self, *, first: bool = False) -> bool:
-        """Poll the graph once; True when it changed. A failing rosapi is
-        reported once and leaves the tables as they were."""
-        try:
-            answer = await self._rosapi("/rosapi/topics")
-            if first and not _names(answer, "topics"):
-                await anyio.sleep(_EMPTY_RETRY_DELAY)  # a bridge that just started
-                answer = await self._rosapi("/rosapi/topics")
-            services = await self._rosapi("/rosapi/services")
-        except (ServiceError, TimeoutError) as exc:
-            if not self._rosapi_warned:
-                self._rosapi_warned = True
-                self._log.warning(
-                    "discovery through /rosapi failed (%s): topic and service lists stay empty;"
-                    " subscribe with schema= and publish still work",
-                    exc,
-                )
-            self._discovery_ok = False
-            return False
-        self._discovery_ok = True
-        names = self._bounded(_names(answer, "topics"), "channel_limit", "topics")
-        types = _names(answer, "types")
-        topics = {n: (types[i] if i < len(types) else "") for i, n in enumerate(names)}
-        service_names = self._bounded(_names(services, "services"), "service_limit", "services")
-        old_services = self._services
-        new_services = {n: old_services.get(n, "") for n in service_names}
-        changed = topics != self._topics or new_services != self._services
-        self._topics = topics
-        self._services = new_services
-        return changed
-
-    def _bounded(self, names: list[str], reason: str, what: str) -> list[str]:
-        """The first ``max_channels`` / ``max_services`` names; more are a
-        rejection, reported when the graph first exceeds the bound (not on
-        every poll while it stays over)."""
-        limit = (
-            self._options.max_channels if reason == "channel_limit" else self._options.max_services
-        )
-        if len(names) <= limit:
-            self._over_limit.discard(reason)
-            return names
-        if reason not in self._over_limit:
-            self._over_limit.add(reason)
-            detail = (
-                f"/rosapi/{what}: {len(names) - limit} of {len(names)} {what} refused: the "
-                f"connection keeps at most {limit}"
-            )
-            self._reject(reason, detail)
-        return names[:limit]
-
-    async def _lookup_service_types(self) -> bool:
-        unknown = [n for n, t in self._services.items() if not t][:_TYPE_LOOKUPS_PER_POLL]
-        changed = False
-        for name in unknown:
-            try:
-                answer = await self._rosapi("/rosapi/service_type", {"service": name})
-            except (ServiceError, TimeoutError):
-                continue
-            schema = answer.get("type") if isinstance(answer, dict) else None
-            if isinstance(schema, str) and schema and name in self._services:
-                self._services[name] = schema
-                changed = True
-        return changed
-
-    async def _poll_discovery(self) -> None:
-        """Keep the graph current: right away (after a (re)connect), then every
-        ``options.discovery_interval``."""
-        interval = self._options.discovery_interval
-        first = True
-        try:
-            while True:
-                changed = await self._discover() if not first else False
-                first = False
-                changed |= await self._lookup_service_types()
-                if changed:
-                    self._emit(GraphChanged(self.topics, self.services))
-                for topic in list(self._wanted):
-                    await self._sync(topic)
-                self._post()
-                await anyio.sleep(interval)
-        except (ConnectError, NotConnected):
-            return  # the reader reports the loss
 
     # -- subscriptions -----------------------------------------------------------
     def _desired(self, topic: str, hints: SubscribeHints) -> _WireSub:
@@ -682,29 +544,6 @@ class RosbridgeAdapter(EventSource):
             return  # the first message logs it, as before
         self._decoders[(topic, "cbor-raw")] = built
 
-    async def _fetch_definition(self, schema: str) -> None:
-        """Register ``schema`` from ``/rosapi/message_details`` (for cbor-raw
-        of a type the bundled definitions lack)."""
-        try:
-            answer = await self._rosapi("/rosapi/message_details", {"type": schema})
-            self.codecs.add_schema(schema, "ros2msg", _typedefs_to_msg(schema, answer))
-        except (ServiceError, TimeoutError, SchemaError, ValueError) as exc:
-            self._no_definition.add(schema)  # asked once per connection
-            self._log.warning(
-                "no definition of %s from /rosapi/message_details: %s",
-                schema,
-                truncate_for_log(str(exc)),
-            )
-
-    async def fetch_definition(self, schema: str) -> bool:
-        """Whether a definition of ``schema`` is known, asking the bridge
-        (``/rosapi/message_details``, once per connection and type) when it
-        is not. The client asks before publishing a type it cannot resolve
-        from the bundled definitions, the graph or the user's own."""
-        if schema not in self._no_definition and not self.codecs.has_schema(schema):
-            await self._fetch_definition(schema)
-        return self.codecs.resolves(schema)
-
     async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
         if hints.compression is not None and hints.compression not in COMPRESSIONS:
             raise ValueError(f"compression must be one of {COMPRESSIONS} or None")
@@ -781,82 +620,6 @@ class RosbridgeAdapter(EventSource):
     async def call_service(self, name: str, request: Any, timeout: float) -> Any:
         return await self._call(name, dict(request) if request is not None else {}, timeout)
 
-    # -- serving -------------------------------------------------------------------------
-    async def advertise_service(
-        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
-    ) -> None:
-        if name in self._served:
-            raise ValueError(f"{name} is served by this client already")
-        served = _Served(service_type, handler, self._next_id(f"advertise_service:{name}"))
-        self._served[name] = served
-        sent = False
-        try:
-            await self._ws.send(self._engine.advertise_service(name, service_type, id=served.id))
-            sent = True
-            if not confirm:
-                served.confirmed = True  # a refusal goes to handler.on_service_failed
-                return
-            await self._confirm_served(name, served)
-            if served.error is not None:
-                raise _refusal(name, service_type, served.error)
-            served.confirmed = True
-        except BaseException:
-            # never sent, or refused (the name may be another client's): free
-            if not (sent and served.error is None) and self._served.get(name) is served:
-                del self._served[name]
-            # else not confirmed (a timeout, a cancellation) but maybe served:
-            # the entry stays, so calls still reach the handler, until the
-            # caller answers what came and calls unadvertise_service
-            raise
-
-    async def _confirm_served(self, name: str, served: _Served) -> None:
-        """Wait until the bridge refused ``name`` (``served.error``) or the
-        graph shows it served with its type. rosbridge_server_rs may report
-        a refusal after answering requests sent later, so a round trip is no
-        proof; the graph is. ``ServiceError`` when neither came within the
-        backend's own deadline."""
-        with anyio.move_on_after(_INTERNAL_TIMEOUT):
-            while served.error is None:
-                try:
-                    answer = await self._rosapi("/rosapi/service_type", {"service": name})
-                except ServiceError:
-                    answer = None
-                found = answer.get("type") if isinstance(answer, dict) else None
-                if served.error is None and isinstance(found, str) and found:
-                    if same_type_name(found, served.type):
-                        return
-                    served.error = f"the graph has {name} as {found}"
-                    return
-                await anyio.sleep(0.05)
-            return
-        raise ServiceError(
-            name, f"the bridge did not confirm serving it in {_INTERNAL_TIMEOUT:g} s"
-        )
-
-    async def unadvertise_service(self, name: str) -> None:
-        served = self._served.pop(name, None)
-        if served is not None and not self._ws.closed:
-            await self._ws.send(self._engine.unadvertise_service(name, id=served.id))
-            await self._round_trip()  # served no more once this returns
-
-    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
-        if result:
-            served = self._served.get(name)
-            body: str | bytes
-            if served is not None:
-                response = CodecRegistry.service_type_names(served.type)[1]
-                if self.codecs.has_schema(response):
-                    self.codecs.encoder(response, "cdr")(values)  # DecodeError naming the field
-                body = self.codecs.encoder(response, "json")(values)
-            else:
-                body = json.dumps(values)
-        else:
-            body = json.dumps(str(values))
-            if len(self._failed_answers) >= _FAILED_ANSWERS_KEPT:
-                del self._failed_answers[next(iter(self._failed_answers))]
-            self._failed_answers[request_id] = name
-        await self._ws.send(self._engine.service_response(name, body, id=request_id, result=result))
-
     # -- actions ---------------------------------------------------------------------
     async def send_action_goal(
         self, action: str, action_type: str, goal: Any, events: GoalEvents
@@ -883,44 +646,6 @@ class RosbridgeAdapter(EventSource):
 
     async def cancel_action_goal(self, action: str, goal_id: str) -> None:
         await self._ws.send(self._engine.cancel_action_goal(action, id=goal_id))
-
-    # -- parameters --------------------------------------------------------------------
-    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
-        if not names:
-            answer = await self._param_call("/rosapi/get_param_names", {})
-            names = _names(answer, "names")
-        values: dict[str, Any] = {}
-        for name in names:
-            answer = await self._param_call("/rosapi/get_param", {"name": name})
-            if not isinstance(answer, dict) or answer.get("successful") is False:
-                continue  # "Parameter not found": absent from the result
-            raw = answer.get("value")
-            if isinstance(raw, str) and raw:
-                try:  # the value is a JSON document in a string
-                    values[name] = json.loads(raw)
-                except ValueError:
-                    values[name] = raw
-        return values
-
-    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
-        for name, value in values.items():
-            answer = await self._param_call(
-                "/rosapi/set_param", {"name": name, "value": json.dumps(value)}
-            )
-            if isinstance(answer, dict) and answer.get("successful") is False:
-                raise ServiceError(
-                    "/rosapi/set_param", f"{name}: {answer.get('reason') or 'refused'}"
-                )
-        return await self.get_parameters(list(values))
-
-    async def _param_call(self, service: str, args: Any) -> Any:
-        return await self._call(service, args, self._options.service_timeout)
-
-    async def subscribe_parameters(self, names: Sequence[str]) -> None:
-        raise NotSupportedError("rosbridge has no parameter updates to subscribe to")
-
-    async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
-        return None
 
     # -- lifecycle -------------------------------------------------------------------
     async def send(self, message: WireMessage) -> None:
@@ -974,38 +699,3 @@ class RosbridgeAdapter(EventSource):
 
     async def aclose(self) -> None:
         await self._ws.aclose()
-
-
-def _names(answer: Any, key: str) -> list[str]:
-    values = answer.get(key) if isinstance(answer, dict) else None
-    if not isinstance(values, list):
-        return []
-    return [v for v in values if isinstance(v, str)]
-
-
-def _typedefs_to_msg(schema: str, answer: Any) -> str:
-    """``/rosapi/message_details`` typedefs as concatenated ``.msg`` text."""
-    typedefs = answer.get("typedefs") if isinstance(answer, dict) else None
-    if not isinstance(typedefs, list) or not typedefs:
-        raise ValueError("no typedefs in the answer")
-    blocks: list[str] = []
-    main = None
-    for typedef in typedefs:
-        name = typedef.get("type")
-        fields = typedef.get("fieldnames", [])
-        types = typedef.get("fieldtypes", [])
-        lengths = typedef.get("fieldarraylen", [])
-        lines = []
-        for i, field in enumerate(fields):
-            length = lengths[i] if i < len(lengths) else -1
-            suffix = "" if length == -1 else ("[]" if length == 0 else f"[{length}]")
-            base = _IDL_TO_MSG.get(types[i], types[i])
-            lines.append(f"{base}{suffix} {field}")
-        text = "\n".join(lines) + "\n"
-        if main is None and same_type_name(str(name), schema):
-            main = text
-        else:
-            blocks.append(f"{'=' * 80}\nMSG: {name}\n{text}")
-    if main is None:
-        raise ValueError(f"the typedefs do not define {schema}")
-    return main + "".join(blocks)

@@ -1,0 +1,83 @@
+"""Message definitions over rosbridge: a type the bundled definitions lack,
+asked of ``/rosapi/message_details`` and registered with the connection's
+codecs. A part of :class:`~._rosbridge.RosbridgeAdapter`."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Awaitable, Callable, Mapping
+from typing import Any, Final
+
+from .._errors import SchemaError, ServiceError
+from .._limits import truncate_for_log
+from ..codec import CodecRegistry, same_type_name
+
+_IDL_TO_MSG: Final[Mapping[str, str]] = {
+    "boolean": "bool",
+    "octet": "byte",
+    "float": "float32",
+    "double": "float64",
+}
+"""``/rosapi/message_details`` names some primitives as IDL does."""
+
+
+class RosbridgeDefinitions:
+    """The definitions fetched from the bridge, once per connection and
+    type (``_no_definition`` keeps the types it could not give). The adapter
+    owns the state and helpers declared here."""
+
+    codecs: CodecRegistry
+    _log: logging.Logger
+    _no_definition: set[str]
+    _rosapi: Callable[..., Awaitable[Any]]
+
+    async def _fetch_definition(self, schema: str) -> None:
+        """Register ``schema`` from ``/rosapi/message_details`` (for cbor-raw
+        of a type the bundled definitions lack)."""
+        try:
+            answer = await self._rosapi("/rosapi/message_details", {"type": schema})
+            self.codecs.add_schema(schema, "ros2msg", _typedefs_to_msg(schema, answer))
+        except (ServiceError, TimeoutError, SchemaError, ValueError) as exc:
+            self._no_definition.add(schema)  # asked once per connection
+            self._log.warning(
+                "no definition of %s from /rosapi/message_details: %s",
+                schema,
+                truncate_for_log(str(exc)),
+            )
+
+    async def fetch_definition(self, schema: str) -> bool:
+        """Whether a definition of ``schema`` is known, asking the bridge
+        (``/rosapi/message_details``, once per connection and type) when it
+        is not. The client asks before publishing a type it cannot resolve
+        from the bundled definitions, the graph or the user's own."""
+        if schema not in self._no_definition and not self.codecs.has_schema(schema):
+            await self._fetch_definition(schema)
+        return self.codecs.resolves(schema)
+
+
+def _typedefs_to_msg(schema: str, answer: Any) -> str:
+    """``/rosapi/message_details`` typedefs as concatenated ``.msg`` text."""
+    typedefs = answer.get("typedefs") if isinstance(answer, dict) else None
+    if not isinstance(typedefs, list) or not typedefs:
+        raise ValueError("no typedefs in the answer")
+    blocks: list[str] = []
+    main = None
+    for typedef in typedefs:
+        name = typedef.get("type")
+        fields = typedef.get("fieldnames", [])
+        types = typedef.get("fieldtypes", [])
+        lengths = typedef.get("fieldarraylen", [])
+        lines = []
+        for i, field in enumerate(fields):
+            length = lengths[i] if i < len(lengths) else -1
+            suffix = "" if length == -1 else ("[]" if length == 0 else f"[{length}]")
+            base = _IDL_TO_MSG.get(types[i], types[i])
+            lines.append(f"{base}{suffix} {field}")
+        text = "\n".join(lines) + "\n"
+        if main is None and same_type_name(str(name), schema):
+            main = text
+        else:
+            blocks.append(f"{'=' * 80}\nMSG: {name}\n{text}")
+    if main is None:
+        raise ValueError(f"the typedefs do not define {schema}")
+    return main + "".join(blocks)

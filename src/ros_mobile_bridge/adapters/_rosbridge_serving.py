@@ -1,0 +1,168 @@
+"""Serving a service over rosbridge (``advertise_service``): the record of
+each service this connection serves, the bridge's refusals of them and its
+complaints about the answers sent to their callers. A part of
+:class:`~._rosbridge.RosbridgeAdapter`."""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import Any, Final
+
+import anyio
+
+from .._errors import RosBridgeError, SchemaError, ServiceError
+from .._limits import truncate_for_log
+from ..codec import CodecRegistry, same_type_name
+from ..transport import WebSocket
+from ..wire import rosbridge as rb
+from ._rosbridge_discovery import _INTERNAL_TIMEOUT
+from ._seam import ServiceHandler
+
+
+def _refusal(name: str, service_type: str, text: str) -> RosBridgeError:
+    """The error for the bridge's refusal to serve ``name``."""
+    if "another client" in text:
+        return ServiceError(name, f"the bridge refused to serve it: {text}")
+    return SchemaError(f"the bridge refused to serve {name} as {service_type}: {text}")
+
+
+@dataclass(slots=True)
+class _Served:
+    """A service this connection serves (``advertise_service``)."""
+
+    type: str
+    handler: ServiceHandler
+    id: str
+    error: str | None = None
+    confirmed: bool = False  # nobody waits for the answer: a refusal goes to the handler
+
+
+_FAILED_ANSWERS_KEPT: Final = 256
+
+
+class RosbridgeServing:
+    """The services a rosbridge connection serves: advertising them (and
+    confirming that through the graph), answering their callers, and the
+    bridge's error statuses about either (:meth:`_on_serving_status`). The
+    adapter forwards each call to the handler itself; it owns the state and
+    helpers declared here."""
+
+    _ws: WebSocket
+    _engine: rb.RosbridgeEngine
+    _log: logging.Logger
+    codecs: CodecRegistry
+    _served: dict[str, _Served]
+    _failed_answers: dict[str, str]  # request id -> service, answered false
+    _next_id: Callable[[str], str]
+    _rosapi: Callable[..., Awaitable[Any]]
+    _round_trip: Callable[[], Awaitable[None]]
+
+    async def advertise_service(
+        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
+    ) -> None:
+        if name in self._served:
+            raise ValueError(f"{name} is served by this client already")
+        served = _Served(service_type, handler, self._next_id(f"advertise_service:{name}"))
+        self._served[name] = served
+        sent = False
+        try:
+            await self._ws.send(self._engine.advertise_service(name, service_type, id=served.id))
+            sent = True
+            if not confirm:
+                served.confirmed = True  # a refusal goes to handler.on_service_failed
+                return
+            await self._confirm_served(name, served)
+            if served.error is not None:
+                raise _refusal(name, service_type, served.error)
+            served.confirmed = True
+        except BaseException:
+            # never sent, or refused (the name may be another client's): free
+            if not (sent and served.error is None) and self._served.get(name) is served:
+                del self._served[name]
+            # else not confirmed (a timeout, a cancellation) but maybe served:
+            # the entry stays, so calls still reach the handler, until the
+            # caller answers what came and calls unadvertise_service
+            raise
+
+    async def _confirm_served(self, name: str, served: _Served) -> None:
+        """Wait until the bridge refused ``name`` (``served.error``) or the
+        graph shows it served with its type. rosbridge_server_rs may report
+        a refusal after answering requests sent later, so a round trip is no
+        proof; the graph is. ``ServiceError`` when neither came within the
+        backend's own deadline."""
+        with anyio.move_on_after(_INTERNAL_TIMEOUT):
+            while served.error is None:
+                try:
+                    answer = await self._rosapi("/rosapi/service_type", {"service": name})
+                except ServiceError:
+                    answer = None
+                found = answer.get("type") if isinstance(answer, dict) else None
+                if served.error is None and isinstance(found, str) and found:
+                    if same_type_name(found, served.type):
+                        return
+                    served.error = f"the graph has {name} as {found}"
+                    return
+                await anyio.sleep(0.05)
+            return
+        raise ServiceError(
+            name, f"the bridge did not confirm serving it in {_INTERNAL_TIMEOUT:g} s"
+        )
+
+    async def unadvertise_service(self, name: str) -> None:
+        served = self._served.pop(name, None)
+        if served is not None and not self._ws.closed:
+            await self._ws.send(self._engine.unadvertise_service(name, id=served.id))
+            await self._round_trip()  # served no more once this returns
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        if result:
+            served = self._served.get(name)
+            body: str | bytes
+            if served is not None:
+                response = CodecRegistry.service_type_names(served.type)[1]
+                if self.codecs.has_schema(response):
+                    self.codecs.encoder(response, "cdr")(values)  # DecodeError naming the field
+                body = self.codecs.encoder(response, "json")(values)
+            else:
+                body = json.dumps(values)
+        else:
+            body = json.dumps(str(values))
+            if len(self._failed_answers) >= _FAILED_ANSWERS_KEPT:
+                del self._failed_answers[next(iter(self._failed_answers))]
+            self._failed_answers[request_id] = name
+        await self._ws.send(self._engine.service_response(name, body, id=request_id, result=result))
+
+    def _on_serving_status(self, event: rb.Status) -> bool:
+        """Handle an error status about a served service (the bridge refused
+        to serve it) or about an answer sent to one of its callers; True when
+        it was one of those."""
+        key = event.id or ""
+        error = event.level == "error"
+        for name, served in self._served.items():
+            if served.id == key and error:
+                served.error = event.msg
+                self._log.error("the bridge refused to serve %s: %s", name, event.msg)
+                if served.confirmed:  # nobody waits for it: end that serve() block
+                    del self._served[name]  # refused: not ours to unadvertise
+                    served.handler.on_service_failed(_refusal(name, served.type, event.msg))
+                return True
+        if error and key.startswith("service_request:"):
+            service = self._failed_answers.pop(key, None)
+            if service is not None:
+                # rosbridge_server_rs: "ROS services cannot carry an error
+                # response; request will time out"
+                self._log.info(
+                    "%s: answered %s with result false; the bridge says: %s",
+                    service,
+                    key,
+                    truncate_for_log(event.msg),
+                )
+            else:
+                self._log.warning(
+                    "the bridge refused the answer to %s: %s", key, truncate_for_log(event.msg)
+                )
+            return True
+        return False
