@@ -232,7 +232,7 @@ class RosbridgeAdapter(
             text = truncate_for_log(
                 response.values
                 if isinstance(response.values, str)
-                else rb._as_text(response.values),
+                else rb.as_text(response.values),
                 2000,
             )
             if timeout is not None and "timeout" in text.lower():

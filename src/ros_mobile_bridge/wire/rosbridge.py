@@ -450,9 +450,6 @@ def as_text(value: Any) -> str:
         return truncate_for_log(value, 1000)
 
 
-_as_text = as_text  # the former name, which callers outside this module still use
-
-
 def _check_str(name: str, value: object) -> str:
     if not isinstance(value, str) or not value:
         raise TypeError(f"{name} must be a non-empty str")
