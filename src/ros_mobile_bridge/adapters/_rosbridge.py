@@ -132,7 +132,7 @@ async def start_rosbridge(
             )
         backend = RosbridgeAdapter(ws, options)
         try:
-            await backend._bootstrap(deadline)
+            await backend.bootstrap(deadline)
         except ProtocolMismatchError as exc:
             if auth is None or exc.detected is not None:
                 raise
@@ -254,9 +254,10 @@ class RosbridgeAdapter(
             return await self._call(name, args if args is not None else {}, _INTERNAL_TIMEOUT)
 
     # -- connecting ------------------------------------------------------------
-    async def _bootstrap(self, deadline: float) -> None:
+    async def bootstrap(self, deadline: float) -> None:
         """The first discovery, with a temporary reader (the client's reader
-        starts after ``connect()`` returns)."""
+        starts after ``connect()`` returns). Called once, by
+        :func:`start_rosbridge`."""
         lost: list[ConnectError] = []
 
         async def read() -> None:

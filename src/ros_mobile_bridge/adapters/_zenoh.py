@@ -105,7 +105,7 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     )
     try:
         backend = ZenohAdapter(session, options, endpoint)
-        await backend._bootstrap(deadline)
+        await backend.bootstrap(deadline)
     except BaseException:
         await session.aclose()
         raise
@@ -198,8 +198,9 @@ class ZenohAdapter(ZenohCalls, EventSource, CannotServe):
         return rz.format_key(rz.TopicKey(self.domain, name, type_name, self._type_hash(type_name)))
 
     # -- the graph ----------------------------------------------------------------------
-    async def _bootstrap(self, deadline: float) -> None:
-        """Read the graph as it is now (a liveliness get), then follow it."""
+    async def bootstrap(self, deadline: float) -> None:
+        """Read the graph as it is now (a liveliness get), then follow it.
+        Called once, by :func:`open_zenoh`."""
         session = self._session
         selector = rz.liveliness_selector(self.domain)
         query_id = session.query_liveliness(
