@@ -1,6 +1,6 @@
 """The handle of one action goal: feedback, acceptance, result, cancel.
 
-Protocol-free: the backend reports what happens to the goal through the
+Protocol-free: the adapter reports what happens to the goal through the
 :class:`~ros_mobile_bridge.adapters.GoalEvents` callbacks, which this class
 implements."""
 
@@ -85,7 +85,7 @@ class ActionGoal:
         self._cancel_sent = True
         await self._cancel()
 
-    # -- GoalEvents (called by the backend's reader) --------------------------
+    # -- GoalEvents (called by the adapter's reader) --------------------------
     def on_feedback(self, values: Any) -> None:
         if self.done:
             return

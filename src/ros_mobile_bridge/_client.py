@@ -413,7 +413,7 @@ class Client:
     ) -> T:
         """Run one correlated request under its deadline (``timeout`` or
         ``options.service_timeout``) and report its round trip to
-        ``on_latency``. ``call`` gets the limit (a backend may forward it);
+        ``on_latency``. ``call`` gets the limit (an adapter may forward it);
         the local deadline is ``slack`` later, so the server's own timeout
         answer arrives first. ``ServiceTimeout`` names ``what``."""
         limit = check_timeout(timeout) or self._options.service_timeout

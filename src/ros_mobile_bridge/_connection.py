@@ -240,10 +240,6 @@ class Connection:
             if not await self.next_connection(adapter):
                 return
 
-    @property
-    def rejections(self) -> dict[str, int]:
-        return self.router.rejections
-
     # -- the end -----------------------------------------------------------------
     async def teardown(self) -> None:
         """Flush, zero Twist, confirm, in one shielded scope with a deadline."""

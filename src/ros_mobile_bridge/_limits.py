@@ -3,8 +3,8 @@ is truncated, and JSON nesting is measured before it is parsed.
 
 Pure functions, no I/O: the sans-IO wire engines use them too.
 
-The rejection reasons a backend reports through
-``BackendEvents.on_rejected`` (and :attr:`Client.rejections` counts):
+The rejection reasons an adapter reports in a ``Rejected`` event
+(``adapters/_seam.py``), which :attr:`Client.rejections` counts:
 
 * ``"invalid_utf8"``: a text frame (or a text field) that is not UTF-8;
 * ``"malformed"``: any other frame the engine could not use;

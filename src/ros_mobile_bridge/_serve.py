@@ -1,6 +1,6 @@
 """Serving a service: the objects :meth:`Client.serve` hands out.
 
-The backend's reader hands each forwarded call to :class:`Serving`
+The adapter's reader hands each forwarded call to :class:`Serving`
 (``on_service_request``), the engine of one ``serve()`` block, which queues
 it (bounded) for the consumer's ``async for`` over :class:`ServiceRequests`,
 its face. Every request is answered exactly once: by the consumer
@@ -215,14 +215,14 @@ class Serving:
         """The counters so far (see :class:`ServeStats`)."""
         return ServeStats(**self._counts)
 
-    # -- from the backend's reader ------------------------------------------------
-    async def on_service_request(self, backend: Adapter, request_id: str, args: Any) -> None:
+    # -- from the adapter's reader ------------------------------------------------
+    async def on_service_request(self, adapter: Adapter, request_id: str, args: Any) -> None:
         """Queue a forwarded call; answer ``result: false`` at once when
         serving ended or ``buffer`` requests already wait."""
         self._counts["received"] += 1
         if self._closed:
             self._counts["unanswered"] += 1
-            await backend.respond_service(
+            await adapter.respond_service(
                 self.name, request_id, "the service is shutting down", False
             )
             return
@@ -235,7 +235,7 @@ class Serving:
                 self.name,
                 self.buffer,
             )
-            await backend.respond_service(
+            await adapter.respond_service(
                 self.name,
                 request_id,
                 f"the service is busy: {self.buffer} requests already wait",
@@ -243,14 +243,14 @@ class Serving:
             )
             return
         deadline = anyio.current_time() + self.timeout
-        call = _Call(backend, request_id, args, deadline, self.name, self.answer)
+        call = _Call(adapter, request_id, args, deadline, self.name, self.answer)
         self._queue.append(call)
         self._unsettled[call] = None
         self._wake.set()
         self._changed.set()
 
     def on_service_failed(self, error: RosBridgeError) -> None:
-        """The backend's word that the bridge refused the service after it
+        """The adapter's word that the bridge refused the service after it
         was advertised (a refusal arriving after confirmation, or after a
         restore that could not wait for one): the iteration raises it."""
         self._log.error("%s is not served: %s", self.name, error)
@@ -303,8 +303,8 @@ class Serving:
             raise ServiceError(
                 self.name, f"request {call.id} was answered already ({call.outcome})"
             )
-        backend = call.adapter
-        if backend is not self._current():
+        adapter = call.adapter
+        if adapter is not self._current():
             self._settle(call, "lost")
             raise NotConnected(
                 f"the connection that carried request {call.id} to {self.name} is gone;"
@@ -315,7 +315,7 @@ class Serving:
         # shielded): when it raises, nothing was sent; once it returns, the
         # answer is out, whatever cancellation lands next
         try:
-            await backend.respond_service(self.name, call.id, values, result)
+            await adapter.respond_service(self.name, call.id, values, result)
         except DecodeError as exc:
             self._unclaim(call)  # still the caller's to answer
             raise ValueError(f"{self.name}: {exc}") from exc
@@ -336,14 +336,14 @@ class Serving:
         (never raises; a lost connection counts the request as lost)."""
         if call.outcome is not None:
             return
-        backend = call.adapter
-        if backend is not self._current():
+        adapter = call.adapter
+        if adapter is not self._current():
             self._settle(call, "lost")
             return
         self._log.info("%s: request %s answered result false: %s", self.name, call.id, reason)
         call.outcome = "unanswered"  # claimed, as in answer
         try:
-            await backend.respond_service(self.name, call.id, reason, False)
+            await adapter.respond_service(self.name, call.id, reason, False)
         except RosBridgeError as exc:
             self._settle(call, "lost")
             self._log.debug("%s: could not answer %s: %s", self.name, call.id, exc)

@@ -1,4 +1,4 @@
-"""The Foxglove WebSocket backend: the sans-IO Foxglove engine over the
+"""The Foxglove WebSocket adapter: the sans-IO Foxglove engine over the
 WebSocket transport, with schemas decoded by the per-connection codec
 registry."""
 

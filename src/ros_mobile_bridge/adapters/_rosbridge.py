@@ -1,4 +1,4 @@
-"""The rosbridge v2 backend: the sans-IO rosbridge engine over the WebSocket
+"""The rosbridge v2 adapter: the sans-IO rosbridge engine over the WebSocket
 transport. Discovery, parameters and the latency probe go through the
 bridge's ``/rosapi/*`` services; messages arrive as JSON, CBOR or cbor-raw
 (CDR decoded by the per-connection codec registry)."""
@@ -130,9 +130,9 @@ async def start_rosbridge(
                     end=auth.end,
                 )
             )
-        backend = RosbridgeAdapter(ws, options)
+        adapter = RosbridgeAdapter(ws, options)
         try:
-            await backend.bootstrap(deadline)
+            await adapter.bootstrap(deadline)
         except ProtocolMismatchError as exc:
             if auth is None or exc.detected is not None:
                 raise
@@ -146,7 +146,7 @@ async def start_rosbridge(
     except BaseException:
         await ws.aclose()
         raise
-    return backend
+    return adapter
 
 
 @dataclass(frozen=True, slots=True)
@@ -249,7 +249,7 @@ class RosbridgeAdapter(
             raise error(what, f"{limit} requests already wait for an answer (max_pending_requests)")
 
     async def _rosapi(self, name: str, args: Any = None) -> Any:
-        """A ``/rosapi/*`` call under the backend's own deadline."""
+        """A ``/rosapi/*`` call under the adapter's own deadline."""
         with anyio.fail_after(_INTERNAL_TIMEOUT):
             return await self._call(name, args if args is not None else {}, _INTERNAL_TIMEOUT)
 

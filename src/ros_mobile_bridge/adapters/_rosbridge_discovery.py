@@ -16,7 +16,7 @@ from .._types import ServiceInfo, TopicInfo
 from ._seam import Event, GraphChanged, SubscribeHints
 
 _INTERNAL_TIMEOUT: Final = 5.0
-"""Seconds for the backend's own rosapi requests (discovery, parameters)."""
+"""Seconds for the adapter's own rosapi requests (discovery, parameters)."""
 _EMPTY_RETRY_DELAY: Final = 0.25
 _TYPE_LOOKUPS_PER_POLL: Final = 4
 """Service types looked up per discovery poll: a burst of rosapi calls makes

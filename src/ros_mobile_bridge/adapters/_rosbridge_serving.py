@@ -92,7 +92,7 @@ class RosbridgeServing:
         graph shows it served with its type. rosbridge_server_rs may report
         a refusal after answering requests sent later, so a round trip is no
         proof; the graph is. ``ServiceError`` when neither came within the
-        backend's own deadline."""
+        adapter's own deadline."""
         with anyio.move_on_after(_INTERNAL_TIMEOUT):
             while served.error is None:
                 try:

@@ -148,10 +148,6 @@ class Adapter(Protocol):
     def topic_active(self, topic: str) -> bool:
         """Whether the server currently carries ``topic`` to this client."""
 
-    rejections: dict[str, int]
-    """Inbound frames skipped or refused on this connection, per reason
-    (every :class:`Rejected` event it handed up, counted)."""
-
     async def run(self, sink: EventSink) -> None:
         """The reader loop: hands every event to ``sink`` (events that
         happened before it started first). Returns when the connection

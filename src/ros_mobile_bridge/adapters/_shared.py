@@ -38,7 +38,7 @@ async def open_websocket(
     """:func:`~ros_mobile_bridge.transport.connect_websocket` to ``url`` with
     the client's options (message size bound, TLS context, connect timeout,
     read coalescing): the one place every WebSocket of a client is opened,
-    by either backend and by ``protocol="auto"``. Raises as
+    by either adapter and by ``protocol="auto"``. Raises as
     ``connect_websocket`` does.
 
     The handshake carries ``options.headers``. websockets' debug log (request
@@ -111,7 +111,7 @@ A = TypeVar("A", bound=Advertisement)
 
 
 class Advertisements(dict[str, A]):
-    """The topics a backend publishes, by name: the same bookkeeping for
+    """The topics an adapter publishes, by name: the same bookkeeping for
     every adapter."""
 
     def schemas(self) -> dict[str, str]:
@@ -140,8 +140,7 @@ class EventSource:
     inbound message (:meth:`_deliver`); a call from outside the reader (a
     subscribe, a discovery poll) passes them on at its end (:meth:`_post`).
     Before :meth:`_attach` (the bootstrap, before the reader runs) they wait,
-    :data:`_KEPT_BEFORE_RUN` at most. Rejections are also counted here
-    (``Adapter.rejections``)."""
+    :data:`_KEPT_BEFORE_RUN` at most."""
 
     _log: logging.Logger
 
@@ -149,7 +148,6 @@ class EventSource:
         self._sink: EventSink | None = None
         self._pending: list[Event] = []
         self._dropped_before_run = 0
-        self.rejections: dict[str, int] = {}
 
     def _attach(self, sink: EventSink) -> None:
         """The reader starts: from now on events go to ``sink``."""
@@ -170,9 +168,8 @@ class EventSource:
         self._pending.append(event)
 
     def _reject(self, reason: str, detail: str, count: int = 1) -> None:
-        """Count a rejection and hand it up (the client counts it over its
-        life and logs it)."""
-        self.rejections[reason] = self.rejections.get(reason, 0) + count
+        """Hand a rejection up (the router counts it over the client's life
+        and logs it)."""
         self._emit(Rejected(reason, detail, count))
 
     async def _deliver(self) -> None:

@@ -1,4 +1,4 @@
-"""The Zenoh backend: ROS 2 over Zenoh with rmw_zenoh's conventions (key
+"""The Zenoh adapter: ROS 2 over Zenoh with rmw_zenoh's conventions (key
 expressions, liveliness tokens, attachments, CDR payloads), through one
 zenoh *client* session to a router (``rmw_zenohd`` or any zenoh router).
 
@@ -104,12 +104,12 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
         max_bytes=options.zenoh_backlog_bytes,
     )
     try:
-        backend = ZenohAdapter(session, options, endpoint)
-        await backend.bootstrap(deadline)
+        adapter = ZenohAdapter(session, options, endpoint)
+        await adapter.bootstrap(deadline)
     except BaseException:
         await session.aclose()
         raise
-    return backend
+    return adapter
 
 
 class ZenohAdapter(ZenohCalls, EventSource, CannotServe):
@@ -535,7 +535,7 @@ class ZenohAdapter(ZenohCalls, EventSource, CannotServe):
 
     async def send(self, message: WireMessage) -> None:
         if not isinstance(message, TopicMessage):
-            raise TypeError("the zenoh backend sends only TopicMessage")
+            raise TypeError("the zenoh adapter sends only TopicMessage")
         if self._lost is not None or self._session.closed:
             raise ConnectError(f"zenoh: {self._lost or 'the session is closed'}")
         pub = self._pubs.get(message.topic)

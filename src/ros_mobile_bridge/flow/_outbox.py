@@ -22,7 +22,7 @@ __all__ = ["Outbox", "TopicMessage", "WireMessage"]
 
 class TopicMessage(NamedTuple):
     """An encoded message for a transport with no shared stream but one
-    writer per topic (Zenoh): the backend hands ``payload`` to ``topic``'s
+    writer per topic (Zenoh): the adapter hands ``payload`` to ``topic``'s
     publisher when it sends it."""
 
     topic: str

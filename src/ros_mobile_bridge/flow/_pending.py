@@ -1,4 +1,4 @@
-"""The pending-request registry every backend shares: correlate a request id
+"""The pending-request registry every adapter shares: correlate a request id
 with the response that answers it, and fail every waiter when the connection
 goes away, so no call waits forever."""
 

@@ -4,7 +4,7 @@ httpx makes the HTTP upgrade (so the client's proxies, auth, cookies, default
 headers, TLS settings and custom transport all apply), then the library's own
 :class:`~ros_mobile_bridge.transport.WebSocket` runs on the upgraded
 connection: the same reader, fast path, size bound, keep-alive and closing
-rules as the default transport, one code path for the backends.
+rules as the default transport, one code path for the adapters.
 
 The request is the one websockets' sans-IO client builds (key, version,
 subprotocols), sent by httpx; httpx's answer is fed back to that client as

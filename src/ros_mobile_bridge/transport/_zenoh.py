@@ -1,4 +1,4 @@
-"""A Zenoh session for the Zenoh backend: eclipse-zenoh in *client* mode,
+"""A Zenoh session for the Zenoh adapter: eclipse-zenoh in *client* mode,
 with everything its threads hand over funnelled into one :class:`Inbox` that
 the event loop drains in batches.
 
@@ -6,7 +6,7 @@ Zenoh calls back on its own threads, one call per sample, reply or
 liveliness change. A thread hop per item costs 12-15 us, so the callbacks
 do not hop: they copy what they need out of the zenoh objects, append it to
 the inbox under a lock and wake the event loop only when the inbox was empty
-(one wake-up per batch, however many items it holds). The backend's reader
+(one wake-up per batch, however many items it holds). The adapter's reader
 task takes the whole batch at once.
 
 Data samples are bounded (``max_items`` samples and ``max_bytes`` payload
@@ -17,7 +17,7 @@ by the graph and the pending-request limits.
 
 Lifecycle: every subscriber, liveliness subscriber and token declared here
 is undeclared, and the session closed, by :meth:`ZenohSession.aclose` (the
-backend calls it on every exit path, shielded). A callback still declared at
+adapter calls it on every exit path, shielded). A callback still declared at
 interpreter exit would hang the process for 20 s or more.
 
 eclipse-zenoh is an optional dependency (the ``[zenoh]`` extra); it is
@@ -233,7 +233,7 @@ class ZenohSession:
 
     def undeclare(self, handle: int) -> None:
         """Undeclare what ``handle`` names (a no-op for an unknown handle).
-        Zenoh may still call a callback once after this: the backend ignores
+        Zenoh may still call a callback once after this: the adapter ignores
         items whose tag it no longer knows."""
         declared = self._declared.pop(handle, None)
         if declared is not None and not self._closed:

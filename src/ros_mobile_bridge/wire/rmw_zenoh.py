@@ -2,7 +2,7 @@
 
 No sessions, no threads, no event loop: this module turns ROS names, types and
 QoS into the Zenoh key expressions, liveliness tokens and attachments that
-``rmw_zenoh_cpp`` uses, and parses what a peer sends back. The backend
+``rmw_zenoh_cpp`` uses, and parses what a peer sends back. The adapter
 (``adapters/_zenoh.py``) owns the Zenoh session and feeds these functions.
 
 The conventions, as ``rmw_zenoh_cpp`` (Jazzy) writes them:
@@ -400,7 +400,7 @@ def entity_gid(token_key: str) -> bytes:
     return xxhash.xxh3_128_intdigest(token_key.encode()).to_bytes(_GID_SIZE, "little")
 
 
-# -- what a session hands the backend ----------------------------------------------------------
+# -- what a session hands the adapter ----------------------------------------------------------
 # One object per item a Zenoh session's threads hand to the event loop (one per
 # data sample on the hot path). Plain __slots__ classes with a plain __init__:
 # the cheapest typed form to build (a slotted dataclass costs ~20% more, a
