@@ -336,6 +336,10 @@ class Subscription:
         client's next reliability tick (200 ms)."""
         self._logger = logger
         self._since_yield = 0
+        # the next frame once one arrives; StopAsyncIteration once closed and
+        # drained (the connection's error instead, when it was lost). Bound
+        # here, not wrapped: no call layer on the consumer's path
+        self._wait = queue.wait_frame
 
     @property
     def state(self) -> SubscriptionState:
@@ -436,12 +440,6 @@ class Subscription:
         if frame.payload.nbytes >= _LARGE_PAYLOAD:
             self._since_yield = _YIELD_EVERY  # yield before the next big decode
         return message
-
-    async def _wait(self) -> RawFrame:
-        """The next frame once one arrives; ``StopAsyncIteration`` once the
-        subscription is closed and drained (the connection's error instead,
-        when it was lost)."""
-        return await self._queue.wait_frame()
 
     def _decode(self, frame: RawFrame) -> Message:
         queue = self._queue
