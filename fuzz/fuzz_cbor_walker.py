@@ -1,8 +1,9 @@
 """Fuzz harness for the zero-copy CBOR walker of the rosbridge engine.
 
 :meth:`RosbridgeEngine.receive_binary` first walks a CBOR frame without
-decoding it (``_peek_cbor_publish`` and its helpers ``_head``, ``_skip``,
-``_text``, ``_is_raw``, ``_raw_message`` in ``wire/rosbridge.py``) to find
+decoding it (``peek_cbor_publish``, ``rb._peek_cbor_publish`` here, and its
+helpers ``_head``, ``_skip``, ``_text``, ``_is_raw``, ``_raw_message`` in
+``wire/_rosbridge/_readers.py``) to find
 ``op``, ``topic`` and, for a ``cbor-raw`` topic, the slice holding the CDR
 message; any other frame is decoded whole (``cbor2``). This harness builds
 CBOR byte by byte, so it reaches what ``cbor2.dumps`` never writes:
