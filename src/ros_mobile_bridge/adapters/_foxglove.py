@@ -43,6 +43,7 @@ from ._shared import (
     Advertisements,
     CannotServe,
     EventSource,
+    Publishes,
     open_websocket,
     socket_frame,
 )
@@ -126,7 +127,7 @@ def _greeted(engine: fx.FoxgloveEngine) -> bool:
     return engine.server_info is not None
 
 
-class FoxgloveAdapter(EventSource, CannotServe):
+class FoxgloveAdapter(EventSource, Publishes, CannotServe):
     """One Foxglove WebSocket connection (see :class:`~.Adapter`)."""
 
     protocol = "foxglove-ws"
@@ -157,7 +158,7 @@ class FoxgloveAdapter(EventSource, CannotServe):
         self._topic_infos: list[TopicInfo] = []
         self._wanted: dict[str, SubscribeHints] = {}
         self._active: dict[str, int] = {}  # topic -> subscription id
-        self._client_channels: Advertisements[_ClientChannel] = Advertisements()
+        self._pubs: Advertisements[_ClientChannel] = Advertisements()
         self._calls: PendingRequests[Any] = PendingRequests()
         self._params: PendingRequests[dict[str, Any]] = PendingRequests()
         self._call_ids = itertools.count(1)
@@ -427,12 +428,6 @@ class FoxgloveAdapter(EventSource, CannotServe):
             await self._ws.send(self._engine.unsubscribe([sub_id]))
 
     # -- publishing ---------------------------------------------------------
-    def publishing(self) -> Mapping[str, str]:
-        return self._client_channels.schemas()
-
-    def advertised(self, topic: str) -> str | None:
-        return self._client_channels.ready_schema(topic)
-
     def _publish_encoding(self, schema: str) -> str:
         supported = self.server_info.supported_encodings
         if "cdr" in supported and self.codecs.has_schema(schema):
@@ -450,7 +445,7 @@ class FoxgloveAdapter(EventSource, CannotServe):
     ) -> None:
         if latch:
             raise NotSupportedError("the Foxglove protocol has no latched publishing")
-        if await self._client_channels.reuse(topic, schema):
+        if await self._pubs.reuse(topic, schema):
             return
         if "clientPublish" not in self.server_info.capabilities:
             raise NotSupportedError(
@@ -460,25 +455,23 @@ class FoxgloveAdapter(EventSource, CannotServe):
         encode = self.codecs.encoder(schema, encoding)
         channel_id, message = self._engine.advertise(topic, encoding, schema)
         ready = anyio.Event()
-        self._client_channels[topic] = _ClientChannel(
-            schema, ready, channel_id, topic, encoding, encode
-        )
+        self._pubs[topic] = _ClientChannel(schema, ready, channel_id, topic, encoding, encode)
         try:
             await self._ws.send(message)
             await anyio.sleep(self._options.advertise_settle)
         except BaseException:
-            self._client_channels.pop(topic, None)
+            self._pubs.pop(topic, None)
             raise
         finally:
             ready.set()
 
     async def unadvertise(self, topic: str) -> None:
-        channel = self._client_channels.pop(topic, None)
+        channel = self._pubs.pop(topic, None)
         if channel is not None:
             await self._ws.send(self._engine.unadvertise([channel.id]))
 
     def encode_publish(self, topic: str, data: Any) -> WireMessage:
-        channel = self._client_channels[topic]
+        channel = self._pubs[topic]
         payload = channel.encode(data)
         return self._engine.message_data(channel.id, payload)
 

@@ -43,7 +43,14 @@ from ._rosbridge_discovery import RosbridgeDiscovery, _names
 from ._rosbridge_parameters import RosbridgeParameters
 from ._rosbridge_serving import RosbridgeServing, _Served
 from ._seam import EventSink, GoalEvents, SubscribeHints, TopicState
-from ._shared import Advertisement, Advertisements, EventSource, open_websocket, socket_frame
+from ._shared import (
+    Advertisement,
+    Advertisements,
+    EventSource,
+    Publishes,
+    open_websocket,
+    socket_frame,
+)
 
 __all__ = ["RosbridgeAdapter", "open_rosbridge", "start_rosbridge"]
 
@@ -169,7 +176,12 @@ class _Publisher(Advertisement):
 
 
 class RosbridgeAdapter(
-    EventSource, RosbridgeDiscovery, RosbridgeDefinitions, RosbridgeServing, RosbridgeParameters
+    EventSource,
+    Publishes,
+    RosbridgeDiscovery,
+    RosbridgeDefinitions,
+    RosbridgeServing,
+    RosbridgeParameters,
 ):
     """One rosbridge v2 connection (see :class:`~.Adapter`). Discovery,
     definitions, serving and parameters are its mixins' (sibling modules)."""
@@ -563,12 +575,6 @@ class RosbridgeAdapter(
                 await self._ws.send(self._engine.unsubscribe(topic, id=wire.id))
 
     # -- publishing --------------------------------------------------------------
-    def publishing(self) -> Mapping[str, str]:
-        return self._pubs.schemas()
-
-    def advertised(self, topic: str) -> str | None:
-        return self._pubs.ready_schema(topic)
-
     async def advertise(
         self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
     ) -> None:

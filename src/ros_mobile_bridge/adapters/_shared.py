@@ -6,6 +6,7 @@ sink (:class:`EventSource`), and the refusal of what a protocol cannot do
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Final, TypeVar
 
@@ -23,6 +24,7 @@ __all__ = [
     "Advertisements",
     "CannotServe",
     "EventSource",
+    "Publishes",
     "open_websocket",
     "socket_frame",
 ]
@@ -132,6 +134,20 @@ class Advertisements(dict[str, A]):
             return False
         await existing.reuse(topic, schema)
         return True
+
+
+class Publishes:
+    """The publishing half of the seam every adapter answers alike, from
+    its :class:`Advertisements` (``_pubs``): ``publishing()`` and
+    ``advertised()``."""
+
+    _pubs: Advertisements[Any]
+
+    def publishing(self) -> Mapping[str, str]:
+        return self._pubs.schemas()
+
+    def advertised(self, topic: str) -> str | None:
+        return self._pubs.ready_schema(topic)
 
 
 class EventSource:

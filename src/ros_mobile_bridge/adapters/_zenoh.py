@@ -34,7 +34,6 @@ import contextlib
 import itertools
 import logging
 import time
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -54,7 +53,7 @@ from ..flow import Decoder, PendingRequests, RawFrame, TopicMessage, WireMessage
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
-from ._shared import Advertisement, Advertisements, CannotServe, EventSource
+from ._shared import Advertisement, Advertisements, CannotServe, EventSource, Publishes
 from ._zenoh_calls import ZenohCalls
 from ._zenoh_values import (
     Goal,
@@ -112,7 +111,7 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     return adapter
 
 
-class ZenohAdapter(ZenohCalls, EventSource, CannotServe):
+class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
     """One zenoh session to one router (see :class:`~.Adapter`)."""
 
     protocol = "zenoh"
@@ -487,12 +486,6 @@ class ZenohAdapter(ZenohCalls, EventSource, CannotServe):
             self._session.undeclare(sub.token)
 
     # -- publishing ---------------------------------------------------------------------
-    def publishing(self) -> Mapping[str, str]:
-        return self._pubs.schemas()
-
-    def advertised(self, topic: str) -> str | None:
-        return self._pubs.ready_schema(topic)
-
     async def advertise(
         self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
     ) -> None:
