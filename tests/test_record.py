@@ -339,8 +339,10 @@ async def test_the_record_command_writes_a_file_for_its_duration(
     demo: DemoRobot, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     path = tmp_path / "cli.mcap"
+    # /battery is 1 Hz: 2.5 s hold at least two of its ticks after the
+    # subscription is set up (1 s held one at best, none on a loaded machine)
     verb, args = parse(
-        ["record", demo.url, "/odom", "/battery", "-o", str(path), "--duration", "1"]
+        ["record", demo.url, "/odom", "/battery", "-o", str(path), "--duration", "2.5"]
     )
     assert verb.path == ("record",) and verb.run is not None
     assert await verb.run(args) == 0
