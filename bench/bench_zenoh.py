@@ -362,7 +362,9 @@ def backlog(env: Env, kind: Kind, count: int) -> tuple[int, int]:
 def _inbox_of(client: rmb.Client) -> Any:
     """The client's zenoh inbox (private; None if the layout changed)."""
     conn = getattr(client, "_conn", None)  # since the connection moved out of Client
-    adapter = getattr(conn, "adapter", None) or getattr(client, "_backend", None)
+    adapter = (
+        getattr(conn, "adapter", None) if conn is not None else getattr(client, "_backend", None)
+    )
     session = getattr(adapter, "_session", None)
     return getattr(session, "inbox", None)
 
