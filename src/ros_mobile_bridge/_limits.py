@@ -16,7 +16,9 @@ The rejection reasons an adapter reports in a ``Rejected`` event
 * ``"fragment_limit"``: a rosbridge fragmented message dropped by the
   reassembly bounds (size, count of messages in reassembly, timeout);
 * ``"sequence_too_long"``: a CDR sequence length beyond what the payload
-  holds (a decode failure, counted by the subscription).
+  holds (a decode failure, counted by the subscription);
+* ``"overflow"``: events an adapter found before its reader ran (a
+  bootstrap's graph and rejections) beyond the 256 it keeps.
 """
 
 from __future__ import annotations

@@ -486,7 +486,3 @@ class ServedServices:
         already queued are read)."""
         for served in self._served.values():
             served.fail(error)
-
-    def names(self) -> list[str]:
-        """The names served now."""
-        return list(self._served)

@@ -5,7 +5,6 @@ sink (:class:`EventSource`), and the refusal of what a protocol cannot do
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Final, TypeVar
@@ -158,8 +157,6 @@ class EventSource:
     Before :meth:`_attach` (the bootstrap, before the reader runs) they wait,
     :data:`_KEPT_BEFORE_RUN` at most."""
 
-    _log: logging.Logger
-
     def _init_events(self) -> None:
         self._sink: EventSink | None = None
         self._pending: list[Event] = []
@@ -169,10 +166,12 @@ class EventSource:
         """The reader starts: from now on events go to ``sink``."""
         self._sink = sink
         if self._dropped_before_run:
+            dropped = self._dropped_before_run
             self._pending.append(
                 Rejected(
                     "overflow",
-                    f"{self._dropped_before_run} events before the reader started were dropped",
+                    f"{dropped} events before the reader started were dropped",
+                    dropped,
                 )
             )
             self._dropped_before_run = 0
