@@ -82,6 +82,7 @@ import ros_mobile_bridge as rmb
 from ros_mobile_bridge.transport import connect_websocket
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import client_internals
 from _peer import CMD_TOPIC, IDLE_TOPIC, IMAGE_TOPIC, TWIST_TYPE
 from bench_foxglove import _where, steady_malloc, versions
 
@@ -254,18 +255,6 @@ def _twist_seq(message: object) -> int:
     return 0
 
 
-def _internals(robot: rmb.Client) -> tuple[Any, Any]:
-    """The client's adapter and outbox (private; None where the layout
-    changed): through its connection since the connection moved out of
-    Client, else the attributes Client held before. (An empty outbox is
-    falsy: compared with None, not by truth.)"""
-    conn: Any = getattr(robot, "_conn", None)
-    if conn is not None:
-        outbound = getattr(conn, "outbound", None)
-        return getattr(conn, "adapter", None), getattr(outbound, "outbox", None)
-    return getattr(robot, "_backend", None), getattr(robot, "_outbox", None)
-
-
 @contextmanager
 def trace_sends(robot: rmb.Client, into: dict[int, Sent]) -> Iterator[bool]:
     """Time every published Twist (by sequence number) as it enters the
@@ -273,7 +262,7 @@ def trace_sends(robot: rmb.Client, into: dict[int, Sent]) -> Iterator[bool]:
     ``put_control`` / ``put_data`` and the backend's ``send`` on this
     connection. Bench-only instrumentation, a few microseconds per frame;
     yields False (recording nothing) if the client's internals have moved."""
-    backend, outbox = _internals(robot)
+    backend, outbox = client_internals(robot)
     send = getattr(backend, "send", None)
     put_control = getattr(outbox, "put_control", None)
     put_data = getattr(outbox, "put_data", None)
@@ -619,7 +608,7 @@ async def latency_case(
         overflow = stats.dropped_overflow if stats is not None else 0
         adaptive_drops = stats.dropped_throttle if stats is not None else 0
         breaker_drops = getattr(stats, "dropped_breaker", 0)
-        outbox = _internals(publisher)[1]
+        outbox = client_internals(publisher)[1]
         coalesced = outbox.coalesced if outbox is not None else 0
     received: dict[int, int] = {}
     for _ in range(20):  # the teardown confirmed delivery; this is a safety net

@@ -109,7 +109,7 @@ import ros_mobile_bridge as rmb
 
 HERE: Final = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from _common import DROP_REASONS, check_fates, subscription_counts  # noqa: E402
+from _common import DROP_REASONS, check_fates, client_internals, subscription_counts  # noqa: E402
 from _common import versions as common_versions  # noqa: E402
 from _zenoh_publisher import IMAGE_TOPIC, IMAGE_TYPE, STRING_TOPIC, STRING_TYPE  # noqa: E402
 from _zenoh_publisher import config as zenoh_config  # noqa: E402
@@ -361,11 +361,7 @@ def backlog(env: Env, kind: Kind, count: int) -> tuple[int, int]:
 
 def _inbox_of(client: rmb.Client) -> Any:
     """The client's zenoh inbox (private; None if the layout changed)."""
-    conn = getattr(client, "_conn", None)  # since the connection moved out of Client
-    adapter = (
-        getattr(conn, "adapter", None) if conn is not None else getattr(client, "_backend", None)
-    )
-    session = getattr(adapter, "_session", None)
+    session = getattr(client_internals(client)[0], "_session", None)
     return getattr(session, "inbox", None)
 
 
