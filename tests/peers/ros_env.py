@@ -47,6 +47,19 @@ RUNTIME_REQUIREMENTS: tuple[str, ...] = (
     "ros-jazzy-test-msgs",
     "ros-jazzy-rcl-interfaces",
     "ros-jazzy-nav-msgs",
+    # every interface package of a Jazzy desktop that is on PyPI: their
+    # share/<pkg>/<kind>/*.json files are the official type hashes the
+    # bundled interfaces are checked against (tests/test_interfaces.py)
+    "ros-jazzy-common-interfaces",
+    "ros-jazzy-builtin-interfaces",
+    "ros-jazzy-unique-identifier-msgs",
+    "ros-jazzy-lifecycle-msgs",
+    "ros-jazzy-type-description-interfaces",
+    "ros-jazzy-rosgraph-msgs",
+    "ros-jazzy-service-msgs",
+    "ros-jazzy-actionlib-msgs",
+    "ros-jazzy-rosidl-adapter",
+    "ros-jazzy-rosidl-generator-type-description",
     "rosbridge-server-rs==0.1.6",
 )
 
