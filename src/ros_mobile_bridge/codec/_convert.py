@@ -261,6 +261,9 @@ def _array_coercer(field: FieldSpec) -> Callable[[Any], Any]:
                 array = np.asarray(value)
             except (ValueError, TypeError, OverflowError) as exc:
                 raise Invalid(f"not an array of {base}: {exc}") from None
+            if array.dtype.kind == "f" and dtype.kind == "u" and _all_ints_in(value, base):
+                # numpy reads ints past int64's range as float64 (uint64 maxima)
+                array = np.array(value, dtype)
             if array.size == 0:
                 array = np.zeros(0, dtype)
         else:
@@ -275,6 +278,11 @@ def _array_coercer(field: FieldSpec) -> Callable[[Any], Any]:
         return array.view(np.int8) if octet else array
 
     return coerce_array
+
+
+def _all_ints_in(values: list[Any] | tuple[Any, ...], base: str) -> bool:
+    low, high = INT_RANGES[base]
+    return all(type(v) is int and low <= v <= high for v in values)
 
 
 def check_default(field: FieldSpec) -> None:

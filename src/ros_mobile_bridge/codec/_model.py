@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 from rosbags.interfaces import Nodetype
@@ -13,6 +13,7 @@ __all__ = [
     "FLOAT_TYPES",
     "INT_RANGES",
     "PRIMITIVE_TYPES",
+    "DescribedTypes",
     "FieldDef",
     "FieldSpec",
     "MsgDef",
@@ -192,3 +193,15 @@ def msgdef_from_rosbags(
         specs = (FieldSpec(DUMMY_FIELD, "uint8", None),)
     consts = tuple((str(c[0]), str(c[1]), c[2]) for c in constants)
     return MsgDef(name, specs, consts)
+
+
+@dataclass(frozen=True, slots=True)
+class DescribedTypes:
+    """What one description defines: the main type's name and hash, the
+    codec definitions by canonical name, and the ``.msg`` source texts by
+    type name (those the description carried and that match it)."""
+
+    type_name: str
+    type_hash: str
+    defs: Mapping[str, MsgDef]
+    sources: Mapping[str, str] = field(default_factory=dict)

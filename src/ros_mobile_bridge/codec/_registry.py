@@ -16,7 +16,7 @@ from rosbags.typesys.store import Typestore
 
 from .._errors import DecodeError, SchemaError
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
-from ._model import FieldDef, MsgDef
+from ._model import DescribedTypes, FieldDef, MsgDef
 from ._names import (
     canonical_name,
     is_valid_type_name,
@@ -304,6 +304,8 @@ class CodecRegistry:
         self._own: dict[str, MsgDef | _JsonSchema] = {}
         self._deps: dict[str, MsgDef] = {}
         self._no_schema: set[str] = set()
+        self._described: dict[str, MsgDef] = {}
+        self._sources: dict[str, str] = {}
         self._gen: _Generation | None = None
 
     # ------------------------------------------------------------------ schemas
@@ -366,6 +368,26 @@ class CodecRegistry:
                 else:
                     self._deps[type_name] = msgdef
 
+    def add_description(self, described: DescribedTypes) -> None:
+        """Register the definitions a REP-2011 type description gave (see
+        :func:`~ros_mobile_bridge.codec.describe`): the robot's own, checked
+        against the type's hash, so for this registry they win over every
+        other definition of the same names (bundled, registered, or a
+        server's schema). Their ``.msg`` texts, when the description carried
+        them, become :meth:`ros2msg_text`'s. :class:`SchemaTooLarge` over
+        ``max_schema_fields``."""
+        fields = sum(len(d.fields) for d in described.defs.values())
+        if self.max_schema_fields is not None and fields > self.max_schema_fields:
+            raise SchemaTooLarge(
+                f"the description of {described.type_name!r} defines {fields} fields in "
+                f"{len(described.defs)} types, over max_schema_fields={self.max_schema_fields}"
+            )
+        with self._lock:
+            self._described.update(described.defs)
+            for name in described.defs:
+                self._sources.pop(name, None)
+            self._sources.update(described.sources)
+
     def has_schema(self, name: str) -> bool:
         """Whether a definition of ``name`` is available: registered by the
         server (``ros2msg``, ``ros2idl`` or ``jsonschema``) or built in. A name
@@ -399,6 +421,7 @@ class CodecRegistry:
 
     def _find(self, name: str, *, ros_only: bool) -> tuple[str, MsgDef | _JsonSchema] | None:
         layers: tuple[Mapping[str, MsgDef | _JsonSchema], ...] = (
+            self._described,
             self._own,
             self._deps,
             wellknown_definitions(),
@@ -522,12 +545,29 @@ class CodecRegistry:
         type it uses appended in the concatenated form (an ``=`` * 80 line,
         then ``MSG: pkg/Type`` and its text): what an MCAP file's ``ros2msg``
         schema and rosbag2 carry. Generated from the definition this registry
-        decodes and encodes with. :class:`SchemaError` when it has none."""
+        decodes and encodes with; when a type description from the robot
+        carried the ``.msg`` texts of the type and of everything it uses
+        (:meth:`add_description`), those texts, comments kept.
+        :class:`SchemaError` when it has none."""
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
+            closure = self._closure(key, msgdef)
+            if all(name in self._sources for name in closure):
+                return self._source_text(key, closure)
             gen = self._prepare(key, msgdef)
             text, _digest = gen.store.generate_msgdef(key, ros_version=2)
         return text
+
+    def _source_text(self, key: str, closure: Mapping[str, MsgDef]) -> str:
+        """The concatenated ``.msg`` form of the source texts a type
+        description carried (comments and constants kept)."""
+        parts = [self._sources[key].rstrip("\n") + "\n"]
+        for name in sorted(closure):
+            if name != key:
+                pkg, _kind, typ = name.split("/")
+                text = self._sources[name].rstrip("\n")
+                parts.append(f"{'=' * 80}\nMSG: {pkg}/{typ}\n{text}\n")
+        return "".join(parts)
 
     def jsonschema(self, schema_name: str) -> dict[str, Any] | bool | None:
         """The JSON schema registered for ``schema_name`` (a channel with

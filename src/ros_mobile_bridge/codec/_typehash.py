@@ -45,7 +45,7 @@ import hashlib
 import json
 import threading
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeAlias
 
@@ -56,7 +56,19 @@ from ._names import canonical_name, is_valid_type_name, lookup_candidates, split
 if TYPE_CHECKING:
     from ._registry import CodecRegistry
 
-__all__ = ["type_hash"]
+__all__ = [
+    "ARRAY_OFFSET",
+    "BOUNDED_SEQUENCE_OFFSET",
+    "BOUNDED_STRING_IDS",
+    "FIELD_TYPE_NESTED_TYPE",
+    "PRIMITIVE_IDS",
+    "UNBOUNDED_SEQUENCE_OFFSET",
+    "TypeDesc",
+    "desc_from_msgdef",
+    "digest",
+    "is_derived_composite",
+    "type_hash",
+]
 
 _Find: TypeAlias = Callable[[str], "tuple[str, object] | None"]
 """A registry's ROS definition lookup (:meth:`CodecRegistry.ros_lookup`):
@@ -65,7 +77,7 @@ _Find: TypeAlias = Callable[[str], "tuple[str, object] | None"]
 FIELD_TYPE_NESTED_TYPE = 1
 """``type_description_interfaces/msg/FieldType.FIELD_TYPE_NESTED_TYPE``."""
 
-_PRIMITIVE_IDS: dict[str, int] = {
+PRIMITIVE_IDS: dict[str, int] = {
     "int8": 2,
     "uint8": 3,
     # A ROS 2 ``.msg`` ``char`` is an unsigned 8-bit integer (rosidl maps it to
@@ -91,26 +103,28 @@ _PRIMITIVE_IDS: dict[str, int] = {
 }
 """FieldType ids of the primitive element types, as the codec's model names them."""
 
-_BOUNDED_STRING_IDS = {"string": 21, "wstring": 22}
-_ARRAY_OFFSET = 48
-_BOUNDED_SEQUENCE_OFFSET = 96
-_UNBOUNDED_SEQUENCE_OFFSET = 144
+BOUNDED_STRING_IDS = {"string": 21, "wstring": 22}
+ARRAY_OFFSET = 48
+BOUNDED_SEQUENCE_OFFSET = 96
+UNBOUNDED_SEQUENCE_OFFSET = 144
 
 _SERVICE_INFO = "service_msgs/msg/ServiceEventInfo"
 _UUID = "unique_identifier_msgs/msg/UUID"
 _TIME = "builtin_interfaces/msg/Time"
 
 # (field name, type id, capacity, string capacity, nested type name)
-_Field = tuple[str, int, int, int, str]
+Field = tuple[str, int, int, int, str]
 
 
 @dataclass(frozen=True, slots=True)
-class _Desc:
-    """One individual type description; ``source`` is the registry definition
-    it was made from (``None`` when synthesised from the name alone)."""
+class TypeDesc:
+    """One individual type description (REP-2011 ``IndividualTypeDescription``
+    without default values); ``source`` is the registry definition it was
+    made from (``None`` when synthesised from the name alone or read from a
+    description)."""
 
     name: str
-    fields: tuple[_Field, ...]
+    fields: tuple[Field, ...]
     source: MsgDef | None
 
     @property
@@ -135,25 +149,25 @@ class _Desc:
         }
 
 
-def _nested(name: str, type_name: str) -> _Field:
+def _nested(name: str, type_name: str) -> Field:
     return (name, FIELD_TYPE_NESTED_TYPE, 0, 0, type_name)
 
 
-def _field_from_spec(owner: str, spec: FieldSpec) -> _Field:
+def _field_from_spec(owner: str, spec: FieldSpec) -> Field:
     """The description of one :class:`~._model.FieldSpec` of ``owner``."""
     if spec.cardinality == SCALAR:
         offset, capacity = 0, 0
     elif spec.cardinality == ARRAY:
-        offset, capacity = _ARRAY_OFFSET, int(spec.size)
+        offset, capacity = ARRAY_OFFSET, int(spec.size)
     elif spec.size:
-        offset, capacity = _BOUNDED_SEQUENCE_OFFSET, int(spec.size)
+        offset, capacity = BOUNDED_SEQUENCE_OFFSET, int(spec.size)
     else:
-        offset, capacity = _UNBOUNDED_SEQUENCE_OFFSET, 0
+        offset, capacity = UNBOUNDED_SEQUENCE_OFFSET, 0
     if spec.ref is not None:
         return (spec.name, offset + FIELD_TYPE_NESTED_TYPE, capacity, 0, str(spec.ref))
     base = str(spec.base)
-    bound = int(spec.string_bound) if base in _BOUNDED_STRING_IDS else 0
-    type_id = _BOUNDED_STRING_IDS[base] if bound else _PRIMITIVE_IDS.get(base)
+    bound = int(spec.string_bound) if base in BOUNDED_STRING_IDS else 0
+    type_id = BOUNDED_STRING_IDS[base] if bound else PRIMITIVE_IDS.get(base)
     if type_id is None:
         raise SchemaError(
             f"cannot hash {owner!r}: field {spec.name!r} has the type {base!r}, "
@@ -162,14 +176,14 @@ def _field_from_spec(owner: str, spec: FieldSpec) -> _Field:
     return (spec.name, offset + type_id, capacity, bound, "")
 
 
-def _desc_from_msgdef(name: str, msgdef: MsgDef) -> _Desc:
+def desc_from_msgdef(name: str, msgdef: MsgDef) -> TypeDesc:
     fields = tuple(_field_from_spec(name, f) for f in msgdef.fields)
     if not fields:  # ROS gives an empty message one placeholder member
-        fields = ((DUMMY_FIELD, _PRIMITIVE_IDS["uint8"], 0, 0, ""),)
-    return _Desc(name, fields, msgdef)
+        fields = ((DUMMY_FIELD, PRIMITIVE_IDS["uint8"], 0, 0, ""),)
+    return TypeDesc(name, fields, msgdef)
 
 
-def _synthesised(name: str) -> tuple[_Field, ...] | None:
+def _synthesised(name: str) -> tuple[Field, ...] | None:
     """The fields of the derived type ``name`` (canonical), when ROS derives
     it from a service or an action; ``None`` for any other name."""
     pkg, kind, typ = split_type_name(name)
@@ -182,14 +196,14 @@ def _synthesised(name: str) -> tuple[_Field, ...] | None:
             _nested("info", _SERVICE_INFO),
             (
                 "request",
-                _BOUNDED_SEQUENCE_OFFSET + FIELD_TYPE_NESTED_TYPE,
+                BOUNDED_SEQUENCE_OFFSET + FIELD_TYPE_NESTED_TYPE,
                 1,
                 0,
                 f"{service}_Request",
             ),
             (
                 "response",
-                _BOUNDED_SEQUENCE_OFFSET + FIELD_TYPE_NESTED_TYPE,
+                BOUNDED_SEQUENCE_OFFSET + FIELD_TYPE_NESTED_TYPE,
                 1,
                 0,
                 f"{service}_Response",
@@ -203,15 +217,15 @@ def _synthesised(name: str) -> tuple[_Field, ...] | None:
             _nested("response_message", f"{base}_Response"),
             _nested("event_message", f"{base}_Event"),
         )
-    action_derived: dict[str, tuple[_Field, ...]] = {
+    action_derived: dict[str, tuple[Field, ...]] = {
         "_SendGoal_Request": (_nested("goal_id", _UUID), _nested("goal", "{}_Goal")),
         "_SendGoal_Response": (
-            ("accepted", _PRIMITIVE_IDS["bool"], 0, 0, ""),
+            ("accepted", PRIMITIVE_IDS["bool"], 0, 0, ""),
             _nested("stamp", _TIME),
         ),
         "_GetResult_Request": (_nested("goal_id", _UUID),),
         "_GetResult_Response": (
-            ("status", _PRIMITIVE_IDS["int8"], 0, 0, ""),
+            ("status", PRIMITIVE_IDS["int8"], 0, 0, ""),
             _nested("result", "{}_Result"),
         ),
         "_FeedbackMessage": (_nested("goal_id", _UUID), _nested("feedback", "{}_Feedback")),
@@ -241,7 +255,7 @@ def _registered(find: _Find, name: str) -> MsgDef | None:
     return found[1]
 
 
-def _describe(find: _Find, name: str, memo: dict[str, _Desc]) -> _Desc | None:
+def _describe(find: _Find, name: str, memo: dict[str, TypeDesc]) -> TypeDesc | None:
     """The description of ``name``: the registry's definition, else the
     synthesised one of a derived type, else ``None``. ``memo`` keeps earlier
     descriptions; one made from a definition is reused only while the registry
@@ -251,12 +265,12 @@ def _describe(find: _Find, name: str, memo: dict[str, _Desc]) -> _Desc | None:
     if desc is not None and desc.source is msgdef:
         return desc
     if msgdef is not None:
-        desc = _desc_from_msgdef(name, msgdef)
+        desc = desc_from_msgdef(name, msgdef)
     else:
         fields = _synthesised(name)
         if fields is None:
             return None
-        desc = _Desc(name, fields, None)
+        desc = TypeDesc(name, fields, None)
     memo[name] = desc
     return desc
 
@@ -283,7 +297,7 @@ def _defined(find: _Find, name: str) -> bool:
     return fields is not None and _registered(find, fields[0][4]) is not None
 
 
-def _closure(find: _Find, name: str, memo: dict[str, _Desc]) -> dict[str, _Desc]:
+def _closure(find: _Find, name: str, memo: dict[str, TypeDesc]) -> dict[str, TypeDesc]:
     """``name`` and every type it uses, directly or not, by name."""
     top = _describe(find, name, memo)
     if top is None:
@@ -310,15 +324,32 @@ def _closure(find: _Find, name: str, memo: dict[str, _Desc]) -> dict[str, _Desc]
     return closure
 
 
-def _digest(name: str, closure: dict[str, _Desc]) -> str:
+def digest(top: TypeDesc, referenced: Iterable[TypeDesc]) -> str:
+    """The RIHS01 hash of the type ``top`` whose closure is ``referenced``
+    (every type it uses, directly or not, each once; any order): the one
+    canonical JSON text and SHA-256 every hash of this library goes
+    through."""
+    refs = {desc.name: desc for desc in referenced if desc.name != top.name}
     document = {
-        "type_description": closure[name].as_json(),
-        "referenced_type_descriptions": [
-            closure[ref].as_json() for ref in sorted(closure) if ref != name
-        ],
+        "type_description": top.as_json(),
+        "referenced_type_descriptions": [refs[name].as_json() for name in sorted(refs)],
     }
     text = json.dumps(document, separators=(", ", ": "), sort_keys=False)
     return "RIHS01_" + hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _digest(name: str, closure: dict[str, TypeDesc]) -> str:
+    return digest(closure[name], closure.values())
+
+
+def is_derived_composite(name: str) -> bool:
+    """Whether ``name`` (canonical) is a type ROS describes only as the sum
+    of other types and never sends: a service (``pkg/srv/S``), its
+    ``S_Event``, an action (``pkg/action/A``) or its ``A_SendGoal`` /
+    ``A_GetResult`` services. This module synthesises those from their
+    parts, so they need no registered definition."""
+    fields = _synthesised(name)
+    return fields is not None and fields[0][0] in ("request_message", "info", "goal")
 
 
 @dataclass(slots=True)
@@ -326,8 +357,8 @@ class _Memo:
     """What :func:`type_hash` keeps per registry (used under its lock):
     individual descriptions, and each hash with the descriptions it covered."""
 
-    descs: dict[str, _Desc] = field(default_factory=dict)
-    hashes: dict[str, tuple[tuple[_Desc, ...], str]] = field(default_factory=dict)
+    descs: dict[str, TypeDesc] = field(default_factory=dict)
+    hashes: dict[str, tuple[tuple[TypeDesc, ...], str]] = field(default_factory=dict)
 
 
 _memo_lock = threading.Lock()

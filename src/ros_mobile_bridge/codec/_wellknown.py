@@ -110,6 +110,18 @@ int8 return_code
 # Goals that accepted the cancel request.
 GoalInfo[] goals_canceling
 """,
+    "type_description_interfaces/srv/GetTypeDescription": """\
+# REP-2011: what a node answers on ~/get_type_description
+string type_name
+string type_hash
+bool include_type_sources true
+---
+bool successful
+string failure_reason
+TypeDescription type_description
+TypeSource[] type_sources
+KeyValue[] extra_information
+""",
 }
 """``.srv`` texts of the bundled services, by service type name."""
 

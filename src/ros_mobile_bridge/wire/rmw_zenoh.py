@@ -46,6 +46,7 @@ import xxhash
 
 __all__ = [
     "ATTACHMENT_SIZE",
+    "HASH_VERSION",
     "LIVELINESS_PREFIX",
     "MAX_KEY_LENGTH",
     "Attachment",
@@ -61,6 +62,7 @@ __all__ = [
     "SessionLost",
     "Token",
     "TopicKey",
+    "UnsupportedHashVersion",
     "dds_type_name",
     "decode_attachment",
     "encode_attachment",
@@ -73,6 +75,7 @@ __all__ = [
     "parse_key",
     "parse_qos",
     "parse_token",
+    "parse_type_hash",
     "ros_type_name",
     "unmangle",
 ]
@@ -85,6 +88,9 @@ _GID_SIZE: Final = 16
 _ATTACHMENT: Final = struct.Struct("<qqB16s")
 _MAX_DOMAIN: Final = 232  # ROS 2's highest valid domain id
 _HASH = re.compile(r"RIHS01_[0-9a-f]{64}")
+_ANY_HASH_VERSION = re.compile(r"RIHS([0-9A-Fa-f]{2})_")
+HASH_VERSION: Final = "RIHS01"
+"""The only REP-2011 type hash version this library reads and writes."""
 _NAME_PART = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _DDS_TYPE = re.compile(
     r"(?P<pkg>[A-Za-z_][A-Za-z0-9_]*)::(?P<kind>msg|srv|action)::dds_::(?P<type>[A-Za-z_][A-Za-z0-9_]*)_"
@@ -96,6 +102,19 @@ _INT = re.compile(r"[0-9]{1,19}")
 class MalformedKey(ValueError):
     """A key expression or liveliness token that does not follow rmw_zenoh's
     conventions (or is longer than :data:`MAX_KEY_LENGTH`)."""
+
+
+class UnsupportedHashVersion(MalformedKey):
+    """A type hash of another REP-2011 version than ``RIHS01`` (e.g. a
+    future ``RIHS02_...``): this library reads RIHS01 only, so a type named
+    with it is never matched with one of our definitions."""
+
+    def __init__(self, version: str) -> None:
+        super().__init__(
+            f"type hash version {version}: this library reads {HASH_VERSION} hashes only "
+            "(a newer ROS 2 distribution?)"
+        )
+        self.version = version
 
 
 class MalformedAttachment(ValueError):
@@ -152,6 +171,19 @@ def _check_length(text: str) -> None:
         raise MalformedKey(f"longer than {MAX_KEY_LENGTH} characters ({len(text)})")
 
 
+def parse_type_hash(text: str) -> str:
+    """``text`` when it is a RIHS01 type hash (``"RIHS01_"`` + 64 lowercase
+    hex digits). :class:`UnsupportedHashVersion` (a :class:`MalformedKey`)
+    naming the version for a hash of another version, :class:`MalformedKey`
+    for anything else."""
+    if _HASH.fullmatch(text):
+        return text
+    version = _ANY_HASH_VERSION.match(text)
+    if version is not None and version[1] != "01":
+        raise UnsupportedHashVersion(f"RIHS{version[1]}")
+    raise MalformedKey(f"not a RIHS01 type hash: {text[:80]!r}")
+
+
 # -- data keys ----------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class TopicKey:
@@ -183,9 +215,8 @@ def parse_key(key: str) -> TopicKey:
         raise MalformedKey(f"not <domain>/<name>/<type>/<hash>: {key[:200]!r}")
     domain = _parse_domain(parts[0])
     type_name = ros_type_name(parts[-2])
-    if not _HASH.fullmatch(parts[-1]):
-        raise MalformedKey(f"not a RIHS01 type hash: {parts[-1][:80]!r}")
-    return TopicKey(domain, "/" + "/".join(parts[1:-2]), type_name, parts[-1])
+    type_hash = parse_type_hash(parts[-1])
+    return TopicKey(domain, "/" + "/".join(parts[1:-2]), type_name, type_hash)
 
 
 def liveliness_selector(domain: int) -> str:
@@ -350,8 +381,7 @@ def parse_token(key: str) -> Token:
     name = unmangle(parts[9])
     if not name.startswith("/") or name == "/":
         raise MalformedKey(f"bad entity name {parts[9][:80]!r}")
-    if not _HASH.fullmatch(parts[11]):
-        raise MalformedKey(f"not a RIHS01 type hash: {parts[11][:80]!r}")
+    parse_type_hash(parts[11])
     return Token(
         **base,  # type: ignore[arg-type]
         name=name,
