@@ -25,6 +25,7 @@ FLOAT_FIELDS = {
     "discovery_interval": False,
     "latency_probe_interval": True,
     "fragment_timeout": False,
+    "type_description_timeout": False,
 }
 # field -> smallest valid value
 INT_FIELDS = {
@@ -38,6 +39,7 @@ INT_FIELDS = {
     "max_pending_requests": 1,
     "zenoh_backlog": 1,
     "zenoh_backlog_bytes": 1024,
+    "type_description_hold": 1,
 }
 
 
@@ -79,6 +81,13 @@ def test_limit_defaults() -> None:
     assert opts.max_schema_size == 256 * 1024
     assert opts.max_schema_fields == 500
     assert opts.max_pending_requests == 256
+    assert opts.type_description_timeout == 3.0
+    assert opts.type_description_hold == 256
+
+
+def test_type_description_timeout_must_be_finite() -> None:
+    with pytest.raises(ValueError, match="finite"):
+        ClientOptions(type_description_timeout=math.inf)
 
 
 def test_every_field_is_covered_here() -> None:

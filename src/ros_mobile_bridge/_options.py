@@ -365,6 +365,15 @@ class ClientOptions:
     zenoh_backlog_bytes: int = 64 * 1024 * 1024
     """Zenoh: payload bytes that may wait between zenoh's threads and the
     reader task (one sample larger than this still passes alone)."""
+    type_description_timeout: float = 3.0
+    """Zenoh: seconds a node may take to answer ``get_type_description``
+    (REP-2011) when this client asks it for a type it does not know. Past
+    it the type is unknown for this connection: a ``SchemaError`` naming
+    the type and the node for a call, raw messages for a subscription."""
+    type_description_hold: int = 256
+    """Zenoh: samples of one topic held while its type's description is
+    being fetched, decoded in order once it arrives. Past it a sample is
+    dropped: a ``"description_hold_overflow"`` rejection."""
 
     def report_latency(self, ms: float) -> None:
         """Hand one round-trip time to :attr:`on_latency`; a failing callback
@@ -409,6 +418,10 @@ class ClientOptions:
             raise TypeError("zenoh_shared_memory must be a bool")
         _count("zenoh_backlog", self.zenoh_backlog, 1)
         _count("zenoh_backlog_bytes", self.zenoh_backlog_bytes, 1024)
+        _positive("type_description_timeout", self.type_description_timeout)
+        if math.isinf(self.type_description_timeout):
+            raise ValueError("type_description_timeout must be finite")
+        _count("type_description_hold", self.type_description_hold, 1)
         if isinstance(self.stop_topics, str):
             raise TypeError("stop_topics must be a sequence of topic names, not a str")
         object.__setattr__(self, "stop_topics", tuple(self.stop_topics))

@@ -4,13 +4,24 @@ write, as the peer of the Zenoh tests. One process runs one role:
     python tests/peers/zenoh_sdk_node.py --router tcp/127.0.0.1:7447 --domain 5 \\
         --definitions <ROS share dir> talker --topic /chatter --count 100
 
-Roles: ``talker`` (``std_msgs/msg/String`` "hello N"), ``listener`` (one JSON
-line ``{"msg": {...}}`` per message, any type), ``service``
-(``std_srvs/srv/SetBool``: success = data, message "set to <data>") and
-``params`` (node ``/sdk_params``: its ``get_parameters``, ``set_parameters``
-and ``list_parameters`` services over three parameters). Each prints
-``HASH <type> <RIHS01 hash>`` for the hash the sdk computed, then ``READY``,
-and runs until stdin closes.
+Roles: ``talker`` (``std_msgs/msg/String`` "hello N", or any ``--type``
+with the field values ``--values`` gives as JSON, the rest zero),
+``listener`` (one JSON line ``{"msg": {...}}`` per message, any type),
+``service`` (``std_srvs/srv/SetBool``: success = data, message "set to
+<data>"; any other ``--type`` answers each request with the response fields
+of the same name copied from it) and ``params`` (node ``/sdk_params``: its
+``get_parameters``, ``set_parameters`` and ``list_parameters`` services over
+three parameters). Each prints ``HASH <type> <RIHS01 hash>`` for the hash the
+sdk computed, then ``READY``, and runs until stdin closes.
+
+With ``--describe`` the talker and service nodes also serve REP-2011's
+``/<node>/get_type_description``
+(``type_description_interfaces/srv/GetTypeDescription``), answering from the
+official ``share/<pkg>/<kind>/<Name>.json`` (its ``type_description_msg``)
+with the ``.msg``/``.srv`` texts as ``type_sources``, and print ``DESCRIBED
+<type>`` per answer. ``--describe-wrong`` answers with the main type's first
+field renamed (so the hash disagrees); ``--describe-silent`` declares the
+service and never answers.
 
 The sdk looks up ``.msg`` / ``.srv`` files in a directory laid out as
 ``<pkg>/<msg|srv>/<Name>.<ext>`` and, when one is missing, clones the
@@ -72,7 +83,14 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--rate", type=float, default=50.0)
     parser.add_argument("--count", type=int, default=0, help="0: until stopped")
     parser.add_argument("--name", default="/sdk_set_bool")
+    parser.add_argument("--values", default="", help="talker: JSON field values")
+    parser.add_argument("--node", default="", help="node name (default per role)")
+    describe = parser.add_mutually_exclusive_group()
+    describe.add_argument("--describe", action="store_true")
+    describe.add_argument("--describe-wrong", action="store_true")
+    describe.add_argument("--describe-silent", action="store_true")
     args = parser.parse_args(argv)
+    describing = args.describe or args.describe_wrong or args.describe_silent
 
     host, port = args.router.removeprefix("tcp/").rsplit(":", 1)
     from zenoh_ros2_sdk import message_registry
@@ -87,13 +105,25 @@ def main(argv: list[str]) -> int:
     closers: list[Any] = []
 
     if args.role == "talker":
-        pub = sdk.ROS2Publisher(args.topic, args.type, node_name="sdk_talker", **where)
+        node = args.node or "sdk_talker"
+        pub = sdk.ROS2Publisher(
+            args.topic, args.type, node_name=node, type_hash=official_hash(args), **where
+        )
         closers.append(pub)
+        if describing:
+            closers.append(_describer(sdk, where, node, args))
         emit("HASH", args.type, pub.type_hash)
         emit("READY")
         sent = 0
+        store = sdk.ZenohSession.get_instance(where["router_ip"], where["router_port"]).store
+        values = json.loads(args.values) if args.values else None
         while not stop.is_set() and (args.count == 0 or sent < args.count):
-            pub.publish(data=f"hello {sent}")
+            if values is None:
+                pub.publish(data=f"hello {sent}")
+            else:
+                message = build(store, args.type, values)
+                fields = store.fielddefs[args.type][1]
+                pub.publish(**{n: getattr(message, n) for n, _ in fields})
             sent += 1
             time.sleep(1.0 / args.rate)
         emit("SENT", sent)
@@ -112,6 +142,8 @@ def main(argv: list[str]) -> int:
         emit("READY")
     elif args.role == "service":
         holder: list[Any] = []
+        srv_type = "std_srvs/srv/SetBool" if args.type == "std_msgs/msg/String" else args.type
+        node = args.node or "sdk_service"
 
         def set_bool(request: Any) -> Any:
             server = holder[0]
@@ -119,12 +151,29 @@ def main(argv: list[str]) -> int:
                 success=bool(request.data), message=f"set to {bool(request.data)}"
             )
 
+        def echo(request: Any) -> Any:
+            server = holder[0]
+            fields = server.response_msg_class.__dataclass_fields__
+            return server.response_msg_class(
+                **{n: getattr(request, n) for n in fields if n != "__msgtype__"}
+            )
+
+        handler = set_bool if srv_type == "std_srvs/srv/SetBool" else echo
         server = sdk.ROS2ServiceServer(
-            args.name, "std_srvs/srv/SetBool", set_bool, node_name="sdk_service", **where
+            args.name,
+            srv_type,
+            handler,
+            node_name=node,
+            type_hash=official_hash(args, srv_type),
+            **where,
         )
         holder.append(server)
         closers.append(server)
-        emit("HASH", "std_srvs/srv/SetBool", server.type_hash)
+        store = sdk.ZenohSession.get_instance(where["router_ip"], where["router_port"]).store
+        alias_nested_types(store, srv_type.split("/")[0])
+        if describing:
+            closers.append(_describer(sdk, where, node, args))
+        emit("HASH", srv_type, server.type_hash)
         emit("READY")
     else:
         closers.extend(_params_node(sdk, where))
@@ -201,15 +250,6 @@ def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
                 results.append(result_cls(successful=True, reason=""))
         return servers[2].response_msg_class(results=results)
 
-    def alias_nested_types() -> None:
-        # the sdk (0.1.8) serializes a service's nested types of its own
-        # package as "<pkg>/srv/msg/<T>" without registering that name
-        for name, fields in list(store.fielddefs.items()):
-            if name.startswith("rcl_interfaces/msg/"):
-                alias = name.replace("/msg/", "/srv/msg/", 1)
-                if alias not in store.fielddefs:
-                    store.register({alias: fields})
-
     for service, srv_type, handler in (
         ("get_parameters", "GetParameters", get),
         ("list_parameters", "ListParameters", list_),
@@ -224,8 +264,171 @@ def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
                 **where,
             )
         )
-    alias_nested_types()
+    alias_nested_types(store, "rcl_interfaces")
     return servers
+
+
+def alias_nested_types(store: Any, package: str) -> None:
+    """The sdk (0.1.8) serializes a service's nested types of its own
+    package as ``<pkg>/srv/msg/<T>`` without registering that name."""
+    for name, fields in list(store.fielddefs.items()):
+        if name.startswith(f"{package}/msg/"):
+            alias = name.replace("/msg/", "/srv/msg/", 1)
+            if alias not in store.fielddefs:
+                store.register({alias: fields})
+
+
+_DTYPES = {
+    "bool": "bool",
+    "byte": "uint8",
+    "char": "uint8",
+    "int8": "int8",
+    "uint8": "uint8",
+    "int16": "int16",
+    "uint16": "uint16",
+    "int32": "int32",
+    "uint32": "uint32",
+    "int64": "int64",
+    "uint64": "uint64",
+    "float32": "float32",
+    "float64": "float64",
+}
+
+
+def _value(store: Any, desc: Any, value: Any) -> Any:
+    """One field's value for the sdk's rosbags classes, from JSON."""
+    import numpy as np
+    from rosbags.interfaces import Nodetype
+
+    node, arg = desc
+    if node == Nodetype.BASE:
+        base = arg[0]
+        if value is not None:
+            return value
+        return (
+            "" if base == "string" else False if base == "bool" else 0.0 if "float" in base else 0
+        )
+    if node == Nodetype.NAME:
+        return build(store, arg, value or {})
+    inner, size = arg
+    items = value if value is not None else ([None] * size if node == Nodetype.ARRAY else [])
+    if inner[0] == Nodetype.BASE and inner[1][0] in _DTYPES:
+        zero = _value(store, inner, None)
+        return np.array([zero if v is None else v for v in items], _DTYPES[inner[1][0]])
+    return [_value(store, inner, v) for v in items]
+
+
+def build(store: Any, type_name: str, values: dict[str, Any]) -> Any:
+    """A message of ``type_name`` from the sdk's store with ``values`` (JSON
+    data; missing fields zero)."""
+    _consts, fields = store.fielddefs[type_name]
+    return store.types[type_name](**{n: _value(store, d, values.get(n)) for n, d in fields})
+
+
+def official_hash(args: Any, type_name: str | None = None) -> str | None:
+    """The official hash of a type outside the packages the tests use as is
+    (std_msgs, geometry_msgs, ...: None, the sdk's own): from its
+    share/*.json, as an rclcpp node would announce it (the sdk 0.1.8
+    computes another one for some test_msgs types)."""
+    name = type_name or args.type
+    if not name.startswith("test_msgs/"):
+        return None
+    path = Path(args.definitions) / f"{name}.json"
+    return str(json.loads(path.read_text())["type_hashes"][0]["hash_string"])
+
+
+def _register_description_types(store: Any, share: Path) -> None:
+    """type_description_interfaces' messages, parsed by rosbags (the sdk
+    0.1.8 cannot resolve their bounded strings by itself)."""
+    from rosbags.typesys import get_types_from_msg
+
+    for name in ("FieldType", "Field", "IndividualTypeDescription", "TypeDescription"):
+        full = f"type_description_interfaces/msg/{name}"
+        if full not in store.fielddefs:
+            text = (share / f"{full}.msg").read_text()
+            store.register(get_types_from_msg(text, full))
+
+
+def _describer(sdk: Any, where: dict[str, Any], node: str, args: Any) -> Any:
+    """``/<node>/get_type_description``, answered from the official files
+    (see the module docstring)."""
+    share = Path(args.definitions)
+    store = sdk.ZenohSession.get_instance(where["router_ip"], where["router_port"]).store
+    _register_description_types(store, share)
+    td = "type_description_interfaces/msg/"
+    holder: list[Any] = []
+
+    def individual(raw: dict[str, Any]) -> Any:
+        fields = [
+            store.types[td + "Field"](
+                name=f["name"],
+                type=store.types[td + "FieldType"](**f["type"]),
+                default_value=f.get("default_value", ""),
+            )
+            for f in raw["fields"]
+        ]
+        return store.types[td + "IndividualTypeDescription"](
+            type_name=raw["type_name"], fields=fields
+        )
+
+    def answer(request: Any) -> Any:
+        response = holder[0].response_msg_class
+        path = share / f"{request.type_name}.json"
+        if not path.is_file():
+            return _failure(response, store, f"unknown type {request.type_name}")
+        document = json.loads(path.read_text())
+        description = document["type_description_msg"]
+        if args.describe_wrong:
+            description["type_description"]["fields"][0]["name"] += "_altered"
+        sources = []
+        if request.include_type_sources:
+            names = [description["type_description"]["type_name"]] + [
+                r["type_name"] for r in description["referenced_type_descriptions"]
+            ]
+            for name in names:
+                kind = name.split("/")[1]
+                text_path = share / f"{name}.{kind}"
+                if text_path.is_file():
+                    sources.append(
+                        store.types[td + "TypeSource"](
+                            type_name=name, encoding=kind, raw_file_contents=text_path.read_text()
+                        )
+                    )
+        emit("DESCRIBED", request.type_name)
+        return response(
+            successful=True,
+            failure_reason="",
+            type_description=store.types[td + "TypeDescription"](
+                type_description=individual(description["type_description"]),
+                referenced_type_descriptions=[
+                    individual(r) for r in description["referenced_type_descriptions"]
+                ],
+            ),
+            type_sources=sources,
+            extra_information=[],
+        )
+
+    server = sdk.ROS2ServiceServer(
+        f"/{node}/get_type_description",
+        "type_description_interfaces/srv/GetTypeDescription",
+        answer,
+        node_name=node,
+        mode="queue" if args.describe_silent else "callback",
+        **where,
+    )
+    holder.append(server)
+    alias_nested_types(store, "type_description_interfaces")
+    return server
+
+
+def _failure(response: Any, store: Any, reason: str) -> Any:
+    return response(
+        successful=False,
+        failure_reason=reason,
+        type_description=build(store, "type_description_interfaces/msg/TypeDescription", {}),
+        type_sources=[],
+        extra_information=[],
+    )
 
 
 class SdkNode:
@@ -239,6 +442,7 @@ class SdkNode:
         self.hashes: dict[str, str] = {}
         self._lines: queue.Queue[str | None] = queue.Queue()
         self._received: list[dict[str, Any]] = []
+        self._described: list[str] = []
         self._errors: list[str] = []
         self._proc = subprocess.Popen(
             [
@@ -307,7 +511,14 @@ class SdkNode:
                 break
             if line and line.startswith("{"):
                 self._received.append(json.loads(line)["msg"])
+            elif line and line.startswith("DESCRIBED "):
+                self._described.append(line.split(" ", 1)[1])
         return list(self._received)
+
+    def described(self) -> list[str]:
+        """The types the node's get_type_description answered so far."""
+        self.messages()
+        return list(self._described)
 
     def stop(self) -> int | None:
         from peers._process import end_process  # this file also runs as a script

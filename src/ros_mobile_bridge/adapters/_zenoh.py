@@ -48,13 +48,14 @@ from .._errors import (
 from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
-from ..codec import CodecRegistry, type_hash
-from ..flow import Decoder, PendingRequests, RawFrame, TopicMessage, WireMessage
+from ..codec import CodecRegistry, same_type_name, type_hash
+from ..flow import PendingRequests, RawFrame, TopicMessage, WireMessage
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
 from ._shared import Advertisement, Advertisements, CannotServe, EventSource, Publishes
 from ._zenoh_calls import ZenohCalls
+from ._zenoh_describe import ZenohDescribe
 from ._zenoh_values import (
     Goal,
     Query,
@@ -111,7 +112,21 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     return adapter
 
 
-class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
+_HOLD: Final = object()
+""":meth:`ZenohAdapter._decoder_for`: hold the samples, the type is being fetched."""
+
+
+@dataclass(slots=True)
+class _Held:
+    """The samples of one topic (key, payload, attachment), in order, held
+    while the type of one of its keys is being described."""
+
+    type_name: str
+    type_hash: str
+    samples: list[tuple[str, bytes, bytes]]
+
+
+class ZenohAdapter(ZenohCalls, ZenohDescribe, EventSource, Publishes, CannotServe):
     """One zenoh session to one router (see :class:`~.Adapter`)."""
 
     protocol = "zenoh"
@@ -137,6 +152,8 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             session_id=session.zid,
         )
         self._init_events()
+        self._init_describe()
+        self._held: dict[str, _Held] = {}  # topic -> samples waiting for a description
         self._ids = itertools.count(0)  # node and entity ids, as rmw_zenoh counts them
         self._tags = itertools.count(1)  # inbox tags (0 is the graph)
         self._node_id = next(self._ids)
@@ -296,6 +313,20 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
 
     # -- the reader -----------------------------------------------------------------------
     async def run(self, sink: EventSink) -> None:
+        lost: ConnectError | None = None
+        async with anyio.create_task_group() as group:
+            self._describe_group = group  # type descriptions are fetched in its tasks
+            try:
+                await self._read(sink)
+            except ConnectError as exc:
+                lost = exc
+                group.cancel_scope.cancel()
+            finally:
+                self._describe_group = None
+        if lost is not None:
+            raise lost
+
+    async def _read(self, sink: EventSink) -> None:
         self._attach(sink)
         inbox = self._session.inbox
         by_tag = self._by_tag
@@ -355,10 +386,18 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
                 f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
             )
             return
+        if self._held and sub.topic in self._held:  # its type is being described
+            self._hold(sub.topic, self._held[sub.topic], key, payload, attachment)
+            return
         entry = sub.keys.get(key)
         if entry is None:
             built = self._key_entry(sub.topic, key)
             if built is None:
+                return
+            if built[1] is _HOLD:
+                parsed = rz.parse_key(key)
+                held = self._held[sub.topic] = _Held(parsed.type_name, parsed.type_hash, [])
+                self._hold(sub.topic, held, key, payload, attachment)
                 return
             entry = built
             if len(sub.keys) < _MAX_KEYS_PER_TOPIC:
@@ -377,7 +416,32 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             )
         )
 
-    def _key_entry(self, topic: str, key: str) -> tuple[str, Decoder | None] | None:
+    def _hold(self, topic: str, held: _Held, key: str, payload: bytes, attachment: bytes) -> None:
+        if len(held.samples) >= self._options.type_description_hold:
+            self._reject(
+                "description_hold_overflow",
+                f"{topic}: more than {self._options.type_description_hold} samples arrived "
+                f"while the description of {held.type_name} was fetched "
+                "(type_description_hold)",
+            )
+            return
+        held.samples.append((key, payload, attachment))
+
+    def _on_described(self, type_name: str, type_hash: str) -> None:
+        """A fetch of (type, hash) ended: the samples held for it are decoded
+        (or delivered raw, when it failed), in order, and handed up."""
+        for topic, held in list(self._held.items()):
+            if (held.type_name, held.type_hash) != (type_name, type_hash):
+                continue
+            del self._held[topic]
+            sub = self._subs.get(topic)
+            if sub is None:
+                continue
+            for key, payload, attachment in held.samples:
+                self._on_sample(sub, key, payload, attachment)
+        self._post()
+
+    def _key_entry(self, topic: str, key: str) -> tuple[str, Any] | None:
         """The type and decoder for samples on ``key``; None (counted) for a
         key that is not a well-formed rmw_zenoh data key of ``topic``."""
         try:
@@ -390,10 +454,20 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             return None
         return parsed.type_name, self._decoder_for(parsed)
 
-    def _decoder_for(self, parsed: rz.TopicKey) -> Decoder | None:
-        """A decoder when we know a definition whose hash is the key's; None
-        (messages delivered raw, with a warning) otherwise: decoding with
-        another definition of the same name would deliver garbage."""
+    def _decoder_for(self, parsed: rz.TopicKey) -> Any:
+        """A decoder when we know a definition whose hash is the key's;
+        :data:`_HOLD` while the robot is asked for it (hold the samples);
+        None (messages delivered raw, with a warning) otherwise: decoding
+        with another definition of the same name would deliver garbage."""
+        if self._knows(parsed.type_name, parsed.type_hash):
+            return self.codecs.decoder(parsed.type_name, "cdr")
+        name, hash_ = parsed.type_name, parsed.type_hash
+        if (
+            self._describe_failed(name, hash_) is None
+            and self._describers(name, hash_)
+            and self._want_description(name, hash_)
+        ):
+            return _HOLD
         try:
             ours = self._type_hash(parsed.type_name)
             if ours != parsed.type_hash:
@@ -431,7 +505,10 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         if topic in self._subs:
             return
         type_name = hints.schema or self._topic_type(topic)
-        if type_name is not None:
+        announced = self._graph_hash(topic, (rz.EntityKind.PUBLISHER,))
+        if announced is not None and not self._knows(*announced):
+            self._want_description(*announced)  # ahead of the first sample
+        elif type_name is not None:
             await self._prepare_decoder(topic, type_name)
         tag = next(self._tags)
         selector = f"{self.domain}/{topic.lstrip('/')}/*/*"
@@ -481,6 +558,7 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         if sub is None:
             return
         self._by_tag.pop(sub.tag, None)
+        self._held.pop(topic, None)
         self._session.undeclare(sub.handle)
         if sub.token is not None:
             self._session.undeclare(sub.token)
@@ -543,7 +621,22 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
 
     # -- lifecycle -----------------------------------------------------------------------------
     async def fetch_definition(self, schema: str) -> bool:
-        return self.codecs.resolves(schema)  # zenoh carries no definitions
+        """Known, or learnt from a node of the graph that uses a type of
+        that name (REP-2011, see ``_zenoh_describe``): whether a definition
+        with the graph's hash is known now. ``SchemaError`` when a node was
+        asked and did not tell."""
+        announced = self._announced(schema)
+        if announced is None:
+            return self.codecs.resolves(schema)
+        await self._ensure_described(*announced)
+        return True
+
+    def _announced(self, schema: str) -> tuple[str, str] | None:
+        """(type, hash) of a type named ``schema`` in the graph's tokens."""
+        for token in self._graph.values():
+            if token.type_name and token.type_hash and same_type_name(token.type_name, schema):
+                return token.type_name, token.type_hash
+        return None
 
     async def _round_trip(self, timeout: float) -> bool:
         """A liveliness query for our own node token, answered by the router:

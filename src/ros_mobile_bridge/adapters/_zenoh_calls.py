@@ -69,6 +69,18 @@ class ZenohCalls:
         def _service_type(self, name: str) -> str | None: ...
         def _type_hash(self, type_name: str) -> str: ...
         def _token_key(self, kind: rz.EntityKind, entity_id: int, **kw: Any) -> str: ...
+        def _graph_hash(
+            self, name: str, kinds: tuple[rz.EntityKind, ...]
+        ) -> tuple[str, str] | None: ...
+        async def _ensure_described(self, type_name: str, type_hash: str) -> None: ...
+
+    async def _describe_entity(self, name: str, kind: rz.EntityKind) -> None:
+        """Learn the type of the graph's entity ``name`` from its node when
+        our definition lacks it or hashes differently (``_zenoh_describe``);
+        ``SchemaError`` when it cannot be learnt."""
+        announced = self._graph_hash(name, (kind,))
+        if announced is not None:
+            await self._ensure_described(*announced)
 
     # -- services ---------------------------------------------------------------------------
     def _client_identity(self, service: str, srv_type: str, hash_: str) -> bytes:
@@ -138,6 +150,7 @@ class ZenohCalls:
         srv_type = self._service_type(name)
         if srv_type is None:
             raise ServiceError(name, "no server offers this service on this domain")
+        await self._describe_entity(name, rz.EntityKind.SERVICE)
         return await self._request(name, srv_type, request, timeout)
 
     # -- actions ----------------------------------------------------------------------------
@@ -150,6 +163,9 @@ class ZenohCalls:
         if self._service_type(send_goal) is None:
             raise ActionGoalError(action, "no action server offers it")
         self._check_pending(action, goal=True)
+        await self._describe_entity(send_goal, rz.EntityKind.SERVICE)
+        await self._describe_entity(f"{action}/_action/get_result", rz.EntityKind.SERVICE)
+        await self._describe_entity(f"{action}/_action/feedback", rz.EntityKind.PUBLISHER)
         try:
             feedback_decode: Decoder | None = self.codecs.decoder(f"{base}_FeedbackMessage", "cdr")
         except SchemaError as exc:

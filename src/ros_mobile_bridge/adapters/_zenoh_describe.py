@@ -1,0 +1,257 @@
+"""Types the Zenoh adapter learns from the robot, as a mixin of
+:class:`~._zenoh.ZenohAdapter`: REP-2011 ``get_type_description``.
+
+Every rmw_zenoh key and liveliness token names its type with the type's
+RIHS01 hash. When the codec has no definition of a type, or ours hashes
+differently, the adapter asks a node that publishes or serves it (found in
+the graph's liveliness tokens) on ``<namespace>/<node>/get_type_description``
+(``type_description_interfaces/srv/GetTypeDescription``, with the type
+sources), hashes the answer and compares with the key's hash:
+
+* a match is registered in this connection's registry (winning over any
+  other definition of those names) and kept in the process cache
+  (:data:`~ros_mobile_bridge.codec.DESCRIPTION_CACHE`), so no other
+  connection asks again;
+* a mismatch is refused, never decoded: a ``"type_hash_mismatch"``
+  rejection, logged;
+* no answer within ``options.type_description_timeout``, no node to ask, or
+  a failed answer: a :class:`SchemaError` naming the type, the node and how
+  to register the definition by hand.
+
+Never more than one fetch per (type, hash) is in flight; everyone who needs
+it waits on that one. A fetch runs in a task of the reader's task group, so
+it ends with the connection. Its outcome (success or error) is kept for the
+connection's life: a type that could not be learnt is not asked for again
+on this connection.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Final
+
+import anyio
+from anyio.abc import TaskGroup
+
+from .._errors import SchemaError, ServiceError
+from .._limits import truncate_for_log
+from .._options import ClientOptions
+from ..codec import DESCRIPTION_CACHE, CodecRegistry, DescribedTypes, HashMismatch, describe
+from ..wire import rmw_zenoh as rz
+
+__all__ = ["DESCRIBE_SERVICE_TYPE", "ZenohDescribe"]
+
+DESCRIBE_SERVICE_TYPE: Final = "type_description_interfaces/srv/GetTypeDescription"
+_SERVICE_SUFFIX: Final = "/get_type_description"
+_BY_HAND: Final = (
+    "register it by hand with Client.register_type(name, msg_text) or point "
+    "ClientOptions.interface_paths at a directory holding its .msg/.srv/.action files"
+)
+
+
+@dataclass(slots=True)
+class _Fetch:
+    """One (type, hash) being learnt: ``done`` is set once ``error`` (None
+    on success) is final."""
+
+    type_name: str
+    type_hash: str
+    done: anyio.Event = field(default_factory=anyio.Event)
+    error: SchemaError | None = None
+
+
+class ZenohDescribe:
+    """REP-2011 type descriptions fetched from the graph's nodes (a mixin of
+    :class:`~._zenoh.ZenohAdapter`, which calls :meth:`_init_describe`)."""
+
+    codecs: CodecRegistry
+    _options: ClientOptions
+    _log: logging.Logger
+    _graph: dict[str, rz.Token]
+
+    if TYPE_CHECKING:  # the adapter's core, ZenohCalls and EventSource provide these
+
+        def _reject(self, reason: str, detail: str, count: int = 1) -> None: ...
+        def _type_hash(self, type_name: str) -> str: ...
+        async def _request(
+            self, service: str, srv_type: str, request: Any, timeout: float
+        ) -> Any: ...
+        def _on_described(self, type_name: str, type_hash: str) -> None: ...
+
+    def _init_describe(self) -> None:
+        self._fetches: dict[tuple[str, str], _Fetch] = {}
+        self._describe_group: TaskGroup | None = None
+        self.description_requests = 0
+        """get_type_description requests this connection sent."""
+
+    # -- what is known ----------------------------------------------------------------
+    def _knows(self, type_name: str, type_hash: str) -> bool:
+        """Whether our definition of ``type_name`` has ``type_hash``; a
+        description in the process cache is registered on the way."""
+        try:
+            if self._type_hash(type_name) == type_hash:
+                return True
+        except SchemaError:
+            pass
+        cached = DESCRIPTION_CACHE.get(type_hash)
+        if cached is None or cached.type_name != type_name:
+            return False
+        try:
+            self.codecs.add_description(cached)
+        except SchemaError:
+            return False
+        return True
+
+    def _describe_failed(self, type_name: str, type_hash: str) -> SchemaError | None:
+        """The error of a finished, failed fetch of this (type, hash)."""
+        fetch = self._fetches.get((type_name, type_hash))
+        return fetch.error if fetch is not None and fetch.done.is_set() else None
+
+    def _graph_hash(self, name: str, kinds: tuple[rz.EntityKind, ...]) -> tuple[str, str] | None:
+        """``(type, hash)`` of the entity ``name`` of one of ``kinds`` in the graph."""
+        for token in self._graph.values():
+            if token.name == name and token.kind in kinds and token.type_name and token.type_hash:
+                return token.type_name, token.type_hash
+        return None
+
+    def _describers(self, type_name: str, type_hash: str) -> list[str]:
+        """The ``get_type_description`` services of the nodes that use
+        (type, hash): publishers and servers first, then the others."""
+        services = {
+            token.name
+            for token in self._graph.values()
+            if token.kind is rz.EntityKind.SERVICE
+            and token.type_name == DESCRIBE_SERVICE_TYPE
+            and token.name is not None
+        }
+        order = {
+            rz.EntityKind.PUBLISHER: 0,
+            rz.EntityKind.SERVICE: 0,
+            rz.EntityKind.SUBSCRIPTION: 1,
+            rz.EntityKind.CLIENT: 1,
+        }
+        found: dict[str, int] = {}
+        for token in self._graph.values():
+            if token.type_name != type_name or token.type_hash != type_hash:
+                continue
+            namespace = token.namespace.rstrip("/")
+            service = f"{namespace}/{token.node_name}{_SERVICE_SUFFIX}"
+            if service in services:
+                rank = order.get(token.kind, 2)
+                found[service] = min(rank, found.get(service, rank))
+        return sorted(found, key=lambda s: (found[s], s))
+
+    # -- fetching -----------------------------------------------------------------------
+    def _want_description(self, type_name: str, type_hash: str) -> _Fetch | None:
+        """The fetch of (type, hash), started in the reader's task group if
+        none is under way; None when the reader is not running."""
+        key = (type_name, type_hash)
+        fetch = self._fetches.get(key)
+        if fetch is not None:
+            return fetch
+        group = self._describe_group
+        if group is None:
+            return None
+        fetch = self._fetches[key] = _Fetch(type_name, type_hash)
+        group.start_soon(self._run_fetch, fetch)
+        return fetch
+
+    async def _ensure_described(self, type_name: str, type_hash: str) -> None:
+        """Return once our definition of ``type_name`` has ``type_hash``,
+        fetching it from a node if need be; :class:`SchemaError` (see the
+        module docstring) when it cannot be learnt."""
+        if self._knows(type_name, type_hash):
+            return
+        fetch = self._want_description(type_name, type_hash)
+        if fetch is None:  # no reader (yet): fetch in the caller's task
+            fetch = self._fetches.setdefault((type_name, type_hash), _Fetch(type_name, type_hash))
+            if not fetch.done.is_set():
+                await self._run_fetch(fetch)
+        await fetch.done.wait()
+        if fetch.error is not None:
+            raise fetch.error
+
+    async def _run_fetch(self, fetch: _Fetch) -> None:
+        try:
+            await self._fetch(fetch.type_name, fetch.type_hash)
+        except SchemaError as exc:
+            fetch.error = exc
+            self._log.warning("%s", truncate_for_log(str(exc)))
+        except Exception as exc:  # a bug must not kill the reader's task group
+            fetch.error = SchemaError(
+                f"cannot learn {fetch.type_name} ({fetch.type_hash}): {type(exc).__name__}: {exc}"
+            )
+            self._log.exception("fetching the type description of %s failed", fetch.type_name)
+        finally:
+            fetch.done.set()
+            self._on_described(fetch.type_name, fetch.type_hash)
+
+    async def _fetch(self, type_name: str, type_hash: str) -> None:
+        if self._knows(type_name, type_hash):
+            return
+        services = self._describers(type_name, type_hash)
+        if not services:
+            raise SchemaError(
+                f"no definition of {type_name} ({type_hash}) and no node using it serves "
+                f"get_type_description to ask; {_BY_HAND}"
+            )
+        service = services[0]
+        node = service.removesuffix(_SERVICE_SUFFIX)
+        timeout = self._options.type_description_timeout
+        self.description_requests += 1
+        try:
+            answer = await self._request(
+                service,
+                DESCRIBE_SERVICE_TYPE,
+                {"type_name": type_name, "type_hash": type_hash, "include_type_sources": True},
+                timeout,
+            )
+        except ServiceError as exc:
+            raise SchemaError(
+                f"no definition of {type_name} ({type_hash}): node {node} did not describe it "
+                f"within {timeout:g} s (type_description_timeout): {exc.reason}; {_BY_HAND}"
+            ) from exc
+        if not _field(answer, "successful"):
+            reason = _field(answer, "failure_reason") or "no reason given"
+            raise SchemaError(
+                f"no definition of {type_name} ({type_hash}): node {node} could not describe "
+                f"it: {reason}; {_BY_HAND}"
+            )
+        try:
+            described = describe(
+                _field(answer, "type_description"),
+                _field(answer, "type_sources") or (),
+                expected_hash=type_hash,
+                max_fields=self._options.max_schema_fields,
+            )
+        except HashMismatch as exc:
+            self._reject("type_hash_mismatch", f"node {node}: {exc}")
+            raise SchemaError(f"node {node} described another {type_name}: {exc}") from exc
+        if described.type_name != type_name:
+            raise SchemaError(
+                f"node {node} described {described.type_name} when asked for {type_name}"
+            )
+        await anyio.to_thread.run_sync(self._register_described, described)
+        DESCRIPTION_CACHE.put(described)
+
+    def _register_described(self, described: DescribedTypes) -> None:
+        """Register in this connection's registry and build the codecs the
+        first message will need (in a worker thread: code generation)."""
+        self.codecs.add_description(described)
+        name = described.type_name
+        try:
+            if name in described.defs:
+                self.codecs.decoder(name, "cdr")
+            elif name.split("/")[1] == "srv":
+                request, response = CodecRegistry.service_type_names(name)
+                self.codecs.encoder(request, "cdr")
+                self.codecs.decoder(response, "cdr")
+        except SchemaError:
+            pass  # said by whoever asks for the codec
+
+
+def _field(value: Any, name: str) -> Any:
+    getter: Callable[[str], Any] | None = getattr(value, "get", None)
+    return getter(name) if getter is not None else getattr(value, name, None)

@@ -1,0 +1,271 @@
+"""Types learnt from the robot over Zenoh (REP-2011 get_type_description),
+against zenoh-ros2-sdk nodes (tests/peers/zenoh_sdk_node.py) that serve
+``/<node>/get_type_description`` from the official ROS 2 Jazzy description
+files. test_msgs is not bundled with the library: its types are unknown
+until a node describes them.
+
+An un-bundled nested type reaches ``async for`` decoded; a service of such a
+type is called; an answer whose hash disagrees with the key is refused and
+counted, nothing decoded; a silent node gives a SchemaError within the
+timeout; what was learnt is cached for the process; fetch_definition,
+schema_definition and the recorder's schema text work for it."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import anyio
+import pytest
+from mcap.reader import make_reader
+
+import ros_mobile_bridge as rmb
+from peers.ros_env import PeerEnv
+from peers.zenoh_sdk_node import SdkNode
+from ros_mobile_bridge.codec import DESCRIPTION_CACHE, CodecRegistry
+
+pytest_plugins = ["peers.ros_fixtures"]
+pytest.importorskip("zenoh_ros2_sdk")
+
+NESTED = "test_msgs/msg/Nested"
+ARRAYS = "test_msgs/msg/Arrays"
+BASIC_SRV = "test_msgs/srv/BasicTypes"
+NESTED_VALUES = {
+    "basic_types_value": {
+        "bool_value": True,
+        "int32_value": -42,
+        "uint64_value": 2**63,
+        "float64_value": 1.5,
+        "uint8_value": 200,
+    }
+}
+ARRAYS_VALUES = {
+    "int32_values": [1, -2, 3],
+    "string_values": ["a", "bc", "def"],
+    "basic_types_values": [{"int8_value": -1}, {"float32_value": 0.5}, {"bool_value": True}],
+}
+
+
+@pytest.fixture(autouse=True)
+def _fresh_cache() -> Iterator[None]:
+    """Each test starts with an empty process cache (what it learns stays in it)."""
+    DESCRIPTION_CACHE.clear()
+    yield
+    DESCRIPTION_CACHE.clear()
+
+
+@pytest.fixture(scope="session")
+def definitions(ros_peer_env: PeerEnv) -> Path:
+    return ros_peer_env.prefix / "share"
+
+
+@pytest.fixture
+def sdk(
+    zenoh_router: Any, zenoh_domain: int, definitions: Path
+) -> Iterator[Callable[..., SdkNode]]:
+    nodes: list[SdkNode] = []
+
+    def start(role: str, *args: str) -> SdkNode:
+        node = SdkNode(zenoh_router.locator, zenoh_domain, definitions, role, *args)
+        nodes.append(node)
+        return node
+
+    try:
+        yield start
+    finally:
+        for node in nodes:
+            node.stop()
+
+
+def options(domain: int, **kw: Any) -> rmb.ClientOptions:
+    return rmb.ClientOptions(domain_id=domain, **kw)
+
+
+async def until(predicate: Callable[[], bool], what: str, timeout: float = 15.0) -> None:
+    with anyio.fail_after(timeout):
+        while not predicate():
+            await anyio.sleep(0.05)
+
+
+def talker(sdk: Callable[..., SdkNode], type_name: str, values: Any, *flags: str) -> SdkNode:
+    return sdk(
+        "talker",
+        "--topic",
+        "/described",
+        "--type",
+        type_name,
+        "--values",
+        json.dumps(values),
+        "--rate",
+        "50",
+        *flags,
+    )
+
+
+async def first_messages(client: rmb.Client, count: int) -> list[rmb.Message]:
+    await until(lambda: any(t.name == "/described" for t in client.topics), "the talker")
+    got: list[rmb.Message] = []
+    async with client.subscribe("/described") as sub:
+        with anyio.fail_after(20):
+            async for message in sub:
+                got.append(message)
+                if len(got) == count:
+                    break
+    return got
+
+
+def test_test_msgs_is_not_bundled() -> None:
+    registry = CodecRegistry()
+    assert not registry.resolves(NESTED)
+    assert not registry.resolves(BASIC_SRV + "_Request")
+
+
+@pytest.mark.parametrize(
+    ("type_name", "values"), [(NESTED, NESTED_VALUES), (ARRAYS, ARRAYS_VALUES)]
+)
+async def test_an_unknown_type_with_nested_types_is_fetched_and_decoded(
+    sdk: Callable[..., SdkNode],
+    zenoh_router: Any,
+    zenoh_domain: int,
+    type_name: str,
+    values: dict[str, Any],
+) -> None:
+    node = talker(sdk, type_name, values, "--describe")
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        got = await first_messages(client, 5)
+        assert client.rejections == {}
+    assert [m.decode_error for m in got] == [None] * 5
+    assert {m.schema_name for m in got} == {type_name}
+    data = got[0].data
+    if type_name == NESTED:
+        basic = data["basic_types_value"]
+        assert (basic["bool_value"], basic["int32_value"]) == (True, -42)
+        assert (basic["uint64_value"], basic["float64_value"]) == (2**63, 1.5)
+        assert (basic["uint8_value"], basic["int16_value"]) == (200, 0)
+    else:
+        assert list(data["int32_values"]) == [1, -2, 3]
+        assert data["string_values"] == ["a", "bc", "def"]
+        assert [b["int8_value"] for b in data["basic_types_values"]] == [-1, 0, 0]
+        assert data["basic_types_values"][1]["float32_value"] == 0.5
+        assert len(data["defaults_values"]) == 3
+    assert node.described() == [type_name]  # asked once for all five
+
+
+async def test_a_service_of_an_unknown_type_is_called_and_answered(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int
+) -> None:
+    node = sdk("service", "--type", BASIC_SRV, "--name", "/echo_basic", "--describe")
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        await until(lambda: any(s.name == "/echo_basic" for s in client.services), "the service")
+        for value in (7, -8):
+            answer = await client.call_service(
+                "/echo_basic", {"int32_value": value, "string_value": f"v{value}"}, timeout=10
+            )
+            assert (answer["int32_value"], answer["string_value"]) == (value, f"v{value}")
+            assert answer["bool_value"] is False
+        assert client.rejections == {}
+    assert node.described() == [BASIC_SRV]
+
+
+async def test_an_answer_whose_hash_disagrees_is_refused_and_counted(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int
+) -> None:
+    node = talker(sdk, NESTED, NESTED_VALUES, "--describe-wrong")
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        got = await first_messages(client, 5)
+        assert client.rejections == {"type_hash_mismatch": 1}
+        with pytest.raises(rmb.SchemaError):
+            client.schema_definition(NESTED)
+    assert all(isinstance(m.data, memoryview) for m in got)
+    assert all(m.decode_error and "no decoder" in m.decode_error for m in got)
+    assert node.described() == [NESTED]
+
+
+async def test_a_silent_node_gives_a_schema_error_within_the_timeout(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int
+) -> None:
+    sdk("service", "--type", BASIC_SRV, "--name", "/silent_basic", "--describe-silent")
+    opts = options(zenoh_domain, type_description_timeout=1.0)
+    async with rmb.connect(zenoh_router.locator, options=opts) as client:
+        await until(lambda: any(s.name == "/silent_basic" for s in client.services), "the service")
+        with anyio.fail_after(5), pytest.raises(rmb.SchemaError) as caught:
+            await client.call_service("/silent_basic", {"int32_value": 1}, timeout=10)
+        text = str(caught.value)
+        assert BASIC_SRV in text
+        assert "node /sdk_service did not describe it within 1 s" in text
+        assert "Client.register_type" in text
+        assert "ClientOptions.interface_paths" in text
+        # the outcome is kept for the connection: no second wait
+        with anyio.fail_after(0.5), pytest.raises(rmb.SchemaError):
+            await client.call_service("/silent_basic", {"int32_value": 1}, timeout=10)
+
+
+async def test_a_fetched_description_is_cached_for_the_next_connection(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int
+) -> None:
+    node = talker(sdk, NESTED, NESTED_VALUES, "--describe")
+    for _ in range(2):
+        async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+            got = await first_messages(client, 3)
+            assert [m.decode_error for m in got] == [None] * 3
+            assert got[0].data["basic_types_value"]["int32_value"] == -42
+    assert node.described() == [NESTED]
+    assert DESCRIPTION_CACHE.hits >= 1
+
+
+async def test_fetch_definition_schema_definition_and_recorder_text(
+    sdk: Callable[..., SdkNode],
+    zenoh_router: Any,
+    zenoh_domain: int,
+    tmp_path: Path,
+    definitions: Path,
+) -> None:
+    talker(sdk, NESTED, NESTED_VALUES, "--describe")
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        await until(lambda: any(t.name == "/described" for t in client.topics), "the talker")
+        with pytest.raises(rmb.SchemaError):
+            client.schema_definition(NESTED)
+        assert await client.fetch_definition(NESTED) is True
+        fields = client.schema_definition(NESTED)
+        assert [(f.name, f.type) for f in fields] == [
+            ("basic_types_value", "test_msgs/msg/BasicTypes")
+        ]
+        basic = {f.name: f.type for f in client.schema_definition("test_msgs/msg/BasicTypes")}
+        assert basic["int32_value"] == "int32"
+        assert client.schema_template(NESTED)["basic_types_value"]["uint64_value"] == 0
+        path = tmp_path / "described.mcap"
+        async with client.record(path, topics=["/described"]) as recording:
+            await first_messages(client, 3)
+        assert recording is not None
+    with path.open("rb") as f:
+        recorded = list(make_reader(f).iter_messages(log_time_order=False))
+    assert len(recorded) >= 3
+    schema = recorded[0][0]
+    assert schema is not None
+    assert (schema.name, schema.encoding) == (NESTED, "ros2msg")
+    text = schema.data.decode()
+    # the official .msg texts the node sent, verbatim (comments kept)
+    nested = (definitions / f"{NESTED}.msg").read_text().rstrip("\n")
+    basic = (definitions / "test_msgs/msg/BasicTypes.msg").read_text().rstrip("\n")
+    assert text == f"{nested}\n{'=' * 80}\nMSG: test_msgs/BasicTypes\n{basic}\n"
+
+
+async def test_samples_held_during_a_fetch_are_bounded_and_counted(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int
+) -> None:
+    """A silent node: the samples that arrive while we wait for it are held
+    (5 at most here, the rest counted), then delivered raw, in order, with
+    the ones after them."""
+    talker(sdk, NESTED, NESTED_VALUES, "--describe-silent")
+    opts = options(zenoh_domain, type_description_timeout=1.0, type_description_hold=5)
+    async with rmb.connect(zenoh_router.locator, options=opts) as client:
+        got = await first_messages(client, 8)
+        overflow = client.rejections.get("description_hold_overflow", 0)
+        assert overflow >= 10  # 50 Hz for 1 s, 5 held
+        assert set(client.rejections) == {"description_hold_overflow"}
+    assert all(isinstance(m.data, memoryview) for m in got)
+    stamps = [m.log_time_ns for m in got]  # the publisher's stamps
+    assert None not in stamps
+    assert stamps == sorted(stamps)
