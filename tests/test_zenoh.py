@@ -178,7 +178,7 @@ async def test_another_domain_is_invisible(zenoh_router: Any, zenoh_domain: int,
 
 # -- hostile input (raw eclipse-zenoh, things rmw_zenoh peers never send) -----------------------
 async def test_hostile_samples_are_skipped_and_counted(
-    zenoh_router: Any, zenoh_domain: int, raw: Any
+    zenoh_router: Any, zenoh_domain: int, raw: Any, caplog: pytest.LogCaptureFixture
 ) -> None:
     key = data_key(zenoh_domain, "/chatter")
     good = cdr(STRING, {"data": "ok"})
@@ -197,6 +197,11 @@ async def test_hostile_samples_are_skipped_and_counted(
             good,
             attachment=attachment(3),
         )
+        raw.put(  # a hash version this library does not read
+            f"{prefix}/std_msgs::msg::dds_::String_/RIHS02_{'0' * 64}",
+            good,
+            attachment=attachment(3),
+        )
         raw.put(key, b"\xff" * 7, attachment=attachment(4))  # garbage CDR
         raw.put(key, good, attachment=attachment(5))  # and then a good one
         got = await collect(sub, 3)
@@ -209,7 +214,8 @@ async def test_hostile_samples_are_skipped_and_counted(
         # other transports); the good one decodes
         assert got[1].decode_error is not None
         assert got[2].data == {"data": "ok"}
-        assert client.rejections == {"attachment": 3, "malformed": 1}
+        assert client.rejections == {"attachment": 3, "malformed": 2}
+        assert "RIHS02: this library reads RIHS01 hashes only" in caplog.text
 
 
 async def test_hostile_tokens_are_skipped_and_counted(
