@@ -21,11 +21,21 @@ The conventions, as ``rmw_zenoh_cpp`` (Jazzy) writes them:
   with every ``/`` inside a name replaced by ``%`` and an empty part written
   ``%`` (:func:`mangle`). Node and entity ids count from 0 in every process,
   so only the whole token identifies an entity.
-* **Attachments**: every publication and service request carries 33 bytes:
-  the sequence number (int64, little-endian), the source timestamp in
-  nanoseconds (int64, little-endian), then the 16-byte source gid with its
-  length as one byte (``0x10``) in front, as zenoh-ext serializes them.
-  ``rmw_zenoh_cpp`` drops a sample without one, and so do we.
+* **Attachments**: every publication, service request and service reply
+  carries 33 bytes: the sequence number (int64, little-endian), the source
+  timestamp in nanoseconds (int64, little-endian), then the 16-byte source
+  gid with its length as one byte (``0x10``) in front, as zenoh-ext
+  serializes them. ``rmw_zenoh_cpp`` drops a sample without one, and so do
+  we. Earlier ``rmw_zenoh_cpp`` releases (the first Jazzy binaries) wrote
+  the same three values as key-value pairs, each preceded by its name as a
+  zenoh-ext string (``sequence_number``, ``source_timestamp``,
+  ``source_gid``: 77 bytes); :func:`decode_attachment` reads both forms,
+  :func:`encode_attachment` writes the 33-byte one.
+* **Service servers** declare a *complete* queryable on the service's data
+  key and an ``SS`` token. A reply carries the response's CDR on the
+  service key and an attachment holding the *request's* sequence number and
+  the *client's* gid (the server's own clock as its timestamp), by which the
+  client matches it to its call.
 
 Peer input never makes a parser do anything but return or raise
 :class:`MalformedKey` / :class:`MalformedAttachment` (both ``ValueError``);
@@ -47,6 +57,7 @@ import xxhash
 __all__ = [
     "ATTACHMENT_SIZE",
     "HASH_VERSION",
+    "KV_ATTACHMENT_SIZE",
     "LIVELINESS_PREFIX",
     "MAX_KEY_LENGTH",
     "Attachment",
@@ -58,6 +69,7 @@ __all__ = [
     "Qos",
     "QueryDone",
     "Reply",
+    "Request",
     "Sample",
     "SessionLost",
     "Token",
@@ -86,6 +98,12 @@ MAX_KEY_LENGTH: Final = 4096
 ATTACHMENT_SIZE: Final = 33
 _GID_SIZE: Final = 16
 _ATTACHMENT: Final = struct.Struct("<qqB16s")
+# the key-value form: <len>"sequence_number" int64 <len>"source_timestamp"
+# int64 <len>"source_gid" <len=16> 16 bytes (zenoh-ext strings and buffers
+# carry a LEB128 length; every length here is below 128: one byte)
+_KV_ATTACHMENT: Final = struct.Struct("<16sq17sq11sB16s")
+_KV_KEYS: Final = (b"\x0fsequence_number", b"\x10source_timestamp", b"\x0asource_gid")
+KV_ATTACHMENT_SIZE: Final = _KV_ATTACHMENT.size
 _MAX_DOMAIN: Final = 232  # ROS 2's highest valid domain id
 _HASH = re.compile(r"RIHS01_[0-9a-f]{64}")
 _ANY_HASH_VERSION = re.compile(r"RIHS([0-9A-Fa-f]{2})_")
@@ -412,10 +430,17 @@ def encode_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
 
 
 def decode_attachment(data: bytes | bytearray | memoryview | None) -> Attachment:
-    """Decode an attachment; :class:`MalformedAttachment` if it is missing,
-    not exactly :data:`ATTACHMENT_SIZE` bytes, or its gid length is not 16."""
+    """Decode an attachment in either form rmw_zenoh_cpp has sent (33 bytes,
+    or the 77-byte key-value form of its first Jazzy releases);
+    :class:`MalformedAttachment` if it is missing, of another length, or not
+    laid out as one of those (a gid length other than 16, a wrong key)."""
     if data is None:
         raise MalformedAttachment("no attachment")
+    if len(data) == KV_ATTACHMENT_SIZE:
+        k1, sequence, k2, timestamp, k3, gid_size, gid = _KV_ATTACHMENT.unpack(bytes(data))
+        if (k1, k2, k3) != _KV_KEYS or gid_size != _GID_SIZE:
+            raise MalformedAttachment("a 77-byte attachment that is not the key-value form")
+        return Attachment(sequence, timestamp, gid)
     if len(data) != ATTACHMENT_SIZE:
         raise MalformedAttachment(f"attachment of {len(data)} bytes, expected {ATTACHMENT_SIZE}")
     sequence, timestamp, gid_size, gid = _ATTACHMENT.unpack(bytes(data))
@@ -486,6 +511,24 @@ class Reply(_Item):
         self.attachment = attachment
 
 
+class Request(_Item):
+    """A query on the queryable tagged ``tag`` (a call to a service this
+    client serves): ``query_id`` names it to the session's ``reply`` and
+    ``reply_error``; its key, payload (empty when it carried none) and
+    attachment (None when it carried none)."""
+
+    __slots__ = ("attachment", "key", "payload", "query_id", "tag")
+
+    def __init__(
+        self, tag: int, query_id: int, key: str, payload: bytes, attachment: bytes | None
+    ) -> None:
+        self.tag = tag
+        self.query_id = query_id
+        self.key = key
+        self.payload = payload
+        self.attachment = attachment
+
+
 class QueryDone(_Item):
     """The query ``query_id`` will get no more replies."""
 
@@ -504,5 +547,5 @@ class SessionLost(_Item):
         self.reason = reason
 
 
-InboxItem: TypeAlias = Sample | LivelinessChange | Reply | QueryDone | SessionLost
+InboxItem: TypeAlias = Sample | LivelinessChange | Reply | Request | QueryDone | SessionLost
 """Anything a session's inbox holds."""
