@@ -114,8 +114,12 @@ async def test_graph_shows_the_other_client_and_our_tokens(
         tokens = {rz.parse_token(str(r.ok.key_expr)) for r in replies if r.ok is not None}
         ours = [t for t in tokens if t.zid == a.server_info.session_id]
         kinds = {t.kind for t in ours}
-        assert kinds == {rz.EntityKind.NODE, rz.EntityKind.PUBLISHER}
+        # a publishing node serves get_type_description, as ROS nodes do
+        assert kinds == {rz.EntityKind.NODE, rz.EntityKind.PUBLISHER, rz.EntityKind.SERVICE}
         assert all(t.node_name.startswith("rmb_") for t in ours)
+        service = next(t for t in ours if t.kind is rz.EntityKind.SERVICE)
+        assert service.name == f"/{service.node_name}/get_type_description"
+        assert service.type_name == "type_description_interfaces/srv/GetTypeDescription"
         pub = next(t for t in ours if t.kind is rz.EntityKind.PUBLISHER)
         assert (pub.name, pub.type_name) == ("/status", STRING)
         assert pub.type_hash == type_hash(CodecRegistry(), STRING)

@@ -24,7 +24,7 @@ from mcap.reader import make_reader
 import ros_mobile_bridge as rmb
 from peers.ros_env import PeerEnv
 from peers.zenoh_sdk_node import SdkNode
-from ros_mobile_bridge.codec import DESCRIPTION_CACHE, CodecRegistry
+from ros_mobile_bridge.codec import DESCRIPTION_CACHE, CodecRegistry, description_hash
 
 pytest_plugins = ["peers.ros_fixtures"]
 pytest.importorskip("zenoh_ros2_sdk")
@@ -269,3 +269,42 @@ async def test_samples_held_during_a_fetch_are_bounded_and_counted(
     stamps = [m.log_time_ns for m in got]  # the publisher's stamps
     assert None not in stamps
     assert stamps == sorted(stamps)
+
+
+TWIST = "geometry_msgs/msg/Twist"
+DESCRIBE = "type_description_interfaces/srv/GetTypeDescription"
+
+
+async def test_our_node_describes_the_types_it_publishes_to_an_sdk_client(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int, definitions: Path
+) -> None:
+    official = json.loads((definitions / f"{TWIST}.json").read_text())
+    twist_hash = official["type_hashes"][0]["hash_string"]
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        await client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.1}})
+        node = f"rmb_{client.server_info.session_id[:12]}"
+        service = f"/{node}/get_type_description"
+        requests = [
+            {"type_name": TWIST, "type_hash": twist_hash, "include_type_sources": True},
+            {"type_name": TWIST, "type_hash": "RIHS01_" + "0" * 64, "include_type_sources": False},
+            {"type_name": "std_msgs/msg/String", "type_hash": "", "include_type_sources": True},
+        ]
+        caller = await anyio.to_thread.run_sync(
+            lambda: sdk(
+                "client", "--name", service, "--type", DESCRIBE, "--requests", json.dumps(requests)
+            )
+        )
+        await until(lambda: caller.done, "the sdk's calls")
+        answers = [record["response"] for record in caller.records()]
+        await client.publish_zero_twist()
+    assert len(answers) == 3
+    first = answers[0]
+    assert first["successful"] is True
+    assert description_hash(first["type_description"]) == twist_hash
+    described = first["type_description"]["type_description"]
+    assert described["type_name"] == TWIST
+    assert [f["name"] for f in described["fields"]] == ["linear", "angular"]
+    assert answers[1]["successful"] is False
+    assert "not RIHS01_000" in answers[1]["failure_reason"]
+    assert answers[2]["successful"] is False
+    assert "does not publish" in answers[2]["failure_reason"]

@@ -229,9 +229,14 @@ def _client(sdk: Any, where: dict[str, Any], args: argparse.Namespace, stop: Any
     each answer as a JSON line, then ``DONE``."""
     errors = _ErrorReplies()
     logging.getLogger("zenoh_ros2_sdk.service_client").addHandler(errors)
+    if args.type == "type_description_interfaces/srv/GetTypeDescription":
+        session = sdk.ZenohSession.get_instance(where["router_ip"], where["router_port"])
+        _register_description_types(session.store, Path(args.definitions))
     client = sdk.ROS2ServiceClient(
         args.name, args.type, node_name="sdk_client", timeout=args.timeout, **where
     )
+    store = sdk.ZenohSession.get_instance(where["router_ip"], where["router_port"]).store
+    alias_nested_types(store, args.type.split("/")[0])
     emit("HASH", args.type, client.type_hash)
     deadline = time.monotonic() + 30
     while _server_count(sdk, where, args.name)[0] == 0:

@@ -605,6 +605,10 @@ class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publish
         self._pubs[topic] = _Publisher(
             schema, ready, topic, key, rz.entity_gid(token_key), encode, publisher, token
         )
+        await self._serve_descriptions()
+
+    def _published_types(self) -> list[str]:
+        return list(self._pubs.schemas().values())
 
     async def unadvertise(self, topic: str) -> None:
         pub = self._pubs.pop(topic, None)

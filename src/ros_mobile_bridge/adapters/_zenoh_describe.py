@@ -18,6 +18,11 @@ sources), hashes the answer and compares with the key's hash:
   a failed answer: a :class:`SchemaError` naming the type, the node and how
   to register the definition by hand.
 
+The other way round, once this client publishes, its node answers
+``/<our node>/get_type_description`` for the types it publishes, as a
+well-behaved ROS node does (no type sources: a description made from the
+definitions it encodes with).
+
 Never more than one fetch per (type, hash) is in flight; everyone who needs
 it waits on that one. A fetch runs in a task of the reader's task group, so
 it ends with the connection. Its outcome (success or error) is kept for the
@@ -38,7 +43,15 @@ from anyio.abc import TaskGroup
 from .._errors import SchemaError, ServiceError
 from .._limits import truncate_for_log
 from .._options import ClientOptions
-from ..codec import DESCRIPTION_CACHE, CodecRegistry, DescribedTypes, HashMismatch, describe
+from ..codec import (
+    DESCRIPTION_CACHE,
+    CodecRegistry,
+    DescribedTypes,
+    HashMismatch,
+    describe,
+    same_type_name,
+    type_description,
+)
 from ..wire import rmw_zenoh as rz
 
 __all__ = ["DESCRIBE_SERVICE_TYPE", "ZenohDescribe"]
@@ -79,12 +92,24 @@ class ZenohDescribe:
             self, service: str, srv_type: str, request: Any, timeout: float
         ) -> Any: ...
         def _on_described(self, type_name: str, type_hash: str) -> None: ...
+        def _published_types(self) -> list[str]: ...
+        async def advertise_service(
+            self, name: str, service_type: str, handler: Any, *, confirm: bool = True
+        ) -> None: ...
+        async def respond_service(
+            self, name: str, request_id: str, values: Any, result: bool
+        ) -> None: ...
+
+    _node_name: str
 
     def _init_describe(self) -> None:
         self._fetches: dict[tuple[str, str], _Fetch] = {}
         self._describe_group: TaskGroup | None = None
         self.description_requests = 0
         """get_type_description requests this connection sent."""
+        self.descriptions_served = 0
+        """get_type_description requests this connection's node answered."""
+        self._describing = False
 
     # -- what is known ----------------------------------------------------------------
     def _knows(self, type_name: str, type_hash: str) -> bool:
@@ -250,6 +275,70 @@ class ZenohDescribe:
                 self.codecs.decoder(response, "cdr")
         except SchemaError:
             pass  # said by whoever asks for the codec
+
+    # -- answering ----------------------------------------------------------------------
+    async def _serve_descriptions(self) -> None:
+        """Serve our node's ``get_type_description`` (once per connection;
+        called when this client starts publishing). A failure to declare it
+        is logged: publishing goes on."""
+        if self._describing:
+            return
+        self._describing = True
+        name = f"/{self._node_name}{_SERVICE_SUFFIX}"
+        try:
+            handler = _DescriptionServer(name, self.description_answer, self._log)
+            await self.advertise_service(name, DESCRIBE_SERVICE_TYPE, handler, confirm=False)
+        except Exception as exc:
+            self._log.warning("cannot serve %s: %s", name, truncate_for_log(str(exc)))
+
+    def description_answer(self, type_name: Any, type_hash: Any) -> dict[str, Any]:
+        """The GetTypeDescription response our node gives for (type, hash):
+        the description of a type this client publishes, when the hash is
+        ours (or not given); a failure naming the reason otherwise."""
+        self.descriptions_served += 1
+        name = type_name if isinstance(type_name, str) else ""
+        published = next(
+            (t for t in self._published_types() if name and same_type_name(t, name)), None
+        )
+        if published is None:
+            return _refusal(f"this node does not publish {name!r}")
+        try:
+            ours = self._type_hash(published)
+            if type_hash and type_hash != ours:
+                return _refusal(f"{published} has the hash {ours} here, not {type_hash}")
+            description = type_description(self.codecs, published)
+        except SchemaError as exc:
+            return _refusal(str(exc))
+        return {
+            "successful": True,
+            "failure_reason": "",
+            "type_description": description,
+            "type_sources": [],
+            "extra_information": [],
+        }
+
+
+class _DescriptionServer:
+    """The handler of our node's ``get_type_description`` (see
+    :class:`~._seam.ServiceHandler`)."""
+
+    def __init__(
+        self, name: str, answer: Callable[[Any, Any], dict[str, Any]], log: logging.Logger
+    ) -> None:
+        self.name = name
+        self.answer = answer
+        self.log = log
+
+    async def on_service_request(self, adapter: Any, request_id: str, args: Any) -> None:
+        response = self.answer(_field(args, "type_name"), _field(args, "type_hash"))
+        await adapter.respond_service(self.name, request_id, response, True)
+
+    def on_service_failed(self, error: Exception) -> None:
+        self.log.warning("%s: %s", self.name, error)
+
+
+def _refusal(reason: str) -> dict[str, Any]:
+    return {"successful": False, "failure_reason": reason}
 
 
 def _field(value: Any, name: str) -> Any:

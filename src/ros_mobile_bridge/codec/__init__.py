@@ -24,6 +24,7 @@ from ._names import normalize_type_name as normalize_type_name
 from ._names import same_type_name as same_type_name
 from ._registry import CodecRegistry as CodecRegistry
 from ._registry import SchemaTooLarge as SchemaTooLarge
+from ._typehash import type_description as type_description
 from ._typehash import type_hash as type_hash
 
 __all__ = [
@@ -38,5 +39,6 @@ __all__ = [
     "description_hash",
     "normalize_type_name",
     "same_type_name",
+    "type_description",
     "type_hash",
 ]

@@ -67,6 +67,7 @@ __all__ = [
     "desc_from_msgdef",
     "digest",
     "is_derived_composite",
+    "type_description",
     "type_hash",
 ]
 
@@ -411,3 +412,44 @@ def type_hash(registry: CodecRegistry, type_name: str) -> str:
         digest = _digest(name, closure)
         memo.hashes[name] = (descs, digest)
         return digest
+
+
+def _default_text(value: object) -> str:
+    """A default value as rosidl writes it in a description (``str`` of the
+    Python value; arrays as tuples)."""
+    if value is None:
+        return ""
+    if isinstance(value, list | tuple):
+        return str(tuple(value))
+    return str(value)
+
+
+def _with_defaults(desc: TypeDesc) -> dict[str, Any]:
+    out = desc.as_json()
+    source = desc.source
+    if source is not None and len(source.fields) == len(out["fields"]):
+        for entry, spec in zip(out["fields"], source.fields, strict=True):
+            entry["default_value"] = _default_text(spec.default)
+    else:
+        for entry in out["fields"]:
+            entry["default_value"] = ""
+    return out
+
+
+def type_description(registry: CodecRegistry, type_name: str) -> dict[str, Any]:
+    """The REP-2011 ``TypeDescription`` of ``type_name`` from ``registry``'s
+    definitions, as a plain mapping (``type_description`` and the
+    ``referenced_type_descriptions`` in name order, each field with its
+    ``default_value`` text): what a node answers on
+    ``get_type_description``; its hash is :func:`type_hash`'s. Raises as
+    :func:`type_hash` does."""
+    memo = _memo(registry)
+    with registry.ros_lookup() as find:
+        name = _top_name(find, type_name)
+        closure = _closure(find, name, memo.descs)
+    return {
+        "type_description": _with_defaults(closure[name]),
+        "referenced_type_descriptions": [
+            _with_defaults(closure[ref]) for ref in sorted(closure) if ref != name
+        ],
+    }
