@@ -586,6 +586,7 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             routers = await anyio.to_thread.run_sync(self._session.routers)
             if routers:
                 missing_since = None
+                self._retry_results()
                 start = time.perf_counter()
                 if await self._round_trip(self._options.keepalive_timeout):
                     self._options.report_latency((time.perf_counter() - start) * 1000.0)

@@ -62,6 +62,10 @@ class Goal:
     uuid: bytes
     events: GoalEvents
     feedback_decode: Decoder | None
+    # its get_result query ended without a reply (the router or the server
+    # went): the keep-alive asks again or fails it (see ZenohCalls)
+    orphaned: bool = False
+    asked: int = 0  # get_result queries sent
 
 
 def valid_attachment(attachment: bytes | None) -> bool:
