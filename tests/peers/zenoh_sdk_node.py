@@ -4,7 +4,8 @@ write, as the peer of the Zenoh tests. One process runs one role:
     python tests/peers/zenoh_sdk_node.py --router tcp/127.0.0.1:7447 --domain 5 \\
         --definitions <ROS share dir> talker --topic /chatter --count 100
 
-Roles: ``talker`` (``std_msgs/msg/String`` "hello N"), ``listener`` (one JSON
+Roles: ``talker`` (``std_msgs/msg/String`` "hello N", or ``--type
+sensor_msgs/msg/Imu`` with :func:`imu_fields`), ``listener`` (one JSON
 line ``{"msg": {...}}`` per message, any type), ``service``
 (``std_srvs/srv/SetBool``: success = data, message "set to <data>") and
 ``params`` (node ``/sdk_params``: its ``get_parameters``, ``set_parameters``
@@ -99,7 +100,7 @@ def main(argv: list[str]) -> int:
         emit("READY")
         sent = 0
         while not stop.is_set() and (args.count == 0 or sent < args.count):
-            pub.publish(data=f"hello {sent}")
+            pub.publish(**_talker_message(pub, args.type, sent))
             sent += 1
             time.sleep(1.0 / args.rate)
         emit("SENT", sent)
@@ -142,6 +143,54 @@ def main(argv: list[str]) -> int:
     for closer in closers:
         closer.close()
     return 0
+
+
+IMU: Final = "sensor_msgs/msg/Imu"
+
+
+def imu_fields(n: int) -> dict[str, Any]:
+    """The talker's ``n``-th ``sensor_msgs/msg/Imu``, as plain data."""
+    return {
+        "header": {"stamp": {"sec": n, "nanosec": n * 1000}, "frame_id": f"imu{n}"},
+        "orientation": {"x": n * 0.5, "y": 0.0, "z": -0.25, "w": 1.0},
+        "orientation_covariance": [float(n + i) for i in range(9)],
+        "angular_velocity": {"x": 0.0, "y": 0.125, "z": float(-n)},
+        "angular_velocity_covariance": [0.0] * 9,
+        "linear_acceleration": {"x": 9.81, "y": float(n), "z": 0.0},
+        "linear_acceleration_covariance": [i / 4 for i in range(9)],
+    }
+
+
+def _talker_message(pub: Any, type_name: str, n: int) -> dict[str, Any]:
+    """The keyword arguments of the talker's ``n``-th message."""
+    if type_name != IMU:
+        return {"data": f"hello {n}"}
+    import numpy as np
+
+    types = pub.session_mgr.store.types
+
+    def build(type_: str, value: dict[str, Any]) -> Any:
+        return types[type_](**value)
+
+    fields = imu_fields(n)
+    header = fields["header"]
+    return {
+        "header": build(
+            "std_msgs/msg/Header",
+            {
+                "stamp": build("builtin_interfaces/msg/Time", header["stamp"]),
+                "frame_id": header["frame_id"],
+            },
+        ),
+        "orientation": build("geometry_msgs/msg/Quaternion", fields["orientation"]),
+        "angular_velocity": build("geometry_msgs/msg/Vector3", fields["angular_velocity"]),
+        "linear_acceleration": build("geometry_msgs/msg/Vector3", fields["linear_acceleration"]),
+        **{
+            name: np.array(fields[name], np.float64)
+            for name in fields
+            if name.endswith("_covariance")
+        },
+    }
 
 
 def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
