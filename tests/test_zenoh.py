@@ -212,6 +212,27 @@ async def test_hostile_samples_are_skipped_and_counted(
         assert client.rejections == {"attachment": 3, "malformed": 1}
 
 
+async def test_the_keyed_attachments_of_early_rmw_zenoh_releases_are_read(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    # rmw_zenoh_cpp Jazzy 0.2.0-0.2.3 named each attachment value (77 bytes)
+    key = data_key(zenoh_domain, "/chatter")
+    async with (
+        rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
+        client.subscribe("/chatter", schema=STRING) as sub,
+    ):
+        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        keyed = rz.encode_keyed_attachment(1, 1_700_000_000_000_000_001, bytes(16))
+        raw.put(key, cdr(STRING, {"data": "keyed"}), attachment=keyed)
+        broken = keyed[:50] + b"X" + keyed[51:]  # "source_gid" misspelt
+        raw.put(key, cdr(STRING, {"data": "broken"}), attachment=broken)
+        raw.put(key, cdr(STRING, {"data": "fixed"}), attachment=attachment(2))
+        got = await collect(sub, 2)
+        assert [m.data["data"] for m in got] == ["keyed", "fixed"]
+        assert got[0].log_time_ns == 1_700_000_000_000_000_001
+        assert client.rejections == {"attachment": 1}
+
+
 async def test_hostile_tokens_are_skipped_and_counted(
     zenoh_router: Any, zenoh_domain: int, raw: Any
 ) -> None:

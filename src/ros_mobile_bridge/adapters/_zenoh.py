@@ -62,7 +62,6 @@ from ._zenoh_values import (
     default_domain,
     parameter_from_ros,
     parameter_to_ros,
-    valid_attachment,
 )
 
 __all__ = [
@@ -74,6 +73,7 @@ __all__ = [
 ]
 
 _GRAPH_TAG: Final = 0
+_FIXED: Final = rz.ATTACHMENT_SIZE
 _MAX_KEYS_PER_TOPIC: Final = 16
 """Distinct (type, hash) keys remembered per subscribed topic; a sample on a
 further key is decoded without the cache (a hostile peer cannot grow it)."""
@@ -348,13 +348,18 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         payload: bytes,
         attachment: bytes | None,
     ) -> None:
-        if attachment is None or not valid_attachment(attachment):
-            self._reject(
-                "attachment",
-                f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
-                f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
-            )
-            return
+        if attachment is not None and len(attachment) == _FIXED and attachment[16] == 0x10:
+            stamp = int.from_bytes(attachment[8:16], "little", signed=True)
+        else:  # the older keyed form, or nothing readable
+            older = rz.attachment_timestamp(attachment)
+            if older is None:
+                self._reject(
+                    "attachment",
+                    f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
+                    f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
+                )
+                return
+            stamp = older
         entry = sub.keys.get(key)
         if entry is None:
             built = self._key_entry(sub.topic, key)
@@ -364,7 +369,6 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             if len(sub.keys) < _MAX_KEYS_PER_TOPIC:
                 sub.keys[key] = entry
         schema, decode = entry
-        stamp = int.from_bytes(attachment[8:16], "little", signed=True)
         self._pending.append(
             RawFrame(
                 sub.topic,
