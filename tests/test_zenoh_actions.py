@@ -235,3 +235,28 @@ async def test_a_goal_fails_with_a_reason_when_the_action_server_goes(
         assert client.status == "connected"
     assert "the action server is gone" in caught.value.reason
     assert goal.state == "failed"
+
+
+async def test_unanswered_result_queries_are_asked_again_then_the_goal_fails(
+    action_server: Callable[..., SdkNode],
+    zenoh_router: ZenohRouter,
+    zenoh_domain: int,
+    share: Path,
+) -> None:
+    # the server stays in the graph but ends every get_result query unanswered
+    server = action_server("--step", "0.05", "--drop-results")
+    opts = options(zenoh_domain, keepalive_interval=0.2)
+    async with rmb.connect(zenoh_router.locator, options=opts) as client:
+        await connected(client, share)
+        async with client.send_action_goal("/fibonacci", FIB, {"order": 3}) as goal:
+            with anyio.fail_after(15), pytest.raises(rmb.ActionGoalError) as caught:
+                await goal.result()
+        assert client.status == "connected"
+    assert caught.value.reason == "the action server sent no result (4 queries)"
+
+    def asked() -> list[str]:
+        return [m["get_result"] for m in server.messages() if "get_result" in m]
+
+    await until(lambda: len(asked()) >= 4, "the server's lines")  # its stdout may lag
+    assert len(asked()) == 4
+    assert len(set(asked())) == 1

@@ -76,6 +76,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--count", type=int, default=0, help="0: until stopped")
     parser.add_argument("--name", default="/sdk_set_bool")
     parser.add_argument("--step", type=float, default=0.1, help="action: seconds per feedback")
+    parser.add_argument(
+        "--drop-results", action="store_true", help="action: end get_result queries unanswered"
+    )
     args = parser.parse_args(argv)
 
     host, port = args.router.removeprefix("tcp/").rsplit(":", 1)
@@ -137,7 +140,9 @@ def main(argv: list[str]) -> int:
         closers.extend(_params_node(sdk, where))
         emit("READY")
     else:
-        closers.extend(_action_server(sdk, where, args.name, args.step, stop))
+        closers.extend(
+            _action_server(sdk, where, args.name, args.step, stop, drop=args.drop_results)
+        )
         emit("READY")
     stop.wait()
     for closer in closers:
@@ -354,7 +359,13 @@ def _service_hash(srv_type: str, request: str, response: str, registry: Any) -> 
 
 
 def _action_server(
-    sdk: Any, where: dict[str, Any], action: str, step: float, stop: threading.Event
+    sdk: Any,
+    where: dict[str, Any],
+    action: str,
+    step: float,
+    stop: threading.Event,
+    *,
+    drop: bool = False,
 ) -> list[Any]:
     """A ``test_msgs/action/Fibonacci`` action server on ``action``, from the
     sdk's service servers and publishers with the official types:
@@ -362,7 +373,11 @@ def _action_server(
     ``_action/get_result`` (answers once the goal ended), ``_action/cancel_goal``
     (honoured at the next step), and ``_action/feedback`` and ``_action/status``
     published at every step (``step`` seconds apart). A goal of order ``n``
-    ends with the ``n + 2`` first Fibonacci numbers (as the rosbridge peer's)."""
+    ends with the ``n + 2`` first Fibonacci numbers (as the rosbridge peer's).
+    Each ``get_result`` request is printed as a JSON line ``{"msg":
+    {"get_result": <goal id hex>}}``; with ``drop`` the server lets every one
+    go unanswered (the query ends with no reply: a fault to test the client
+    against)."""
     import numpy as np
     from zenoh_ros2_sdk import message_registry
 
@@ -494,6 +509,11 @@ def _action_server(
             except TimeoutError:
                 continue
             raw = bytes(np.asarray(request.goal_id.uuid, np.uint8))
+            emit(json.dumps({"msg": {"get_result": raw.hex()}}))
+            if drop:  # dropping the zenoh query ends it with no reply
+                with get_result_server._lock:
+                    get_result_server._pending_queries.pop(key, None)
+                continue
             threading.Thread(target=answer, args=(key, raw), daemon=True).start()
 
     def answer(key: Any, raw: bytes) -> None:
