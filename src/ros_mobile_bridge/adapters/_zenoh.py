@@ -10,8 +10,9 @@ What it maps:
 * subscriptions: one zenoh subscriber per topic on
   ``<domain>/<name>/*/*`` (any type and hash), so a publisher whose token
   has not been seen yet still delivers; each sample's key names its type,
-  which picks the decoder; a sample without a valid 33-byte attachment is
-  skipped and counted, as ``rmw_zenoh_cpp`` subscribers do;
+  which picks the decoder; a sample without an attachment in a form a
+  released rmw_zenoh sends (``wire.rmw_zenoh``) is skipped and counted, as
+  ``rmw_zenoh_cpp`` subscribers do;
 * publishing: one zenoh publisher per advertised topic on the exact key
   (the type's RIHS01 hash included), with the attachment and increasing
   sequence numbers, and a publisher token so ROS tools see it;
