@@ -359,3 +359,35 @@ def test_entity_gid_is_16_stable_bytes() -> None:
     assert len(gid) == 16
     assert gid == rz.entity_gid(GOOD_TOKEN)
     assert gid != rz.entity_gid(GOOD_TOKEN.replace("/10/", "/11/"))
+
+
+def test_the_key_value_attachment_of_the_first_jazzy_releases_is_read() -> None:
+    """rmw_zenoh_cpp's first Jazzy binaries wrote the three values as
+    key-value pairs (zenoh-ext strings and buffers, each with its length in
+    front; test_zenoh_queryable.py checks this layout against zenoh-ext)."""
+    gid = bytes(range(16))
+    data = (
+        b"\x0fsequence_number"
+        + (42).to_bytes(8, "little", signed=True)
+        + b"\x10source_timestamp"
+        + (-7).to_bytes(8, "little", signed=True)
+        + b"\x0asource_gid\x10"
+        + gid
+    )
+    assert len(data) == rz.KEYED_ATTACHMENT_SIZE == 77
+    assert rz.decode_attachment(data) == rz.Attachment(42, -7, gid)
+    for bad in (data.replace(b"source_gid", b"source_gix"), data[:-17] + b"\x0f" + bytes(16)):
+        with pytest.raises(rz.MalformedAttachment):
+            rz.decode_attachment(bad)
+
+
+def test_a_request_item_carries_its_query() -> None:
+    item = rz.Request(3, 9, "k", b"p", None)
+    assert (item.tag, item.query_id, item.key, item.payload, item.attachment) == (
+        3,
+        9,
+        "k",
+        b"p",
+        None,
+    )
+    assert repr(item).startswith("Request(")

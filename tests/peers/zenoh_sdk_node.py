@@ -9,11 +9,18 @@ sensor_msgs/msg/Imu`` with :func:`imu_fields`), ``listener`` (one JSON
 line ``{"msg": {...}}`` per message, any type), ``service``
 (``std_srvs/srv/SetBool``: success = data, message "set to <data>") and
 ``params`` (node ``/sdk_params``: its ``get_parameters``, ``set_parameters``
-and ``list_parameters`` services over three parameters) and ``action`` (a
+and ``list_parameters`` services over three parameters), ``action`` (a
 ``test_msgs/action/Fibonacci`` server assembled from the sdk's services and
-publishers, see :func:`_action_server`). Each prints ``HASH <type> <RIHS01
-hash>`` for the hash the sdk computed, then ``READY``, and runs until stdin
-closes.
+publishers, see :func:`_action_server`), ``client`` (a
+``ROS2ServiceClient`` of ``--name`` / ``--type`` that waits until the sdk's
+discovery shows a server, then calls it once per request of ``--requests``,
+a JSON list, printing one JSON line per call: ``{"response": {...}}``, or
+``{"error": "<text>"}`` for an error reply, or ``{"error": null}`` for no
+reply in time; then ``DONE``) and ``discover`` (one JSON line
+``{"servers": N, "types": [...]}`` whenever the sdk's
+``get_service_info(--name)`` changes). Each prints
+``HASH <type> <RIHS01 hash>`` for the hash the sdk computed, then ``READY``,
+and runs until stdin closes.
 
 The sdk looks up ``.msg`` / ``.srv`` files in a directory laid out as
 ``<pkg>/<msg|srv>/<Name>.<ext>`` and, when one is missing, clones the
@@ -26,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import queue
 import subprocess
 import sys
@@ -69,7 +77,10 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--router", required=True)
     parser.add_argument("--domain", type=int, required=True)
     parser.add_argument("--definitions", required=True, help="directory <pkg>/<msg|srv>/*")
-    parser.add_argument("role", choices=["talker", "listener", "service", "params", "action"])
+    parser.add_argument(
+        "role",
+        choices=["talker", "listener", "service", "params", "action", "client", "discover"],
+    )
     parser.add_argument("--topic", default="/chatter")
     parser.add_argument("--type", default="std_msgs/msg/String")
     parser.add_argument("--rate", type=float, default=50.0)
@@ -79,6 +90,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--drop-results", action="store_true", help="action: end get_result queries unanswered"
     )
+    parser.add_argument("--requests", default="[]", help="client: a JSON list of requests")
+    parser.add_argument("--timeout", type=float, default=10.0, help="client: per call")
     args = parser.parse_args(argv)
 
     host, port = args.router.removeprefix("tcp/").rsplit(":", 1)
@@ -136,6 +149,11 @@ def main(argv: list[str]) -> int:
         closers.append(server)
         emit("HASH", "std_srvs/srv/SetBool", server.type_hash)
         emit("READY")
+    elif args.role == "client":
+        closers.append(_client(sdk, where, args, stop))
+    elif args.role == "discover":
+        emit("READY")
+        _discover(sdk, where, args.name, stop)
     elif args.role == "params":
         closers.extend(_params_node(sdk, where))
         emit("READY")
@@ -196,6 +214,67 @@ def _talker_message(pub: Any, type_name: str, n: int) -> dict[str, Any]:
             if name.endswith("_covariance")
         },
     }
+
+
+class _ErrorReplies(logging.Handler):
+    """The text of each error reply the sdk's client logs ("Service call
+    failed: <text>"): its ``call`` returns None for an error and a timeout
+    alike."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.texts: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        message = record.getMessage()
+        if message.startswith("Service call failed: "):
+            self.texts.append(message.removeprefix("Service call failed: "))
+
+
+def _server_count(sdk: Any, where: dict[str, Any], name: str) -> tuple[int, list[str]]:
+    info = sdk.get_service_info(name, **where)
+    if info is None:
+        return 0, []
+    return int(info.server_count), sorted(info.service_types)
+
+
+def _client(sdk: Any, where: dict[str, Any], args: argparse.Namespace, stop: Any) -> Any:
+    """Wait for a server of ``args.name``, call it with each request, print
+    each answer as a JSON line, then ``DONE``."""
+    errors = _ErrorReplies()
+    logging.getLogger("zenoh_ros2_sdk.service_client").addHandler(errors)
+    client = sdk.ROS2ServiceClient(
+        args.name, args.type, node_name="sdk_client", timeout=args.timeout, **where
+    )
+    emit("HASH", args.type, client.type_hash)
+    deadline = time.monotonic() + 30
+    while _server_count(sdk, where, args.name)[0] == 0:
+        if time.monotonic() > deadline or stop.is_set():
+            emit(json.dumps({"no_server": args.name}))
+            break
+        time.sleep(0.1)
+    emit("READY")
+    for request in json.loads(args.requests):
+        seen = len(errors.texts)
+        response = client.call(**request)
+        if response is not None:
+            emit(json.dumps({"response": plain(response)}))
+        else:
+            text = errors.texts[seen] if len(errors.texts) > seen else None
+            emit(json.dumps({"error": text}))
+    emit("DONE")
+    return client
+
+
+def _discover(sdk: Any, where: dict[str, Any], name: str, stop: Any) -> None:
+    """Print the sdk's view of ``name``'s servers whenever it changes."""
+    last: tuple[int, list[str]] | None = None
+    while not stop.is_set():
+        now = _server_count(sdk, where, name)
+        if now != last:
+            last = now
+            emit(json.dumps({"servers": now[0], "types": now[1]}))
+        time.sleep(0.1)
 
 
 def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
@@ -555,6 +634,7 @@ class SdkNode:
         self.hashes: dict[str, str] = {}
         self._lines: queue.Queue[str | None] = queue.Queue()
         self._received: list[dict[str, Any]] = []
+        self._done = False
         self._errors: list[str] = []
         self._proc = subprocess.Popen(
             [
@@ -614,16 +694,35 @@ class SdkNode:
     def stderr(self) -> str:
         return "".join(self._errors)[-3000:]
 
-    def messages(self) -> list[dict[str, Any]]:
-        """Every message the listener has printed so far."""
+    def _drain(self) -> None:
         while True:
             try:
                 line = self._lines.get_nowait()
             except queue.Empty:
                 break
-            if line and line.startswith("{"):
-                self._received.append(json.loads(line)["msg"])
-        return list(self._received)
+            if line is None:
+                continue
+            if line.startswith("{"):
+                self._received.append(json.loads(line))
+            elif line == "DONE":
+                self._done = True
+
+    def messages(self) -> list[dict[str, Any]]:
+        """Every message the listener has printed so far."""
+        self._drain()
+        return [r["msg"] for r in self._received if "msg" in r]
+
+    def records(self) -> list[dict[str, Any]]:
+        """Every other JSON line printed so far (a client's answers, the
+        discoverer's views), in order."""
+        self._drain()
+        return [r for r in self._received if "msg" not in r]
+
+    @property
+    def done(self) -> bool:
+        """Whether a client printed ``DONE`` (every call answered or timed out)."""
+        self._drain()
+        return self._done
 
     def stop(self) -> int | None:
         from peers._process import end_process  # this file also runs as a script

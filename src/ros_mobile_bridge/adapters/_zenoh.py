@@ -18,13 +18,16 @@ What it maps:
   sequence numbers, and a publisher token so ROS tools see it;
 * services: a zenoh ``get`` on the service key with the attachment and a
   deadline; the first reply is the response;
+* serving a service: a complete queryable on the service key and a service
+  token, each query one call (``adapters/_zenoh_serving.py``);
 * actions: the action's ``_action/send_goal``, ``get_result`` and
   ``cancel_goal`` services and its ``_action/feedback`` topic;
 * parameters: the nodes' standard ``rcl_interfaces`` parameter services,
   names written ``/node:param`` as over rosbridge.
 
 Our own node token (``rmb_<zid>``) and one token per publisher,
-subscription and service client make this client visible to ROS tools.
+subscription, service client and served service make this client visible
+to ROS tools.
 
 Everything the zenoh threads deliver reaches the reader task through the
 session's :class:`~ros_mobile_bridge.transport.Inbox`, in batches."""
@@ -54,8 +57,9 @@ from ..flow import Decoder, PendingRequests, RawFrame, TopicMessage, WireMessage
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
-from ._shared import Advertisement, Advertisements, CannotServe, EventSource, Publishes
+from ._shared import Advertisement, Advertisements, EventSource, Publishes
 from ._zenoh_calls import ZenohCalls
+from ._zenoh_serving import ZenohServing
 from ._zenoh_values import (
     Goal,
     Query,
@@ -112,12 +116,11 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     return adapter
 
 
-class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
+class ZenohAdapter(ZenohCalls, ZenohServing, EventSource, Publishes):
     """One zenoh session to one router (see :class:`~.Adapter`)."""
 
     protocol = "zenoh"
     wire_timeout_slack = 0.0  # the client's deadline is the query's timeout
-    serve_refusal = "serving a service over Zenoh is not implemented (rosbridge can)"
 
     def __init__(self, session: ZenohSession, options: ClientOptions, endpoint: str) -> None:
         self._session = session
@@ -132,7 +135,7 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             name=f"zenoh router at {endpoint}",
             protocol=self.protocol,
             subprotocol="rmw_zenoh",
-            capabilities=("clientPublish", "services", "actions", "parameters"),
+            capabilities=("clientPublish", "services", "serving", "actions", "parameters"),
             supported_encodings=("cdr",),
             metadata={"domain_id": str(self.domain), "zid": session.zid},
             session_id=session.zid,
@@ -156,6 +159,10 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         self._calls: PendingRequests[list[tuple[bool, bytes, bytes | None]]] = PendingRequests()
         self._goals: dict[bytes, Goal] = {}
         self._feedback_subs: dict[str, Subscription] = {}
+        self._served = {}
+        self._served_by_tag = {}
+        self._open_calls = {}
+        self._refused_seen = 0
         self._lost: str | None = None
         self._bootstrapped = False
         self._node_key = self._token_key(rz.EntityKind.NODE, self._node_id)
@@ -305,6 +312,7 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
                 raise ConnectError(f"zenoh: {self._lost}")
             batch = await inbox.get_batch()
             graph_changed = False
+            requests: list[rz.Request] = []
             for item in batch:
                 if type(item) is rz.Sample:
                     sub = by_tag.get(item.tag)
@@ -322,6 +330,8 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
                         query.replies.append((item.ok, item.payload, item.attachment))
                 elif type(item) is rz.QueryDone:
                     self._on_query_done(item.query_id)
+                elif type(item) is rz.Request:
+                    requests.append(item)
                 elif type(item) is rz.SessionLost:
                     self._lost = item.reason
             overflowed = inbox.overflowed
@@ -340,6 +350,9 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             if graph_changed:
                 self._rebuild_graph()
                 self._emit(GraphChanged(self.topics, self.services))
+            for request in requests:
+                await self._on_request(request)
+            self._count_refused_queries()
             await self._deliver()
 
     def _on_sample(
@@ -608,4 +621,10 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         return self._session.closed
 
     async def aclose(self) -> None:
+        """Close the session: every declaration goes (the served services'
+        queryables and tokens too) and the calls still open are answered
+        with an error."""
+        self._served.clear()
+        self._served_by_tag.clear()
+        self._open_calls.clear()
         await self._session.aclose()

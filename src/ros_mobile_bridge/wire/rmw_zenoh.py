@@ -41,6 +41,11 @@ The conventions, as ``rmw_zenoh_cpp`` (Jazzy) writes them:
 * **GIDs**: an entity's gid is the XXH3-128 hash (seed 0) of its whole
   liveliness key, the low 64 bits then the high 64 bits, each little-endian
   (:func:`entity_gid`).
+* **Service servers** declare a *complete* queryable on the service's data
+  key and an ``SS`` token. A reply carries the response's CDR on the
+  service key and an attachment holding the *request's* sequence number and
+  the *client's* gid (the server's own clock as its timestamp), by which the
+  client matches it to its call.
 
 Peer input never makes a parser do anything but return or raise
 :class:`MalformedKey` / :class:`MalformedAttachment` (both ``ValueError``);
@@ -73,6 +78,7 @@ __all__ = [
     "Qos",
     "QueryDone",
     "Reply",
+    "Request",
     "Sample",
     "SessionLost",
     "Token",
@@ -518,6 +524,24 @@ class Reply(_Item):
         self.attachment = attachment
 
 
+class Request(_Item):
+    """A query on the queryable tagged ``tag`` (a call to a service this
+    client serves): ``query_id`` names it to the session's ``reply`` and
+    ``reply_error``; its key, payload (empty when it carried none) and
+    attachment (None when it carried none)."""
+
+    __slots__ = ("attachment", "key", "payload", "query_id", "tag")
+
+    def __init__(
+        self, tag: int, query_id: int, key: str, payload: bytes, attachment: bytes | None
+    ) -> None:
+        self.tag = tag
+        self.query_id = query_id
+        self.key = key
+        self.payload = payload
+        self.attachment = attachment
+
+
 class QueryDone(_Item):
     """The query ``query_id`` will get no more replies."""
 
@@ -536,5 +560,5 @@ class SessionLost(_Item):
         self.reason = reason
 
 
-InboxItem: TypeAlias = Sample | LivelinessChange | Reply | QueryDone | SessionLost
+InboxItem: TypeAlias = Sample | LivelinessChange | Reply | Request | QueryDone | SessionLost
 """Anything a session's inbox holds."""
