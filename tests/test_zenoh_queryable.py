@@ -203,5 +203,5 @@ def test_the_key_value_attachment_is_zenoh_ext_serialization() -> None:
         ("source_gid", gid),
     )
     data = b"".join(z_serialize(k).to_bytes() + z_serialize(v).to_bytes() for k, v in parts)
-    assert len(data) == rz.KV_ATTACHMENT_SIZE
+    assert len(data) == rz.KEYED_ATTACHMENT_SIZE
     assert rz.decode_attachment(data) == rz.Attachment(42, -7, gid)

@@ -10,8 +10,9 @@ What it maps:
 * subscriptions: one zenoh subscriber per topic on
   ``<domain>/<name>/*/*`` (any type and hash), so a publisher whose token
   has not been seen yet still delivers; each sample's key names its type,
-  which picks the decoder; a sample without a valid 33-byte attachment is
-  skipped and counted, as ``rmw_zenoh_cpp`` subscribers do;
+  which picks the decoder; a sample without an attachment in a form a
+  released rmw_zenoh sends (``wire.rmw_zenoh``) is skipped and counted, as
+  ``rmw_zenoh_cpp`` subscribers do;
 * publishing: one zenoh publisher per advertised topic on the exact key
   (the type's RIHS01 hash included), with the attachment and increasing
   sequence numbers, and a publisher token so ROS tools see it;
@@ -67,7 +68,6 @@ from ._zenoh_values import (
     default_domain,
     parameter_from_ros,
     parameter_to_ros,
-    valid_attachment,
 )
 
 __all__ = [
@@ -79,6 +79,7 @@ __all__ = [
 ]
 
 _GRAPH_TAG: Final = 0
+_FIXED: Final = rz.ATTACHMENT_SIZE
 _MAX_KEYS_PER_TOPIC: Final = 16
 """Distinct (type, hash) keys remembered per subscribed topic; a sample on a
 further key is decoded without the cache (a hostile peer cannot grow it)."""
@@ -127,7 +128,7 @@ class _Held:
 
     type_name: str
     type_hash: str
-    samples: list[tuple[str, bytes, bytes]]
+    samples: list[tuple[str, bytes, bytes | None]]
 
 
 class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publishes):
@@ -392,13 +393,18 @@ class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publish
         payload: bytes,
         attachment: bytes | None,
     ) -> None:
-        if attachment is None or not valid_attachment(attachment):
-            self._reject(
-                "attachment",
-                f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
-                f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
-            )
-            return
+        if attachment is not None and len(attachment) == _FIXED and attachment[16] == 0x10:
+            stamp = int.from_bytes(attachment[8:16], "little", signed=True)
+        else:  # the older keyed form, or nothing readable
+            older = rz.attachment_timestamp(attachment)
+            if older is None:
+                self._reject(
+                    "attachment",
+                    f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
+                    f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
+                )
+                return
+            stamp = older
         if self._held and sub.topic in self._held:  # its type is being described
             self._hold(sub.topic, self._held[sub.topic], key, payload, attachment)
             return
@@ -416,7 +422,6 @@ class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publish
             if len(sub.keys) < _MAX_KEYS_PER_TOPIC:
                 sub.keys[key] = entry
         schema, decode = entry
-        stamp = int.from_bytes(attachment[8:16], "little", signed=True)
         self._pending.append(
             RawFrame(
                 sub.topic,
@@ -429,7 +434,9 @@ class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publish
             )
         )
 
-    def _hold(self, topic: str, held: _Held, key: str, payload: bytes, attachment: bytes) -> None:
+    def _hold(
+        self, topic: str, held: _Held, key: str, payload: bytes, attachment: bytes | None
+    ) -> None:
         if len(held.samples) >= self._options.type_description_hold:
             self._reject(
                 "description_hold_overflow",
@@ -696,6 +703,7 @@ class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publish
             routers = await anyio.to_thread.run_sync(self._session.routers)
             if routers:
                 missing_since = None
+                self._retry_results()
                 start = time.perf_counter()
                 if await self._round_trip(self._options.keepalive_timeout):
                     self._options.report_latency((time.perf_counter() - start) * 1000.0)

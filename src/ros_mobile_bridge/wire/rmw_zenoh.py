@@ -21,16 +21,26 @@ The conventions, as ``rmw_zenoh_cpp`` (Jazzy) writes them:
   with every ``/`` inside a name replaced by ``%`` and an empty part written
   ``%`` (:func:`mangle`). Node and entity ids count from 0 in every process,
   so only the whole token identifies an entity.
-* **Attachments**: every publication, service request and service reply
-  carries 33 bytes: the sequence number (int64, little-endian), the source
-  timestamp in nanoseconds (int64, little-endian), then the 16-byte source
-  gid with its length as one byte (``0x10``) in front, as zenoh-ext
-  serializes them. ``rmw_zenoh_cpp`` drops a sample without one, and so do
-  we. Earlier ``rmw_zenoh_cpp`` releases (the first Jazzy binaries) wrote
-  the same three values as key-value pairs, each preceded by its name as a
-  zenoh-ext string (``sequence_number``, ``source_timestamp``,
-  ``source_gid``: 77 bytes); :func:`decode_attachment` reads both forms,
-  :func:`encode_attachment` writes the 33-byte one.
+* **Attachments**: every publication, service request and reply carries the
+  sequence number, the source timestamp (ns) and the 16-byte source gid,
+  serialized with zenoh-ext (int64 little-endian; a string or a byte array
+  as its length, one LEB128 byte here, then its bytes). Released
+  ``rmw_zenoh_cpp`` versions send one of two forms:
+
+  - the **fixed form**, 33 bytes: ``seq | stamp | 0x10 gid`` (Jazzy 0.2.4
+    and later, every Kilted release, Rolling 0.6.0 and later): what we send;
+  - the **keyed form**, 77 bytes: each value behind its name as a string,
+    ``0x0f "sequence_number" seq | 0x10 "source_timestamp" stamp |
+    0x0a "source_gid" 0x10 gid`` (Jazzy 0.2.0 to 0.2.3, Rolling 0.3.0 to
+    0.5.0).
+
+  Both are read (:func:`decode_attachment`). ``rmw_zenoh_cpp`` drops a
+  sample without an attachment it can read, and so do we. (Releases before
+  zenoh 1.0 used zenoh 0.11's attachment maps; their sessions cannot talk
+  to a zenoh 1.x router at all.)
+* **GIDs**: an entity's gid is the XXH3-128 hash (seed 0) of its whole
+  liveliness key, the low 64 bits then the high 64 bits, each little-endian
+  (:func:`entity_gid`).
 * **Service servers** declare a *complete* queryable on the service's data
   key and an ``SS`` token. A reply carries the response's CDR on the
   service key and an attachment holding the *request's* sequence number and
@@ -57,7 +67,7 @@ import xxhash
 __all__ = [
     "ATTACHMENT_SIZE",
     "HASH_VERSION",
-    "KV_ATTACHMENT_SIZE",
+    "KEYED_ATTACHMENT_SIZE",
     "LIVELINESS_PREFIX",
     "MAX_KEY_LENGTH",
     "Attachment",
@@ -75,9 +85,11 @@ __all__ = [
     "Token",
     "TopicKey",
     "UnsupportedHashVersion",
+    "attachment_timestamp",
     "dds_type_name",
     "decode_attachment",
     "encode_attachment",
+    "encode_keyed_attachment",
     "entity_gid",
     "format_key",
     "format_qos",
@@ -96,14 +108,13 @@ LIVELINESS_PREFIX: Final = "@ros2_lv"
 MAX_KEY_LENGTH: Final = 4096
 """The longest key or token (in characters) the parsers look at."""
 ATTACHMENT_SIZE: Final = 33
+"""The fixed form's size (what current ``rmw_zenoh_cpp`` releases send)."""
+KEYED_ATTACHMENT_SIZE: Final = 77
+"""The keyed form's size (``rmw_zenoh_cpp`` Jazzy 0.2.0-0.2.3, Rolling 0.3-0.5)."""
 _GID_SIZE: Final = 16
 _ATTACHMENT: Final = struct.Struct("<qqB16s")
-# the key-value form: <len>"sequence_number" int64 <len>"source_timestamp"
-# int64 <len>"source_gid" <len=16> 16 bytes (zenoh-ext strings and buffers
-# carry a LEB128 length; every length here is below 128: one byte)
-_KV_ATTACHMENT: Final = struct.Struct("<16sq17sq11sB16s")
-_KV_KEYS: Final = (b"\x0fsequence_number", b"\x10source_timestamp", b"\x0asource_gid")
-KV_ATTACHMENT_SIZE: Final = _KV_ATTACHMENT.size
+_KEYS: Final = (b"\x0fsequence_number", b"\x10source_timestamp", b"\x0asource_gid\x10")
+_KEYED: Final = struct.Struct(f"<{len(_KEYS[0])}sq{len(_KEYS[1])}sq{len(_KEYS[2])}s{_GID_SIZE}s")
 _MAX_DOMAIN: Final = 232  # ROS 2's highest valid domain id
 _HASH = re.compile(r"RIHS01_[0-9a-f]{64}")
 _ANY_HASH_VERSION = re.compile(r"RIHS([0-9A-Fa-f]{2})_")
@@ -430,28 +441,60 @@ def encode_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
 
 
 def decode_attachment(data: bytes | bytearray | memoryview | None) -> Attachment:
-    """Decode an attachment in either form rmw_zenoh_cpp has sent (33 bytes,
-    or the 77-byte key-value form of its first Jazzy releases);
-    :class:`MalformedAttachment` if it is missing, of another length, or not
-    laid out as one of those (a gid length other than 16, a wrong key)."""
+    """Decode an attachment in either form a released ``rmw_zenoh_cpp``
+    sends (see the module docstring); :class:`MalformedAttachment` if it is
+    missing or neither form exactly (size, names, gid length)."""
     if data is None:
         raise MalformedAttachment("no attachment")
-    if len(data) == KV_ATTACHMENT_SIZE:
-        k1, sequence, k2, timestamp, k3, gid_size, gid = _KV_ATTACHMENT.unpack(bytes(data))
-        if (k1, k2, k3) != _KV_KEYS or gid_size != _GID_SIZE:
-            raise MalformedAttachment("a 77-byte attachment that is not the key-value form")
+    size = len(data)
+    if size == ATTACHMENT_SIZE:
+        sequence, timestamp, gid_size, gid = _ATTACHMENT.unpack(bytes(data))
+        if gid_size != _GID_SIZE:
+            raise MalformedAttachment(f"gid length byte {gid_size}, expected {_GID_SIZE}")
         return Attachment(sequence, timestamp, gid)
-    if len(data) != ATTACHMENT_SIZE:
-        raise MalformedAttachment(f"attachment of {len(data)} bytes, expected {ATTACHMENT_SIZE}")
-    sequence, timestamp, gid_size, gid = _ATTACHMENT.unpack(bytes(data))
-    if gid_size != _GID_SIZE:
-        raise MalformedAttachment(f"gid length byte {gid_size}, expected {_GID_SIZE}")
-    return Attachment(sequence, timestamp, gid)
+    if size == KEYED_ATTACHMENT_SIZE:
+        key1, sequence, key2, timestamp, key3, gid = _KEYED.unpack(bytes(data))
+        if (key1, key2, key3) != _KEYS:
+            raise MalformedAttachment("a 77-byte attachment without rmw_zenoh's keyed layout")
+        return Attachment(sequence, timestamp, gid)
+    raise MalformedAttachment(
+        f"attachment of {size} bytes, expected {ATTACHMENT_SIZE} or {KEYED_ATTACHMENT_SIZE}"
+    )
+
+
+def encode_keyed_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
+    """The keyed form (77 bytes) that ``rmw_zenoh_cpp`` Jazzy 0.2.0-0.2.3
+    sent; we never send it (for tests and peers that speak it)."""
+    if len(gid) != _GID_SIZE:
+        raise ValueError(f"a gid is {_GID_SIZE} bytes, got {len(gid)}")
+    try:
+        return _KEYED.pack(_KEYS[0], sequence, _KEYS[1], timestamp_ns, _KEYS[2], bytes(gid))
+    except struct.error as exc:
+        raise ValueError(f"attachment field out of range: {exc}") from None
+
+
+def attachment_timestamp(data: bytes | None) -> int | None:
+    """The source timestamp (ns) of an attachment in either form; None when
+    it is missing or malformed. The check per sample on the hot path: the
+    fixed form is read by size and gid length byte, the keyed form by its
+    names."""
+    if data is None:
+        return None
+    size = len(data)
+    if size == ATTACHMENT_SIZE and data[16] == _GID_SIZE:
+        return int.from_bytes(data[8:16], "little", signed=True)
+    if size == KEYED_ATTACHMENT_SIZE:
+        try:
+            return decode_attachment(data).timestamp_ns
+        except MalformedAttachment:
+            return None
+    return None
 
 
 def entity_gid(token_key: str) -> bytes:
-    """A 16-byte gid for the entity with liveliness key ``token_key``: the
-    XXH3-128 hash of the key, little-endian, as rmw_zenoh_cpp derives it."""
+    """The 16-byte gid of the entity whose liveliness key is ``token_key``,
+    as ``rmw_zenoh_cpp`` derives it: XXH3-128 (seed 0) of the whole key's
+    bytes, its low 64 bits then its high 64 bits, each little-endian."""
     return xxhash.xxh3_128_intdigest(token_key.encode()).to_bytes(_GID_SIZE, "little")
 
 
