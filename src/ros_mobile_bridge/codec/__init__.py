@@ -11,6 +11,10 @@ hash from a registry's definitions.
 
 from __future__ import annotations
 
+from ._bundled import Interface as Interface
+from ._bundled import bundled_hash as bundled_hash
+from ._bundled import bundled_interface as bundled_interface
+from ._bundled import bundled_interface_names as bundled_interface_names
 from ._model import FieldDef as FieldDef
 from ._names import normalize_type_name as normalize_type_name
 from ._names import same_type_name as same_type_name
@@ -21,7 +25,11 @@ from ._typehash import type_hash as type_hash
 __all__ = [
     "CodecRegistry",
     "FieldDef",
+    "Interface",
     "SchemaTooLarge",
+    "bundled_hash",
+    "bundled_interface",
+    "bundled_interface_names",
     "normalize_type_name",
     "same_type_name",
     "type_hash",
