@@ -5,12 +5,14 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
 import re
 import ssl
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Final
 
+from ._checks import check_interface_paths
 from ._errors import ConnectError
 from .flow._breaker import CircuitBreaker
 from .flow._throttle import THROTTLE_MODES, Bucket, ThrottleMode
@@ -365,6 +367,20 @@ class ClientOptions:
     zenoh_backlog_bytes: int = 64 * 1024 * 1024
     """Zenoh: payload bytes that may wait between zenoh's threads and the
     reader task (one sample larger than this still passes alone)."""
+    interface_paths: Sequence[str | os.PathLike[str]] = ()
+    """Local directories whose interface files (``.msg``, ``.srv``,
+    ``.action``) the codec knows, for your own packages: an install prefix
+    (``install/`` of a colcon workspace, ``/opt/ros/jazzy``: it has
+    ``share/<pkg>/msg/...``), a ``share`` directory, or a package's source
+    directory (``package.xml`` beside ``msg/``). A local definition wins
+    over a bundled one, an earlier path over a later one; a server's schema
+    wins over both. Read lazily, at most
+    :data:`~ros_mobile_bridge.codec._workspace.MAX_INTERFACE_FILES` files
+    and :data:`~ros_mobile_bridge.codec._workspace.MAX_INTERFACE_BYTES`
+    bytes. ``TypeError`` at construction for an entry that is not a path."""
+    ament_prefix_path: bool = True
+    """Also search the prefixes ``$AMENT_PREFIX_PATH`` lists (a sourced ROS
+    or workspace setup), after :attr:`interface_paths`."""
 
     def report_latency(self, ms: float) -> None:
         """Hand one round-trip time to :attr:`on_latency`; a failing callback
@@ -409,6 +425,9 @@ class ClientOptions:
             raise TypeError("zenoh_shared_memory must be a bool")
         _count("zenoh_backlog", self.zenoh_backlog, 1)
         _count("zenoh_backlog_bytes", self.zenoh_backlog_bytes, 1024)
+        object.__setattr__(self, "interface_paths", check_interface_paths(self.interface_paths))
+        if not isinstance(self.ament_prefix_path, bool):
+            raise TypeError("ament_prefix_path must be a bool")
         if isinstance(self.stop_topics, str):
             raise TypeError("stop_topics must be a sequence of topic names, not a str")
         object.__setattr__(self, "stop_topics", tuple(self.stop_topics))

@@ -48,12 +48,19 @@ from .._errors import (
 from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
-from ..codec import CodecRegistry, type_hash
+from ..codec import type_hash
 from ..flow import Decoder, PendingRequests, RawFrame, TopicMessage, WireMessage
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
-from ._shared import Advertisement, Advertisements, CannotServe, EventSource, Publishes
+from ._shared import (
+    Advertisement,
+    Advertisements,
+    CannotServe,
+    EventSource,
+    Publishes,
+    codec_registry,
+)
 from ._zenoh_calls import ZenohCalls
 from ._zenoh_values import (
     Goal,
@@ -124,9 +131,7 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         self._log: logging.Logger = options.logger
         domain = options.domain_id
         self.domain = default_domain() if domain is None else domain
-        self.codecs = CodecRegistry(
-            max_schema_size=options.max_schema_size, max_schema_fields=options.max_schema_fields
-        )
+        self.codecs = codec_registry(options)
         self.server_info = ServerInfo(
             name=f"zenoh router at {endpoint}",
             protocol=self.protocol,

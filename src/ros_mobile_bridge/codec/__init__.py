@@ -11,25 +11,31 @@ hash from a registry's definitions.
 
 from __future__ import annotations
 
-from ._bundled import Interface as Interface
 from ._bundled import bundled_hash as bundled_hash
 from ._bundled import bundled_interface as bundled_interface
 from ._bundled import bundled_interface_names as bundled_interface_names
+from ._interface import Interface as Interface
 from ._model import FieldDef as FieldDef
 from ._names import normalize_type_name as normalize_type_name
 from ._names import same_type_name as same_type_name
 from ._registry import CodecRegistry as CodecRegistry
 from ._registry import SchemaTooLarge as SchemaTooLarge
 from ._typehash import type_hash as type_hash
+from ._workspace import InterfacePaths as InterfacePaths
+from ._workspace import find_interface as find_interface
+from ._workspace import interface_names as interface_names
 
 __all__ = [
     "CodecRegistry",
     "FieldDef",
     "Interface",
+    "InterfacePaths",
     "SchemaTooLarge",
     "bundled_hash",
     "bundled_interface",
     "bundled_interface_names",
+    "find_interface",
+    "interface_names",
     "normalize_type_name",
     "same_type_name",
     "type_hash",
