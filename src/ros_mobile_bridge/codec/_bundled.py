@@ -27,6 +27,7 @@ __all__ = [
     "bundled_interface",
     "bundled_interface_names",
     "bundled_packages",
+    "loaded",
 ]
 
 DATA_FILE: Final = Path(__file__).with_name("_interfaces.json.gz")
@@ -67,6 +68,12 @@ class _Bundle:
 
 
 _BUNDLE = _Bundle(DATA_FILE)
+
+
+def loaded() -> bool:
+    """Whether the data file has been read (it is, once, on the first
+    lookup; never at import)."""
+    return _BUNDLE.loaded
 
 
 def bundled_interface(name: str) -> Interface | None:

@@ -86,6 +86,7 @@ class InterfacePaths:
         self._index: dict[str, Path] | None = None
         self._texts: dict[str, str | None] = {}
         self._warned = False
+        self._bad: set[str] = set()
         self._parsed = ParsedInterfaces(self._text)
 
     def __repr__(self) -> str:
@@ -203,12 +204,15 @@ class InterfacePaths:
         """The parsed definition of the canonical ``type_name`` (a message or
         a type derived from a service or an action), or None. A text that
         does not parse is logged, counted in :attr:`unreadable` and skipped."""
-        if not self.paths:
+        if not self.paths or type_name in self._bad:
             return None
         try:
             return self._parsed.definition(type_name)
         except SchemaError as exc:
             with self._lock:
+                if type_name in self._bad:
+                    return None
+                self._bad.add(type_name)
                 self.unreadable += 1
             _log.warning("interface paths: %s does not parse: %s", type_name, exc)
             return None
