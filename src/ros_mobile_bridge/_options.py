@@ -374,10 +374,10 @@ class ClientOptions:
     ``share/<pkg>/msg/...``), a ``share`` directory, or a package's source
     directory (``package.xml`` beside ``msg/``). A local definition wins
     over a bundled one, an earlier path over a later one; a server's schema
-    wins over both. Read lazily, at most
-    :data:`~ros_mobile_bridge.codec._workspace.MAX_INTERFACE_FILES` files
-    and :data:`~ros_mobile_bridge.codec._workspace.MAX_INTERFACE_BYTES`
-    bytes. ``TypeError`` at construction for an entry that is not a path."""
+    wins over both. Read lazily and once per process,
+    at most 20,000 files and 16 MiB of text (what is skipped is logged and
+    counted). ``TypeError`` at construction for an entry that is not a
+    path (docs/interfaces.md)."""
     ament_prefix_path: bool = True
     """Also search the prefixes ``$AMENT_PREFIX_PATH`` lists (a sourced ROS
     or workspace setup), after :attr:`interface_paths`."""

@@ -2,11 +2,14 @@
 
 :class:`CodecRegistry` holds the schemas one server advertised and makes
 decoders (CDR or JSON payload -> ``dict``) and encoders (``dict`` -> payload)
-for them, falling back to the ROS 2 Jazzy message definitions bundled with
-rosbags and a few standard service definitions. :func:`normalize_type_name`
-and :func:`same_type_name` deal with the several spellings of a ROS type
-name; :func:`type_hash` computes a type's ROS 2 (REP-2011, ``RIHS01_``) type
-hash from a registry's definitions.
+for them, falling back to local interface files (:class:`InterfacePaths`),
+then to the standard ROS 2 Jazzy interfaces bundled with the package
+(:func:`bundled_interface`, :func:`bundled_hash`), then to rosbags' Jazzy
+messages. :func:`find_interface` and :func:`interface_names` look interfaces
+up the same way for tools. :func:`normalize_type_name` and
+:func:`same_type_name` deal with the several spellings of a ROS type name;
+:func:`type_hash` computes a type's ROS 2 (REP-2011, ``RIHS01_``) type hash
+from a registry's definitions.
 """
 
 from __future__ import annotations
