@@ -424,6 +424,49 @@ async def test_a_local_type_crosses_zenoh(
 # -- against the peer environment (ros) -------------------------------------------------------
 
 
+@pytest.fixture
+def adder(ros_peer_env: PeerEnv, zenoh_router: Any, zenoh_domain: int, tmp_path: Path) -> Any:
+    """A zenoh-ros2-sdk node serving ``/add_two_ints`` (AddTwoInts), fed the
+    Jazzy wheels' files plus the supplement's example_interfaces."""
+    pytest.importorskip("zenoh_ros2_sdk")
+    from peers.zenoh_sdk_node import SdkNode
+
+    definitions = tmp_path / "definitions"
+    definitions.mkdir()
+    for package in (ros_peer_env.prefix / "share").iterdir():
+        (definitions / package.name).symlink_to(package)
+    (definitions / "example_interfaces").symlink_to(
+        ROOT / "scripts" / "interfaces" / "example_interfaces"
+    )
+    node = SdkNode(
+        zenoh_router.locator, zenoh_domain, definitions, "add_two_ints", "--name", "/add_two_ints"
+    )
+    try:
+        yield node
+    finally:
+        node.stop()
+
+
+async def test_we_call_the_tutorial_service_over_zenoh(
+    adder: Any, zenoh_router: Any, zenoh_domain: int
+) -> None:
+    """The sdk hashes the supplement's AddTwoInts.srv itself: the same
+    official hash, and our calls reach it (before the bundle, the type was
+    unknown over Zenoh)."""
+    assert adder.hashes[ADD_TWO_INTS] == ADD_TWO_INTS_OFFICIAL
+    options = rmb.ClientOptions(domain_id=zenoh_domain, ament_prefix_path=False)
+    async with rmb.connect(zenoh_router.locator, options=options) as client:
+        with anyio.fail_after(15):
+            while not any(s.name == "/add_two_ints" for s in client.services):
+                await anyio.sleep(0.05)
+        assert {s.name: s.type for s in client.services}["/add_two_ints"] == ADD_TWO_INTS
+        sums = [
+            await client.call_service("/add_two_ints", {"a": a, "b": b}, timeout=5)
+            for a, b in ((2, 3), (-7, 4), (2**40, 1))
+        ]
+    assert sums == [{"sum": 5}, {"sum": -3}, {"sum": 2**40 + 1}]
+
+
 def test_the_bundled_hashes_are_the_peer_envs_official_ones(ros_peer_env: PeerEnv) -> None:
     """Every type_hashes entry of every share/*.json of the wheel packages."""
     share = Path(ros_peer_env.prefix) / "share"

@@ -6,7 +6,8 @@ write, as the peer of the Zenoh tests. One process runs one role:
 
 Roles: ``talker`` (``std_msgs/msg/String`` "hello N"), ``listener`` (one JSON
 line ``{"msg": {...}}`` per message, any type), ``service``
-(``std_srvs/srv/SetBool``: success = data, message "set to <data>") and
+(``std_srvs/srv/SetBool``: success = data, message "set to <data>"),
+``add_two_ints`` (``example_interfaces/srv/AddTwoInts``: sum = a + b) and
 ``params`` (node ``/sdk_params``: its ``get_parameters``, ``set_parameters``
 and ``list_parameters`` services over three parameters). Each prints
 ``HASH <type> <RIHS01 hash>`` for the hash the sdk computed, then ``READY``,
@@ -66,7 +67,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--router", required=True)
     parser.add_argument("--domain", type=int, required=True)
     parser.add_argument("--definitions", required=True, help="directory <pkg>/<msg|srv>/*")
-    parser.add_argument("role", choices=["talker", "listener", "service", "params"])
+    parser.add_argument("role", choices=["talker", "listener", "service", "add_two_ints", "params"])
     parser.add_argument("--topic", default="/chatter")
     parser.add_argument("--type", default="std_msgs/msg/String")
     parser.add_argument("--rate", type=float, default=50.0)
@@ -125,6 +126,19 @@ def main(argv: list[str]) -> int:
         holder.append(server)
         closers.append(server)
         emit("HASH", "std_srvs/srv/SetBool", server.type_hash)
+        emit("READY")
+    elif args.role == "add_two_ints":
+        adders: list[Any] = []
+
+        def add(request: Any) -> Any:
+            return adders[0].response_msg_class(sum=int(request.a) + int(request.b))
+
+        adder = sdk.ROS2ServiceServer(
+            args.name, "example_interfaces/srv/AddTwoInts", add, node_name="sdk_adder", **where
+        )
+        adders.append(adder)
+        closers.append(adder)
+        emit("HASH", "example_interfaces/srv/AddTwoInts", adder.type_hash)
         emit("READY")
     else:
         closers.extend(_params_node(sdk, where))
