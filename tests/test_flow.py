@@ -1021,3 +1021,22 @@ def test_the_fast_message_constructor_builds_the_same_frozen_message() -> None:
     assert hash(fast.topic) == hash("/t")
     with pytest.raises(FrozenInstanceError):
         fast.topic = "/other"  # type: ignore[misc]
+
+
+async def test_values_holding_numpy_arrays_are_stored_not_compared_into_an_error() -> None:
+    # decoded feedback holds numpy arrays: == is element-wise (and raises on
+    # other shapes); such a value counts as a change, never crashes the setter
+    import numpy as np
+
+    value: Watchable[object] = Watchable(None)
+    watcher = value.watch()
+    assert await watcher.__anext__() is None
+    first = {"sequence": np.array([0, 1, 1], np.int32)}
+    second = {"sequence": np.array([0, 1, 1, 2], np.int32)}
+    assert value.set(first)
+    assert value.set(second)  # another shape: == raises inside numpy
+    assert value.set({"sequence": np.array([0, 1, 1, 2], np.int32)})  # ambiguous truth
+    assert not value.set(value.value)  # the same object
+    got = await watcher.__anext__()
+    assert isinstance(got, dict)
+    assert got["sequence"].tolist() == [0, 1, 1, 2]

@@ -5,6 +5,7 @@ MalformedKey / MalformedAttachment, never another exception."""
 from __future__ import annotations
 
 import contextlib
+from typing import Any
 
 import pytest
 from hypothesis import given
@@ -169,10 +170,102 @@ def test_malformed_attachments(data: bytes | None) -> None:
         rz.decode_attachment(data)
 
 
-@given(st.binary(max_size=64))
+def keyed(seq: int, ts: int, gid: bytes) -> bytes:
+    """The keyed form rmw_zenoh_cpp Jazzy 0.2.0-0.2.3 (Rolling 0.3.0-0.5.0)
+    sends, built by hand from zenoh-ext's layout: each name a string (one
+    length byte, its bytes), each number an int64 little-endian, the gid a
+    byte array (one length byte 0x10, 16 bytes)."""
+
+    def string(text: str) -> bytes:
+        return bytes([len(text)]) + text.encode()
+
+    return (
+        string("sequence_number")
+        + seq.to_bytes(8, "little", signed=True)
+        + string("source_timestamp")
+        + ts.to_bytes(8, "little", signed=True)
+        + string("source_gid")
+        + b"\x10"
+        + gid
+    )
+
+
+def test_the_keyed_form_of_early_releases_is_read() -> None:
+    gid = bytes(range(100, 116))
+    data = keyed(7, 1_700_000_000_123_456_789, gid)
+    assert len(data) == rz.KEYED_ATTACHMENT_SIZE == 77
+    assert rz.decode_attachment(data) == rz.Attachment(7, 1_700_000_000_123_456_789, gid)
+    assert rz.attachment_timestamp(data) == 1_700_000_000_123_456_789
+    assert rz.encode_keyed_attachment(7, 1_700_000_000_123_456_789, gid) == data
+
+
+def test_the_fixed_form_is_read_by_the_hot_path_check() -> None:
+    data = rz.encode_attachment(3, 42, bytes(16))
+    assert rz.attachment_timestamp(data) == 42
+    assert rz.attachment_timestamp(None) is None
+    assert rz.attachment_timestamp(data[:-1]) is None
+    assert rz.attachment_timestamp(data[:16] + b"\x0f" + data[17:]) is None
+
+
+@given(
+    st.integers(-(2**63), 2**63 - 1),
+    st.integers(-(2**63), 2**63 - 1),
+    st.binary(min_size=16, max_size=16),
+)
+def test_both_forms_decode_to_the_same_attachment(seq: int, ts: int, gid: bytes) -> None:
+    fixed = rz.decode_attachment(rz.encode_attachment(seq, ts, gid))
+    assert rz.decode_attachment(keyed(seq, ts, gid)) == fixed == rz.Attachment(seq, ts, gid)
+
+
+@pytest.mark.parametrize(
+    "mutate",
+    [
+        lambda d: d[:-1],
+        lambda d: d + b"\x00",
+        lambda d: b"\x0e" + d[1:],  # the first name's length
+        lambda d: d[:1] + b"S" + d[2:],  # "Sequence_number"
+        lambda d: d[:24] + b"\x10source_timestamq" + d[41:],
+        lambda d: d[:49] + b"\x0asource_gie" + d[60:],
+        lambda d: d[:60] + b"\x0f" + d[61:],  # the gid's length
+    ],
+    ids=["short", "long", "name-length", "name", "second-name", "third-name", "gid-length"],
+)
+def test_a_malformed_keyed_attachment_is_refused(mutate: Any) -> None:
+    data = mutate(keyed(1, 2, bytes(16)))
+    with pytest.raises(rz.MalformedAttachment):
+        rz.decode_attachment(data)
+    assert rz.attachment_timestamp(data) is None
+
+
+@given(st.one_of(st.binary(max_size=96), st.binary(min_size=77, max_size=77)))
 def test_any_bytes_decode_or_raise_malformed(data: bytes) -> None:
     with contextlib.suppress(rz.MalformedAttachment):
         rz.decode_attachment(data)
+    stamp = rz.attachment_timestamp(data)
+    assert stamp is None or isinstance(stamp, int)
+
+
+# gids computed by rmw_zenoh_cpp's own code (Jazzy 0.2.10: XXH3-128 of the
+# liveliness key, low then high 64 bits memcpy'd on a little-endian machine)
+GID_VECTORS = [
+    (
+        "@ros2_lv/0/8f3c2a9e5b7d4c1e0f2a3b4c5d6e7f80/0/3/MP/%/%/talker/%chatter/"
+        "std_msgs::msg::dds_::String_/"
+        "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18/::,7:,:,:,,",
+        "7a09db853b7bb8e3cc621d6f3c8d4194",
+    ),
+    ("x" * 300, "5435c87d60b4d1a57abcd72aea375212"),  # past XXH3's 240-byte path
+]
+
+
+@pytest.mark.parametrize(("key", "gid"), GID_VECTORS, ids=["publisher-token", "long-key"])
+def test_entity_gid_is_rmw_zenohs(key: str, gid: str) -> None:
+    assert rz.entity_gid(key).hex() == gid
+
+
+def test_entity_gid_is_the_low_half_then_the_high_half_little_endian() -> None:
+    # XXH3-128 of the empty input is 99aa06d3014798d8 (high) 6001c324468d497f (low)
+    assert rz.entity_gid("") == bytes.fromhex("7f498d4624c30160d8984701d306aa99")
 
 
 BAD_KEYS = [
@@ -266,3 +359,35 @@ def test_entity_gid_is_16_stable_bytes() -> None:
     assert len(gid) == 16
     assert gid == rz.entity_gid(GOOD_TOKEN)
     assert gid != rz.entity_gid(GOOD_TOKEN.replace("/10/", "/11/"))
+
+
+def test_the_key_value_attachment_of_the_first_jazzy_releases_is_read() -> None:
+    """rmw_zenoh_cpp's first Jazzy binaries wrote the three values as
+    key-value pairs (zenoh-ext strings and buffers, each with its length in
+    front; test_zenoh_queryable.py checks this layout against zenoh-ext)."""
+    gid = bytes(range(16))
+    data = (
+        b"\x0fsequence_number"
+        + (42).to_bytes(8, "little", signed=True)
+        + b"\x10source_timestamp"
+        + (-7).to_bytes(8, "little", signed=True)
+        + b"\x0asource_gid\x10"
+        + gid
+    )
+    assert len(data) == rz.KEYED_ATTACHMENT_SIZE == 77
+    assert rz.decode_attachment(data) == rz.Attachment(42, -7, gid)
+    for bad in (data.replace(b"source_gid", b"source_gix"), data[:-17] + b"\x0f" + bytes(16)):
+        with pytest.raises(rz.MalformedAttachment):
+            rz.decode_attachment(bad)
+
+
+def test_a_request_item_carries_its_query() -> None:
+    item = rz.Request(3, 9, "k", b"p", None)
+    assert (item.tag, item.query_id, item.key, item.payload, item.attachment) == (
+        3,
+        9,
+        "k",
+        b"p",
+        None,
+    )
+    assert repr(item).startswith("Request(")

@@ -212,6 +212,49 @@ async def test_hostile_samples_are_skipped_and_counted(
         assert client.rejections == {"attachment": 3, "malformed": 1}
 
 
+async def test_the_keyed_attachments_of_early_rmw_zenoh_releases_are_read(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    # rmw_zenoh_cpp Jazzy 0.2.0-0.2.3 named each attachment value (77 bytes)
+    key = data_key(zenoh_domain, "/chatter")
+    async with (
+        rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
+        client.subscribe("/chatter", schema=STRING) as sub,
+    ):
+        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        keyed = rz.encode_keyed_attachment(1, 1_700_000_000_000_000_001, bytes(16))
+        raw.put(key, cdr(STRING, {"data": "keyed"}), attachment=keyed)
+        broken = keyed[:50] + b"X" + keyed[51:]  # "source_gid" misspelt
+        raw.put(key, cdr(STRING, {"data": "broken"}), attachment=broken)
+        raw.put(key, cdr(STRING, {"data": "fixed"}), attachment=attachment(2))
+        got = await collect(sub, 2)
+        assert [m.data["data"] for m in got] == ["keyed", "fixed"]
+        assert got[0].log_time_ns == 1_700_000_000_000_000_001
+        assert client.rejections == {"attachment": 1}
+
+
+async def test_a_sample_of_another_definition_is_not_recorded_under_ours(
+    zenoh_router: Any, zenoh_domain: int, raw: Any, tmp_path: Any
+) -> None:
+    pytest.importorskip("mcap")
+    from mcap.reader import make_reader
+
+    foreign = f"{zenoh_domain}/chatter/std_msgs::msg::dds_::String_/RIHS01_{'0' * 64}"
+    path = tmp_path / "z.mcap"
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        async with client.record(path, topics=["/chatter"], adaptive=False) as rec:
+            await anyio.sleep(0.3)  # the recorder's subscriber reaches the router
+            raw.put(foreign, cdr(STRING, {"data": "theirs"}), attachment=attachment(1))
+            key = data_key(zenoh_domain, "/chatter")
+            raw.put(key, cdr(STRING, {"data": "ours"}), attachment=attachment(2))
+            await until(lambda: rec.stats.total + sum(rec.stats.skipped.values()) >= 2, "both")
+    assert rec.stats.messages == {"/chatter": 1}
+    assert rec.stats.skipped == {"/chatter": 1}
+    with path.open("rb") as f:
+        written = [bytes(m.data) for _s, _c, m in make_reader(f).iter_messages()]
+    assert written == [cdr(STRING, {"data": "ours"})]
+
+
 async def test_hostile_tokens_are_skipped_and_counted(
     zenoh_router: Any, zenoh_domain: int, raw: Any
 ) -> None:

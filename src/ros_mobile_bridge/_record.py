@@ -210,6 +210,13 @@ class _Recorder:
         codecs = self._conn.adapter.codecs
         topic, schema = frame.topic, frame.schema_name
         if frame.encoding == "cdr":
+            if frame.decode is None:
+                # the sender's definition is not one we can name (Zenoh: the
+                # key's hash is not our definition's; Foxglove: its schema did
+                # not parse): writing its bytes under our schema would
+                # mislabel them
+                self._skip(frame, f"no decoder for the sender's definition of {schema!r}")
+                return
             data = bytes(frame.payload)
         else:
             if frame.decode is None:

@@ -10,20 +10,24 @@ What it maps:
 * subscriptions: one zenoh subscriber per topic on
   ``<domain>/<name>/*/*`` (any type and hash), so a publisher whose token
   has not been seen yet still delivers; each sample's key names its type,
-  which picks the decoder; a sample without a valid 33-byte attachment is
-  skipped and counted, as ``rmw_zenoh_cpp`` subscribers do;
+  which picks the decoder; a sample without an attachment in a form a
+  released rmw_zenoh sends (``wire.rmw_zenoh``) is skipped and counted, as
+  ``rmw_zenoh_cpp`` subscribers do;
 * publishing: one zenoh publisher per advertised topic on the exact key
   (the type's RIHS01 hash included), with the attachment and increasing
   sequence numbers, and a publisher token so ROS tools see it;
 * services: a zenoh ``get`` on the service key with the attachment and a
   deadline; the first reply is the response;
+* serving a service: a complete queryable on the service key and a service
+  token, each query one call (``adapters/_zenoh_serving.py``);
 * actions: the action's ``_action/send_goal``, ``get_result`` and
   ``cancel_goal`` services and its ``_action/feedback`` topic;
 * parameters: the nodes' standard ``rcl_interfaces`` parameter services,
   names written ``/node:param`` as over rosbridge.
 
 Our own node token (``rmb_<zid>``) and one token per publisher,
-subscription and service client make this client visible to ROS tools.
+subscription, service client and served service make this client visible
+to ROS tools.
 
 Everything the zenoh threads deliver reaches the reader task through the
 session's :class:`~ros_mobile_bridge.transport.Inbox`, in batches."""
@@ -56,12 +60,12 @@ from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
 from ._shared import (
     Advertisement,
     Advertisements,
-    CannotServe,
     EventSource,
     Publishes,
     codec_registry,
 )
 from ._zenoh_calls import ZenohCalls
+from ._zenoh_serving import ZenohServing
 from ._zenoh_values import (
     Goal,
     Query,
@@ -69,7 +73,6 @@ from ._zenoh_values import (
     default_domain,
     parameter_from_ros,
     parameter_to_ros,
-    valid_attachment,
 )
 
 __all__ = [
@@ -81,6 +84,7 @@ __all__ = [
 ]
 
 _GRAPH_TAG: Final = 0
+_FIXED: Final = rz.ATTACHMENT_SIZE
 _MAX_KEYS_PER_TOPIC: Final = 16
 """Distinct (type, hash) keys remembered per subscribed topic; a sample on a
 further key is decoded without the cache (a hostile peer cannot grow it)."""
@@ -118,12 +122,11 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     return adapter
 
 
-class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
+class ZenohAdapter(ZenohCalls, ZenohServing, EventSource, Publishes):
     """One zenoh session to one router (see :class:`~.Adapter`)."""
 
     protocol = "zenoh"
     wire_timeout_slack = 0.0  # the client's deadline is the query's timeout
-    serve_refusal = "serving a service over Zenoh is not implemented (rosbridge can)"
 
     def __init__(self, session: ZenohSession, options: ClientOptions, endpoint: str) -> None:
         self._session = session
@@ -136,7 +139,7 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             name=f"zenoh router at {endpoint}",
             protocol=self.protocol,
             subprotocol="rmw_zenoh",
-            capabilities=("clientPublish", "services", "actions", "parameters"),
+            capabilities=("clientPublish", "services", "serving", "actions", "parameters"),
             supported_encodings=("cdr",),
             metadata={"domain_id": str(self.domain), "zid": session.zid},
             session_id=session.zid,
@@ -160,6 +163,10 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         self._calls: PendingRequests[list[tuple[bool, bytes, bytes | None]]] = PendingRequests()
         self._goals: dict[bytes, Goal] = {}
         self._feedback_subs: dict[str, Subscription] = {}
+        self._served = {}
+        self._served_by_tag = {}
+        self._open_calls = {}
+        self._refused_seen = 0
         self._lost: str | None = None
         self._bootstrapped = False
         self._node_key = self._token_key(rz.EntityKind.NODE, self._node_id)
@@ -309,6 +316,7 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
                 raise ConnectError(f"zenoh: {self._lost}")
             batch = await inbox.get_batch()
             graph_changed = False
+            requests: list[rz.Request] = []
             for item in batch:
                 if type(item) is rz.Sample:
                     sub = by_tag.get(item.tag)
@@ -326,6 +334,8 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
                         query.replies.append((item.ok, item.payload, item.attachment))
                 elif type(item) is rz.QueryDone:
                     self._on_query_done(item.query_id)
+                elif type(item) is rz.Request:
+                    requests.append(item)
                 elif type(item) is rz.SessionLost:
                     self._lost = item.reason
             overflowed = inbox.overflowed
@@ -344,6 +354,9 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             if graph_changed:
                 self._rebuild_graph()
                 self._emit(GraphChanged(self.topics, self.services))
+            for request in requests:
+                await self._on_request(request)
+            self._count_refused_queries()
             await self._deliver()
 
     def _on_sample(
@@ -353,13 +366,18 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         payload: bytes,
         attachment: bytes | None,
     ) -> None:
-        if attachment is None or not valid_attachment(attachment):
-            self._reject(
-                "attachment",
-                f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
-                f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
-            )
-            return
+        if attachment is not None and len(attachment) == _FIXED and attachment[16] == 0x10:
+            stamp = int.from_bytes(attachment[8:16], "little", signed=True)
+        else:  # the older keyed form, or nothing readable
+            older = rz.attachment_timestamp(attachment)
+            if older is None:
+                self._reject(
+                    "attachment",
+                    f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
+                    f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
+                )
+                return
+            stamp = older
         entry = sub.keys.get(key)
         if entry is None:
             built = self._key_entry(sub.topic, key)
@@ -369,7 +387,6 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             if len(sub.keys) < _MAX_KEYS_PER_TOPIC:
                 sub.keys[key] = entry
         schema, decode = entry
-        stamp = int.from_bytes(attachment[8:16], "little", signed=True)
         self._pending.append(
             RawFrame(
                 sub.topic,
@@ -591,6 +608,7 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
             routers = await anyio.to_thread.run_sync(self._session.routers)
             if routers:
                 missing_since = None
+                self._retry_results()
                 start = time.perf_counter()
                 if await self._round_trip(self._options.keepalive_timeout):
                     self._options.report_latency((time.perf_counter() - start) * 1000.0)
@@ -607,4 +625,10 @@ class ZenohAdapter(ZenohCalls, EventSource, Publishes, CannotServe):
         return self._session.closed
 
     async def aclose(self) -> None:
+        """Close the session: every declaration goes (the served services'
+        queryables and tokens too) and the calls still open are answered
+        with an error."""
+        self._served.clear()
+        self._served_by_tag.clear()
+        self._open_calls.clear()
         await self._session.aclose()

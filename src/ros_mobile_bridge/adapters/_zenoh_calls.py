@@ -38,6 +38,9 @@ __all__ = ["ZenohCalls"]
 _RESULT_TIMEOUT: Final = 24 * 3600.0
 """How long a goal's ``get_result`` query may wait (the goal's own life)."""
 _GOAL_SUCCEEDED: Final = 4
+_MAX_RESULT_QUERIES: Final = 4
+"""How many times a goal's ``get_result`` query is sent when the earlier ones
+ended without a reply while the action server stayed in the graph."""
 
 
 async def _noop() -> None:
@@ -190,8 +193,15 @@ class ZenohCalls:
             return
 
         def done(replies: list[tuple[bool, bytes, bytes | None]]) -> None:
-            if self._goals.pop(goal.uuid, None) is None:
+            if goal.uuid not in self._goals:
                 return
+            if not replies and self._options.keepalive_interval > 0:
+                # the router (or the server) went before the result: the
+                # keep-alive decides (see _retry_results); a lost router
+                # fails the goal with "disconnected" through fail_pending
+                goal.orphaned = True
+                return
+            del self._goals[goal.uuid]
             for ok, body, _attachment in replies:
                 if not ok:
                     goal.events.on_failed(body.decode("utf-8", "replace"))
@@ -207,9 +217,28 @@ class ZenohCalls:
                 return
             goal.events.on_failed("the action server sent no result")
 
+        goal.orphaned = False
+        goal.asked += 1
         self._start_query(
             f"{goal.action}/_action/get_result", srv_type, payload, _RESULT_TIMEOUT, done
         )
+
+    def _retry_results(self) -> None:
+        """Called by the keep-alive while a router is connected: each goal
+        whose ``get_result`` query ended without a reply is asked again, or
+        fails with the reason when its server left the graph or
+        :data:`_MAX_RESULT_QUERIES` queries went unanswered."""
+        for goal in [g for g in self._goals.values() if g.orphaned]:
+            reason = None
+            if self._service_type(f"{goal.action}/_action/get_result") is None:
+                reason = "the action server is gone (its get_result service left the graph)"
+            elif goal.asked >= _MAX_RESULT_QUERIES:
+                reason = f"the action server sent no result ({goal.asked} queries)"
+            if reason is None:
+                self._ask_result(goal)
+            else:
+                del self._goals[goal.uuid]
+                goal.events.on_failed(reason)
 
     async def _ensure_feedback(self, action: str, base: str) -> None:
         if action in self._feedback_subs:

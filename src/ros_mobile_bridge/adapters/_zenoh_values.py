@@ -62,12 +62,19 @@ class Goal:
     uuid: bytes
     events: GoalEvents
     feedback_decode: Decoder | None
+    # its get_result query ended without a reply (the router or the server
+    # went): the keep-alive asks again or fails it (see ZenohCalls)
+    orphaned: bool = False
+    asked: int = 0  # get_result queries sent
 
 
 def valid_attachment(attachment: bytes | None) -> bool:
-    """rmw_zenoh's 33-byte layout (see ``wire.rmw_zenoh``): checked by size
-    and the gid length byte only, on the hot path."""
-    return attachment is not None and len(attachment) == _ATTACHMENT_SIZE and attachment[16] == 0x10
+    """An attachment in a form a released rmw_zenoh sends (see
+    ``wire.rmw_zenoh``): the fixed form checked by size and gid length byte,
+    on the hot path; the keyed form by its names."""
+    if attachment is not None and len(attachment) == _ATTACHMENT_SIZE:
+        return attachment[16] == 0x10
+    return rz.attachment_timestamp(attachment) is not None
 
 
 def ros_field(value: Any, name: str) -> Any:

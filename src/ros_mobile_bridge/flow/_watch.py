@@ -41,9 +41,17 @@ class Watchable(Generic[T]):
         return self.cell.value
 
     def set(self, value: T) -> bool:
-        """Store ``value``; wakes watchers if it differs. Returns whether it did."""
+        """Store ``value``; wakes watchers if it differs. Returns whether it did.
+
+        A value that cannot be compared with the current one (decoded
+        messages hold numpy arrays, whose ``==`` is element-wise and may
+        raise) counts as different."""
         cell = self.cell
-        if value == cell.value:
+        try:
+            same = value is cell.value or bool(value == cell.value)
+        except (ValueError, TypeError):
+            same = False
+        if same:
             return False
         cell.value = value
         cell.version += 1

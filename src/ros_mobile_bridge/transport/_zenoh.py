@@ -15,10 +15,21 @@ bytes waiting); past either bound a sample is dropped and counted
 changes and the end of a query are never dropped: they are small and bounded
 by the graph and the pending-request limits.
 
-Lifecycle: every subscriber, liveliness subscriber and token declared here
-is undeclared, and the session closed, by :meth:`ZenohSession.aclose` (the
-adapter calls it on every exit path, shielded). A callback still declared at
-interpreter exit would hang the process for 20 s or more.
+Queries to a queryable (calls to a service this client serves) arrive as
+``Request`` items; the zenoh query object stays in the session, keyed by the
+item's query id, until :meth:`ZenohSession.reply` or
+:meth:`ZenohSession.reply_error` answers it. At most ``max_open_queries``
+(default :data:`DEFAULT_MAX_OPEN_QUERIES`) wait unanswered; a query past
+that is answered with an error reply at once, in zenoh's thread, and counted
+(:attr:`ZenohSession.refused_queries`). A query still open when its
+queryable is undeclared or the session closes is answered with an error
+reply then: none is left without an answer.
+
+Lifecycle: every subscriber, liveliness subscriber, queryable and token
+declared here is undeclared, and the session closed, by
+:meth:`ZenohSession.aclose` (the adapter calls it on every exit path,
+shielded). A callback still declared at interpreter exit would hang the
+process for 20 s or more.
 
 eclipse-zenoh is an optional dependency (the ``[zenoh]`` extra); it is
 imported only when a Zenoh session is opened."""
@@ -36,18 +47,21 @@ import anyio.to_thread
 import sniffio
 
 from .._errors import ConnectError, NotSupportedError
-from ..wire.rmw_zenoh import InboxItem, LivelinessChange, QueryDone, Reply, Sample
+from ..wire.rmw_zenoh import InboxItem, LivelinessChange, QueryDone, Reply, Request, Sample
 
 if TYPE_CHECKING:
     import zenoh
 
 __all__ = [
+    "DEFAULT_MAX_OPEN_QUERIES",
     "Inbox",
     "ZenohSession",
     "load_zenoh",
 ]
 
 _EXTRA_HINT: Final = "pip install 'ros-mobile-bridge[zenoh]'"
+DEFAULT_MAX_OPEN_QUERIES: Final = 256
+"""Queries to this session's queryables that may wait unanswered at once."""
 
 
 def load_zenoh() -> Any:
@@ -179,14 +193,29 @@ class ZenohSession:
     raises). Declarations are plain method calls (zenoh's declare calls do
     not block on the network)."""
 
-    def __init__(self, session: zenoh.Session, inbox: Inbox) -> None:
+    def __init__(
+        self,
+        session: zenoh.Session,
+        inbox: Inbox,
+        *,
+        max_open_queries: int = DEFAULT_MAX_OPEN_QUERIES,
+    ) -> None:
         self._session = session
         self.inbox = inbox
-        self._declared: dict[int, Any] = {}  # handle -> subscriber or token
+        self._declared: dict[int, Any] = {}  # handle -> subscriber, queryable or token
         self._handles = 0
         self._queries = 0
         self._closed = False
         self.zid: str = str(session.zid())
+        # queries to our queryables, shared with zenoh's threads (under the lock)
+        self._served_lock = threading.Lock()
+        self._open: dict[int, tuple[int, Any]] = {}  # query id -> (tag, zenoh Query)
+        self._queryable_tags: dict[int, int] = {}  # handle -> tag of a queryable
+        self._live_tags: set[int] = set()  # tags of the queryables declared now
+        self._incoming = 0  # ids of incoming queries (their own sequence)
+        self.max_open_queries = max_open_queries
+        self.refused_queries = 0
+        """Queries answered with an error at once: ``max_open_queries`` waited."""
 
     @classmethod
     async def open(
@@ -197,10 +226,15 @@ class ZenohSession:
         shared_memory: bool = False,
         max_items: int,
         max_bytes: int,
+        max_open_queries: int = DEFAULT_MAX_OPEN_QUERIES,
     ) -> ZenohSession:
         """Open a client session to the router at ``endpoint``
         (``tcp/host:port``). ``ConnectError`` when it is refused or
         unreachable (client mode fails fast)."""
+        if isinstance(max_open_queries, bool) or not (
+            isinstance(max_open_queries, int) and max_open_queries >= 1
+        ):
+            raise ValueError(f"max_open_queries must be an int >= 1, got {max_open_queries!r}")
         z = load_zenoh()
         config = client_config(
             endpoint, connect_timeout=connect_timeout, shared_memory=shared_memory
@@ -216,7 +250,7 @@ class ZenohSession:
             raise ConnectError(f"zenoh: no session with {endpoint} within the timeout") from exc
         except z.ZError as exc:
             raise ConnectError(f"zenoh: cannot reach a router at {endpoint}: {exc}") from exc
-        return cls(session, inbox)
+        return cls(session, inbox, max_open_queries=max_open_queries)
 
     @property
     def closed(self) -> bool:
@@ -235,7 +269,13 @@ class ZenohSession:
         """Undeclare what ``handle`` names (a no-op for an unknown handle).
         Zenoh may still call a callback once after this: the adapter ignores
         items whose tag it no longer knows."""
+        tag = self._queryable_tags.pop(handle, None)
+        if tag is not None:
+            with self._served_lock:  # queries from now on are refused
+                self._live_tags.discard(tag)
         declared = self._declared.pop(handle, None)
+        if tag is not None:
+            self._finish_open(tag, "the service is no longer served")
         if declared is not None and not self._closed:
             with contextlib.suppress(Exception):  # a closed session: nothing to undeclare
                 declared.undeclare()
@@ -278,6 +318,102 @@ class ZenohSession:
     def declare_token(self, key_expr: str) -> int:
         """Declare a liveliness token; alive until undeclared or closed."""
         return self._keep(self._session.liveliness().declare_token(key_expr))
+
+    # -- queryables (services we serve) ----------------------------------------------
+    def declare_queryable(self, key_expr: str, tag: int) -> int:
+        """Declare a *complete* queryable on ``key_expr`` (as rmw_zenoh's
+        service servers do). Each query arrives as a
+        :class:`~ros_mobile_bridge.wire.rmw_zenoh.Request` tagged ``tag``
+        and waits for :meth:`reply` or :meth:`reply_error` (see the module's
+        bound). Returns a handle for :meth:`undeclare`, which answers the
+        queries still open with an error."""
+        inbox = self.inbox
+        lock = self._served_lock
+        open_queries = self._open
+        live = self._live_tags
+
+        def on_query(query: zenoh.Query) -> None:
+            payload = query.payload
+            attachment = query.attachment
+            with lock:
+                refused = None if tag in live else "the service is no longer served"
+                if refused is None and len(open_queries) >= self.max_open_queries:
+                    self.refused_queries += 1
+                    refused = f"{self.max_open_queries} calls already wait for an answer"
+                if refused is None:
+                    self._incoming += 1
+                    query_id = self._incoming
+                    open_queries[query_id] = (tag, query)
+            if refused is not None:
+                _answer_error(query, refused)
+                return
+            inbox.push(
+                Request(
+                    tag,
+                    query_id,
+                    str(query.key_expr),
+                    b"" if payload is None else payload.to_bytes(),
+                    None if attachment is None else attachment.to_bytes(),
+                )
+            )
+
+        with lock:
+            live.add(tag)
+        try:
+            queryable = self._session.declare_queryable(key_expr, on_query, complete=True)
+        except BaseException:
+            with lock:
+                live.discard(tag)
+            raise
+        handle = self._keep(queryable)
+        self._queryable_tags[handle] = tag
+        return handle
+
+    def _take_open(self, query_id: int) -> Any:
+        with self._served_lock:
+            entry = self._open.pop(query_id, None)
+        return None if entry is None else entry[1]
+
+    def reply(self, query_id: int, key_expr: str, payload: bytes, attachment: bytes) -> bool:
+        """Answer the open query ``query_id`` with one reply on ``key_expr``
+        and end it. False when it is not open (answered already, ended by an
+        undeclare or the close, or unknown). When zenoh refuses the reply
+        (a closed session) the query is ended with an error reply and the
+        error raised."""
+        query = self._take_open(query_id)
+        if query is None:
+            return False
+        try:
+            query.reply(key_expr, payload, attachment=attachment)
+        except Exception:
+            _answer_error(query, "the server could not send its reply")
+            raise
+        with contextlib.suppress(Exception):
+            query.drop()
+        return True
+
+    def reply_error(self, query_id: int, text: str) -> bool:
+        """Answer the open query ``query_id`` with an error reply carrying
+        ``text`` (UTF-8) and end it; False when it is not open."""
+        query = self._take_open(query_id)
+        if query is None:
+            return False
+        _answer_error(query, text)
+        return True
+
+    @property
+    def open_queries(self) -> int:
+        """Queries to our queryables that wait for an answer now."""
+        return len(self._open)
+
+    def _finish_open(self, tag: int | None, text: str) -> None:
+        """Answer with an error every open query of the queryable ``tag``
+        (every open query when ``tag`` is None)."""
+        with self._served_lock:
+            ids = [q for q, (t, _query) in self._open.items() if tag is None or t == tag]
+            queries = [self._open.pop(q)[1] for q in ids]
+        for query in queries:
+            _answer_error(query, text)
 
     # -- queries -----------------------------------------------------------------
     def _reply_handler(self, query_id: int) -> Any:
@@ -368,9 +504,13 @@ class ZenohSession:
         self.inbox.close()
         declared = list(self._declared.values())
         self._declared.clear()
+        self._queryable_tags.clear()
+        with self._served_lock:
+            self._live_tags.clear()
         session = self._session
 
         def close() -> None:  # in a worker thread
+            self._finish_open(None, "the server closed its session")
             for obj in reversed(declared):
                 with contextlib.suppress(Exception):
                     obj.undeclare()
@@ -379,3 +519,12 @@ class ZenohSession:
 
         with anyio.CancelScope(shield=True):
             await anyio.to_thread.run_sync(close)
+
+
+def _answer_error(query: Any, text: str) -> None:
+    """End ``query`` with an error reply carrying ``text``; never raises (a
+    query whose session is gone cannot be answered any more)."""
+    with contextlib.suppress(Exception):
+        query.reply_err(text.encode("utf-8", "replace"))
+    with contextlib.suppress(Exception):
+        query.drop()

@@ -21,11 +21,31 @@ The conventions, as ``rmw_zenoh_cpp`` (Jazzy) writes them:
   with every ``/`` inside a name replaced by ``%`` and an empty part written
   ``%`` (:func:`mangle`). Node and entity ids count from 0 in every process,
   so only the whole token identifies an entity.
-* **Attachments**: every publication and service request carries 33 bytes:
-  the sequence number (int64, little-endian), the source timestamp in
-  nanoseconds (int64, little-endian), then the 16-byte source gid with its
-  length as one byte (``0x10``) in front, as zenoh-ext serializes them.
-  ``rmw_zenoh_cpp`` drops a sample without one, and so do we.
+* **Attachments**: every publication, service request and reply carries the
+  sequence number, the source timestamp (ns) and the 16-byte source gid,
+  serialized with zenoh-ext (int64 little-endian; a string or a byte array
+  as its length, one LEB128 byte here, then its bytes). Released
+  ``rmw_zenoh_cpp`` versions send one of two forms:
+
+  - the **fixed form**, 33 bytes: ``seq | stamp | 0x10 gid`` (Jazzy 0.2.4
+    and later, every Kilted release, Rolling 0.6.0 and later): what we send;
+  - the **keyed form**, 77 bytes: each value behind its name as a string,
+    ``0x0f "sequence_number" seq | 0x10 "source_timestamp" stamp |
+    0x0a "source_gid" 0x10 gid`` (Jazzy 0.2.0 to 0.2.3, Rolling 0.3.0 to
+    0.5.0).
+
+  Both are read (:func:`decode_attachment`). ``rmw_zenoh_cpp`` drops a
+  sample without an attachment it can read, and so do we. (Releases before
+  zenoh 1.0 used zenoh 0.11's attachment maps; their sessions cannot talk
+  to a zenoh 1.x router at all.)
+* **GIDs**: an entity's gid is the XXH3-128 hash (seed 0) of its whole
+  liveliness key, the low 64 bits then the high 64 bits, each little-endian
+  (:func:`entity_gid`).
+* **Service servers** declare a *complete* queryable on the service's data
+  key and an ``SS`` token. A reply carries the response's CDR on the
+  service key and an attachment holding the *request's* sequence number and
+  the *client's* gid (the server's own clock as its timestamp), by which the
+  client matches it to its call.
 
 Peer input never makes a parser do anything but return or raise
 :class:`MalformedKey` / :class:`MalformedAttachment` (both ``ValueError``);
@@ -46,6 +66,7 @@ import xxhash
 
 __all__ = [
     "ATTACHMENT_SIZE",
+    "KEYED_ATTACHMENT_SIZE",
     "LIVELINESS_PREFIX",
     "MAX_KEY_LENGTH",
     "Attachment",
@@ -57,13 +78,16 @@ __all__ = [
     "Qos",
     "QueryDone",
     "Reply",
+    "Request",
     "Sample",
     "SessionLost",
     "Token",
     "TopicKey",
+    "attachment_timestamp",
     "dds_type_name",
     "decode_attachment",
     "encode_attachment",
+    "encode_keyed_attachment",
     "entity_gid",
     "format_key",
     "format_qos",
@@ -81,8 +105,13 @@ LIVELINESS_PREFIX: Final = "@ros2_lv"
 MAX_KEY_LENGTH: Final = 4096
 """The longest key or token (in characters) the parsers look at."""
 ATTACHMENT_SIZE: Final = 33
+"""The fixed form's size (what current ``rmw_zenoh_cpp`` releases send)."""
+KEYED_ATTACHMENT_SIZE: Final = 77
+"""The keyed form's size (``rmw_zenoh_cpp`` Jazzy 0.2.0-0.2.3, Rolling 0.3-0.5)."""
 _GID_SIZE: Final = 16
 _ATTACHMENT: Final = struct.Struct("<qqB16s")
+_KEYS: Final = (b"\x0fsequence_number", b"\x10source_timestamp", b"\x0asource_gid\x10")
+_KEYED: Final = struct.Struct(f"<{len(_KEYS[0])}sq{len(_KEYS[1])}sq{len(_KEYS[2])}s{_GID_SIZE}s")
 _MAX_DOMAIN: Final = 232  # ROS 2's highest valid domain id
 _HASH = re.compile(r"RIHS01_[0-9a-f]{64}")
 _NAME_PART = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
@@ -382,21 +411,60 @@ def encode_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
 
 
 def decode_attachment(data: bytes | bytearray | memoryview | None) -> Attachment:
-    """Decode an attachment; :class:`MalformedAttachment` if it is missing,
-    not exactly :data:`ATTACHMENT_SIZE` bytes, or its gid length is not 16."""
+    """Decode an attachment in either form a released ``rmw_zenoh_cpp``
+    sends (see the module docstring); :class:`MalformedAttachment` if it is
+    missing or neither form exactly (size, names, gid length)."""
     if data is None:
         raise MalformedAttachment("no attachment")
-    if len(data) != ATTACHMENT_SIZE:
-        raise MalformedAttachment(f"attachment of {len(data)} bytes, expected {ATTACHMENT_SIZE}")
-    sequence, timestamp, gid_size, gid = _ATTACHMENT.unpack(bytes(data))
-    if gid_size != _GID_SIZE:
-        raise MalformedAttachment(f"gid length byte {gid_size}, expected {_GID_SIZE}")
-    return Attachment(sequence, timestamp, gid)
+    size = len(data)
+    if size == ATTACHMENT_SIZE:
+        sequence, timestamp, gid_size, gid = _ATTACHMENT.unpack(bytes(data))
+        if gid_size != _GID_SIZE:
+            raise MalformedAttachment(f"gid length byte {gid_size}, expected {_GID_SIZE}")
+        return Attachment(sequence, timestamp, gid)
+    if size == KEYED_ATTACHMENT_SIZE:
+        key1, sequence, key2, timestamp, key3, gid = _KEYED.unpack(bytes(data))
+        if (key1, key2, key3) != _KEYS:
+            raise MalformedAttachment("a 77-byte attachment without rmw_zenoh's keyed layout")
+        return Attachment(sequence, timestamp, gid)
+    raise MalformedAttachment(
+        f"attachment of {size} bytes, expected {ATTACHMENT_SIZE} or {KEYED_ATTACHMENT_SIZE}"
+    )
+
+
+def encode_keyed_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
+    """The keyed form (77 bytes) that ``rmw_zenoh_cpp`` Jazzy 0.2.0-0.2.3
+    sent; we never send it (for tests and peers that speak it)."""
+    if len(gid) != _GID_SIZE:
+        raise ValueError(f"a gid is {_GID_SIZE} bytes, got {len(gid)}")
+    try:
+        return _KEYED.pack(_KEYS[0], sequence, _KEYS[1], timestamp_ns, _KEYS[2], bytes(gid))
+    except struct.error as exc:
+        raise ValueError(f"attachment field out of range: {exc}") from None
+
+
+def attachment_timestamp(data: bytes | None) -> int | None:
+    """The source timestamp (ns) of an attachment in either form; None when
+    it is missing or malformed. The check per sample on the hot path: the
+    fixed form is read by size and gid length byte, the keyed form by its
+    names."""
+    if data is None:
+        return None
+    size = len(data)
+    if size == ATTACHMENT_SIZE and data[16] == _GID_SIZE:
+        return int.from_bytes(data[8:16], "little", signed=True)
+    if size == KEYED_ATTACHMENT_SIZE:
+        try:
+            return decode_attachment(data).timestamp_ns
+        except MalformedAttachment:
+            return None
+    return None
 
 
 def entity_gid(token_key: str) -> bytes:
-    """A 16-byte gid for the entity with liveliness key ``token_key``: the
-    XXH3-128 hash of the key, little-endian, as rmw_zenoh_cpp derives it."""
+    """The 16-byte gid of the entity whose liveliness key is ``token_key``,
+    as ``rmw_zenoh_cpp`` derives it: XXH3-128 (seed 0) of the whole key's
+    bytes, its low 64 bits then its high 64 bits, each little-endian."""
     return xxhash.xxh3_128_intdigest(token_key.encode()).to_bytes(_GID_SIZE, "little")
 
 
@@ -456,6 +524,24 @@ class Reply(_Item):
         self.attachment = attachment
 
 
+class Request(_Item):
+    """A query on the queryable tagged ``tag`` (a call to a service this
+    client serves): ``query_id`` names it to the session's ``reply`` and
+    ``reply_error``; its key, payload (empty when it carried none) and
+    attachment (None when it carried none)."""
+
+    __slots__ = ("attachment", "key", "payload", "query_id", "tag")
+
+    def __init__(
+        self, tag: int, query_id: int, key: str, payload: bytes, attachment: bytes | None
+    ) -> None:
+        self.tag = tag
+        self.query_id = query_id
+        self.key = key
+        self.payload = payload
+        self.attachment = attachment
+
+
 class QueryDone(_Item):
     """The query ``query_id`` will get no more replies."""
 
@@ -474,5 +560,5 @@ class SessionLost(_Item):
         self.reason = reason
 
 
-InboxItem: TypeAlias = Sample | LivelinessChange | Reply | QueryDone | SessionLost
+InboxItem: TypeAlias = Sample | LivelinessChange | Reply | Request | QueryDone | SessionLost
 """Anything a session's inbox holds."""
