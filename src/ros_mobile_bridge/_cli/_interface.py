@@ -14,7 +14,14 @@ from typing import Any
 from .._connect import connect
 from .._errors import SchemaError
 from .._options import ClientOptions
-from ..codec import CodecRegistry, FieldDef, Interface, find_interface, interface_names
+from ..codec import (
+    CodecRegistry,
+    FieldDef,
+    Interface,
+    find_interface,
+    interface_names,
+    interface_paths_for,
+)
 from ._common import nearest, out, warn
 from ._format import dump_yaml
 from ._verb import Verb, run_signalled
@@ -248,7 +255,7 @@ async def _show_robot(ns: argparse.Namespace) -> int:
                 warn(f"unknown type {ns.type!r}: the robot does not know it and it is not local")
                 return 1
         out("\n---\n".join("\n".join(s) for s in sections))
-        local = CodecRegistry(interface_paths=_paths(ns))
+        local = CodecRegistry(interfaces=interface_paths_for(_paths(ns)))
         for part in _parts(ns.type):
             try:
                 mine = local.definition(part)
@@ -270,7 +277,7 @@ async def _show_robot(ns: argparse.Namespace) -> int:
 def _proto(ns: argparse.Namespace) -> int:
     if find_interface(ns.type, paths=_paths(ns)) is None:
         return _unknown(ns.type, ns)
-    registry = CodecRegistry(interface_paths=_paths(ns))
+    registry = CodecRegistry(interfaces=interface_paths_for(_paths(ns)))
     out(f'"{dump_yaml(registry.template(_parts(ns.type)[0])).rstrip()}"')
     return 0
 

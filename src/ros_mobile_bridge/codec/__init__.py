@@ -27,6 +27,7 @@ from ._typehash import type_hash as type_hash
 from ._workspace import InterfacePaths as InterfacePaths
 from ._workspace import find_interface as find_interface
 from ._workspace import interface_names as interface_names
+from ._workspace import interface_paths_for as interface_paths_for
 
 __all__ = [
     "CodecRegistry",
@@ -39,6 +40,7 @@ __all__ = [
     "bundled_interface_names",
     "find_interface",
     "interface_names",
+    "interface_paths_for",
     "normalize_type_name",
     "same_type_name",
     "type_hash",
