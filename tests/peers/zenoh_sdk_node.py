@@ -10,7 +10,9 @@ line ``{"msg": {...}}`` per message, any type), ``service``
 (``std_srvs/srv/SetBool``: success = data, message "set to <data>"),
 ``add_two_ints`` (``example_interfaces/srv/AddTwoInts``: sum = a + b) and
 ``params`` (node ``/sdk_params``: its ``get_parameters``, ``set_parameters``
-and ``list_parameters`` services over three parameters), ``action`` (a
+and ``list_parameters`` services over three parameters, and a
+``rcl_interfaces/msg/ParameterEvent`` on ``/parameter_events`` for every
+change ``set_parameters`` makes), ``action`` (a
 ``test_msgs/action/Fibonacci`` server assembled from the sdk's services and
 publishers, see :func:`_action_server`), ``client`` (a
 ``ROS2ServiceClient`` of ``--name`` / ``--type`` that waits until the sdk's
@@ -357,14 +359,42 @@ def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
     def set_(request: Any) -> Any:
         result_cls = store.types["rcl_interfaces/msg/SetParametersResult"]
         results = []
+        changed: list[tuple[str, Any]] = []
+        added: list[tuple[str, Any]] = []
         with lock:
             for param in request.parameters:
                 if param.name == "readonly":
                     results.append(result_cls(successful=False, reason="read-only"))
                     continue
-                values[param.name] = from_msg(param.value)
+                value = from_msg(param.value)
+                (changed if param.name in values else added).append((param.name, value))
+                values[param.name] = value
                 results.append(result_cls(successful=True, reason=""))
+        if changed or added:
+            publish_event(changed, added)
         return servers[2].response_msg_class(results=results)
+
+    def publish_event(changed: list[tuple[str, Any]], added: list[tuple[str, Any]]) -> None:
+        # as rclcpp/rclpy nodes do: one ParameterEvent per accepted
+        # set_parameters call, every parameter it set listed (unchanged
+        # values too). Built from plain values: the request's objects are of
+        # the sdk's "srv/msg" alias types (see alias_nested_types)
+        now = time.time_ns()
+        stamp = store.types["builtin_interfaces/msg/Time"](
+            sec=now // 1_000_000_000, nanosec=now % 1_000_000_000
+        )
+        param_cls = store.types["rcl_interfaces/msg/Parameter"]
+
+        def params(pairs: list[tuple[str, Any]]) -> list[Any]:
+            return [param_cls(name=name, value=value_msg(value)) for name, value in pairs]
+
+        events.publish(
+            stamp=stamp,
+            node="/sdk_params",
+            new_parameters=params(added),
+            changed_parameters=params(changed),
+            deleted_parameters=[],
+        )
 
     def alias_nested_types() -> None:
         # the sdk (0.1.8) serializes a service's nested types of its own
@@ -375,6 +405,10 @@ def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
                 if alias not in store.fielddefs:
                     store.register({alias: fields})
 
+    events = sdk.ROS2Publisher(
+        "/parameter_events", "rcl_interfaces/msg/ParameterEvent", node_name="sdk_params", **where
+    )
+    emit("HASH", "rcl_interfaces/msg/ParameterEvent", events.type_hash)
     for service, srv_type, handler in (
         ("get_parameters", "GetParameters", get),
         ("list_parameters", "ListParameters", list_),
@@ -390,7 +424,7 @@ def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
             )
         )
     alias_nested_types()
-    return servers
+    return [*servers, events]
 
 
 FIBONACCI: Final = "test_msgs/action/Fibonacci"

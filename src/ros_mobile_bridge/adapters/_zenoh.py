@@ -23,7 +23,9 @@ What it maps:
 * actions: the action's ``_action/send_goal``, ``get_result`` and
   ``cancel_goal`` services and its ``_action/feedback`` topic;
 * parameters: the nodes' standard ``rcl_interfaces`` parameter services,
-  names written ``/node:param`` as over rosbridge.
+  names written ``/node:param`` as over rosbridge; watching them is one
+  internal ``/parameter_events`` subscription
+  (``adapters/_zenoh_parameter_events.py``).
 
 Our own node token (``rmb_<zid>``) and one token per publisher,
 subscription, service client and served service make this client visible
@@ -65,6 +67,7 @@ from ._shared import (
     codec_registry,
 )
 from ._zenoh_calls import ZenohCalls
+from ._zenoh_parameter_events import ZenohParameterEvents
 from ._zenoh_serving import ZenohServing
 from ._zenoh_values import (
     Goal,
@@ -122,7 +125,7 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     return adapter
 
 
-class ZenohAdapter(ZenohCalls, ZenohServing, EventSource, Publishes):
+class ZenohAdapter(ZenohCalls, ZenohParameterEvents, ZenohServing, EventSource, Publishes):
     """One zenoh session to one router (see :class:`~.Adapter`)."""
 
     protocol = "zenoh"
@@ -163,6 +166,7 @@ class ZenohAdapter(ZenohCalls, ZenohServing, EventSource, Publishes):
         self._calls: PendingRequests[list[tuple[bool, bytes, bytes | None]]] = PendingRequests()
         self._goals: dict[bytes, Goal] = {}
         self._feedback_subs: dict[str, Subscription] = {}
+        self._init_parameter_events()
         self._served = {}
         self._served_by_tag = {}
         self._open_calls = {}
@@ -324,6 +328,8 @@ class ZenohAdapter(ZenohCalls, ZenohServing, EventSource, Publishes):
                         pass
                     elif sub.feedback_of is not None:
                         self._on_feedback(sub, item.payload, item.attachment)
+                    elif sub.parameter_events:
+                        self._on_parameter_event(item.key, item.payload, item.attachment)
                     else:
                         self._on_sample(sub, item.key, item.payload, item.attachment)
                 elif type(item) is rz.LivelinessChange:
