@@ -189,3 +189,59 @@ async def test_hostile_parameter_events_are_counted_not_fatal(
             with anyio.fail_after(10):
                 message = await sub.__anext__()
             assert message.data == {"data": "still here"}
+
+
+async def test_the_watch_is_restored_after_a_router_restart(
+    zenoh_domain: int, definitions: Path
+) -> None:
+    from peers.zenoh_router import ZenohRouter
+
+    opts = rmb.ClientOptions(
+        domain_id=zenoh_domain,
+        connect_timeout=2.0,
+        keepalive_interval=0.2,
+        keepalive_timeout=0.6,
+        reconnect=rmb.ReconnectPolicy(initial_delay=0.1, max_delay=0.3),
+    )
+    router = ZenohRouter().start()
+    node = SdkNode(router.locator, zenoh_domain, definitions, "params")
+    seen: list[dict[str, Any]] = []
+    try:
+        async with (
+            rmb.connect(router.locator, options=opts) as watcher,
+            watcher.watch_parameters([SPEED]) as updates,
+            anyio.create_task_group() as tg,
+        ):
+
+            async def consume() -> None:
+                async for update in updates:
+                    seen.append(update)
+
+            tg.start_soon(consume)
+            async with rmb.connect(router.locator, options=options(zenoh_domain)) as setter:
+                await services_seen(setter)
+                await anyio.sleep(0.3)
+                await setter.set_parameters({SPEED: 1.0})
+                await until(lambda: seen == [{SPEED: 1.0}])
+            first = watcher._conn.adapter
+            router.stop()
+            await until(lambda: watcher.status == "reconnecting")
+            router = ZenohRouter(port=router.port).start()
+            await until(lambda: watcher.status == "connected", 20)
+            assert watcher._conn.adapter is not first  # a new session ...
+            assert subscribed(watcher)  # ... with the watch restored
+            async with rmb.connect(router.locator, options=options(zenoh_domain)) as setter:
+                # the sdk node's own session reconnects by itself: set new
+                # values until one of its events reaches the watcher
+                await services_seen(setter)
+                value = 2.0
+                with anyio.fail_after(20):
+                    while len(seen) < 2:
+                        await setter.set_parameters({SPEED: value})
+                        value += 1.0
+                        await anyio.sleep(0.3)
+            assert seen[1][SPEED] >= 2.0
+            tg.cancel_scope.cancel()
+    finally:
+        node.stop()
+        router.stop()
