@@ -49,7 +49,7 @@ def workspace(tmp_path_factory: pytest.TempPathFactory) -> Path:
         "# one wheel\nfloat64 speed # rad/s\nuint8 MODE_IDLE=0\n"
     )
     (share / "msg" / "Status.msg").write_text(
-        "std_msgs/Header header\nWheel[4] wheels\nstring label \"a#b\"\n"
+        'std_msgs/Header header\nWheel[4] wheels\nstring label "a#b"\n'
     )
     (share / "srv" / "Reset.srv").write_text("bool hard\n---\nbool ok\n")
     return prefix
