@@ -15,8 +15,15 @@ interpreter's own start-up is not counted. Reports medians and the ratio to
   touches the options, or connects, pays on top;
 * ``import roslibpy`` when it is installed (the library users compare with).
 
-It fails (exit 1) when the package alone loads numpy, websockets or rosbags:
-that would be the eager import coming back.
+Then the whole process, timed from outside: ``python -c "import
+ros_mobile_bridge"`` against ``python -c pass`` (the interpreter's own
+start-up), medians of the same number of runs. And the bundled interfaces'
+first-lookup cost, after the import: reading the data file
+(``bundled_interface``), then parsing one interface and building its CDR
+decoder (``example_interfaces/srv/AddTwoInts``).
+
+It fails (exit 1) when the package alone loads numpy, websockets or rosbags,
+or reads the bundled interfaces: that would be the eager import coming back.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ import importlib.util
 import statistics
 import subprocess
 import sys
+import time
 
 CASES: dict[str, str] = {
     "import asyncio (baseline)": "import asyncio",
@@ -48,6 +56,48 @@ def _time_once(stmt: str) -> float:
         check=True,
     )
     return float(out.stdout.strip().splitlines()[-1])
+
+
+FIRST_LOOKUP: dict[str, tuple[str, str]] = {
+    "bundle: first bundled_interface": (
+        "import ros_mobile_bridge.codec as c",
+        "c.bundled_interface('std_msgs/msg/String')",
+    ),
+    "bundle: + first AddTwoInts decoder": (
+        "import ros_mobile_bridge.codec as c; c.bundled_interface('std_msgs/msg/String')",
+        "c.CodecRegistry().decoder('example_interfaces/srv/AddTwoInts_Request', 'cdr')",
+    ),
+}
+
+_AFTER = (
+    "{setup}\nimport time as _t\n_s = _t.perf_counter()\n{stmt}\n"
+    "print((_t.perf_counter() - _s) * 1000.0)\n"
+)
+
+
+def _time_after(setup: str, stmt: str) -> float:
+    out = subprocess.run(
+        [sys.executable, "-c", _AFTER.format(setup=setup, stmt=stmt)],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def _process_ms(code: str) -> float:
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
+    return (time.perf_counter() - start) * 1000.0
+
+
+def _bundle_read_at_import() -> bool:
+    code = (
+        "import ros_mobile_bridge as rmb\nrmb.ClientOptions(); rmb.connect\n"
+        "from ros_mobile_bridge.codec import _bundled\nprint(_bundled.loaded())"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    return out.stdout.strip() != "False"
 
 
 def _loaded_by_package() -> list[str]:
@@ -78,9 +128,29 @@ def main() -> int:
     print(f"{'case':<30} {'ms':>8} {'x asyncio':>10}")
     for name, ms in medians.items():
         print(f"{name:<30} {ms:8.1f} {ms / base:10.2f}")
+    wall = {
+        "python -c pass": statistics.median(_process_ms("pass") for _ in range(args.runs)),
+        "python -c 'import ros_mobile_bridge'": statistics.median(
+            _process_ms("import ros_mobile_bridge") for _ in range(args.runs)
+        ),
+    }
+    start_up = wall["python -c pass"]
+    print(f"\n{'whole process (wall)':<38} {'ms':>8} {'x pass':>8}")
+    for name, ms in wall.items():
+        print(f"{name:<38} {ms:8.1f} {ms / start_up:8.2f}")
+    print(
+        f"the package adds {wall['python -c ' + repr('import ros_mobile_bridge')] - start_up:.1f} ms"
+    )
+    print(f"\n{'first lookup, after the import':<38} {'ms':>8}")
+    for name, (setup, stmt) in FIRST_LOOKUP.items():
+        ms = statistics.median(_time_after(setup, stmt) for _ in range(args.runs))
+        print(f"{name:<38} {ms:8.1f}")
     heavy = _loaded_by_package()
     if heavy:
         print(f"FAIL: import ros_mobile_bridge loaded {', '.join(heavy)}")
+        return 1
+    if _bundle_read_at_import():
+        print("FAIL: import ros_mobile_bridge read the bundled interfaces")
         return 1
     target = medians["import ros_mobile_bridge"]
     print(

@@ -300,13 +300,14 @@ def test_info_of_the_server_and_of_a_topic(robot: DemoRobot) -> None:
     assert "nearest: /odom" in one_line(missing.stderr)
 
 
-def test_interface_show(robot: DemoRobot) -> None:
-    twist = rmb("interface", "show", TWIST, url=robot.url)
+def test_interface_show_from_the_robot(robot: DemoRobot) -> None:
+    twist = rmb("interface", "show", TWIST, "--url", robot.url)
     assert twist.returncode == 0, twist.stderr
     assert twist.stdout.splitlines()[:2] == ["geometry_msgs/msg/Vector3 linear", "\tfloat64 x"]
-    srv = rmb("interface", "show", "std_srvs/srv/SetBool", url=robot.url)
+    assert twist.stderr == ""  # the robot's Twist is the bundled one
+    srv = rmb("interface", "show", "std_srvs/srv/SetBool", robot.url)
     assert srv.stdout.split("---") == ["bool data\n", "\nbool success\nstring message\n"]
-    unknown = rmb("interface", "show", "nosuch_msgs/msg/Nothing", url=robot.url)
+    unknown = rmb("interface", "show", "nosuch_msgs/msg/Nothing", "--url", robot.url)
     assert unknown.returncode == 1
     assert "unknown type" in one_line(unknown.stderr)
 

@@ -108,6 +108,9 @@ def test_every_field_is_covered_here() -> None:
         "headers",
         "rosbridge_auth",
         "http_client",
+        # tests/test_interfaces.py
+        "interface_paths",
+        "ament_prefix_path",
     }
     assert names == set(FLOAT_FIELDS) | set(INT_FIELDS) | others
 

@@ -4,8 +4,10 @@ same exception and the same words, wherever it is made."""
 from __future__ import annotations
 
 import math
+import os
+from collections.abc import Iterable
 
-__all__ = ["check_name", "check_schema", "check_timeout"]
+__all__ = ["check_interface_paths", "check_name", "check_schema", "check_timeout"]
 
 
 def check_name(kind: str, name: object) -> str:
@@ -40,3 +42,24 @@ def check_timeout(timeout: object) -> float | None:
     if not timeout > 0 or math.isinf(timeout):
         raise ValueError(f"timeout must be a positive, finite number of seconds, got {timeout!r}")
     return float(timeout)
+
+
+def check_interface_paths(paths: object) -> tuple[str, ...]:
+    """``paths`` (a sequence of ``str`` or ``os.PathLike``) as a tuple of
+    ``str``; ``TypeError`` for anything else (a lone ``str`` included: it
+    would read as one path per character)."""
+    if isinstance(paths, str | bytes) or not isinstance(paths, Iterable):
+        raise TypeError(
+            f"interface_paths must be a sequence of paths (str or os.PathLike), not {paths!r}"
+        )
+    out: list[str] = []
+    for path in paths:
+        if isinstance(path, bool) or not isinstance(path, str | os.PathLike):
+            raise TypeError(f"interface_paths entries must be str or os.PathLike, not {path!r}")
+        text = os.fspath(path)
+        if not isinstance(text, str):
+            raise TypeError(f"interface_paths entries must be text paths, not {path!r}")
+        if not text:
+            raise ValueError("interface_paths entries must not be empty")
+        out.append(text)
+    return tuple(out)

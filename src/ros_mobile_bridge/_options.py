@@ -5,12 +5,14 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+import os
 import re
 import ssl
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Final
 
+from ._checks import check_interface_paths
 from ._errors import ConnectError
 from .flow._breaker import CircuitBreaker
 from .flow._throttle import THROTTLE_MODES, Bucket, ThrottleMode
@@ -374,6 +376,20 @@ class ClientOptions:
     """Zenoh: samples of one topic held while its type's description is
     being fetched, decoded in order once it arrives. Past it a sample is
     dropped: a ``"description_hold_overflow"`` rejection."""
+    interface_paths: Sequence[str | os.PathLike[str]] = ()
+    """Local directories whose interface files (``.msg``, ``.srv``,
+    ``.action``) the codec knows, for your own packages: an install prefix
+    (``install/`` of a colcon workspace, ``/opt/ros/jazzy``: it has
+    ``share/<pkg>/msg/...``), a ``share`` directory, or a package's source
+    directory (``package.xml`` beside ``msg/``). A local definition wins
+    over a bundled one, an earlier path over a later one; a server's schema
+    wins over both. Read lazily and once per process,
+    at most 20,000 files and 16 MiB of text (what is skipped is logged and
+    counted). ``TypeError`` at construction for an entry that is not a
+    path (docs/interfaces.md)."""
+    ament_prefix_path: bool = True
+    """Also search the prefixes ``$AMENT_PREFIX_PATH`` lists (a sourced ROS
+    or workspace setup), after :attr:`interface_paths`."""
 
     def report_latency(self, ms: float) -> None:
         """Hand one round-trip time to :attr:`on_latency`; a failing callback
@@ -422,6 +438,9 @@ class ClientOptions:
         if math.isinf(self.type_description_timeout):
             raise ValueError("type_description_timeout must be finite")
         _count("type_description_hold", self.type_description_hold, 1)
+        object.__setattr__(self, "interface_paths", check_interface_paths(self.interface_paths))
+        if not isinstance(self.ament_prefix_path, bool):
+            raise TypeError("ament_prefix_path must be a bool")
         if isinstance(self.stop_topics, str):
             raise TypeError("stop_topics must be a sequence of topic names, not a str")
         object.__setattr__(self, "stop_topics", tuple(self.stop_topics))

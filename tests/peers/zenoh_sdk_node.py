@@ -10,8 +10,11 @@ field values ``--values`` gives as JSON, the rest zero), ``listener`` (one JSON
 line ``{"msg": {...}}`` per message, any type), ``service``
 (``std_srvs/srv/SetBool``: success = data, message "set to <data>"; any
 other ``--type`` answers each request with the response fields of the same
-name copied from it), ``params`` (node ``/sdk_params``: its ``get_parameters``, ``set_parameters``
-and ``list_parameters`` services over three parameters), ``action`` (a
+name copied from it), ``add_two_ints`` (``example_interfaces/srv/AddTwoInts``:
+sum = a + b) and ``params`` (node ``/sdk_params``: its ``get_parameters``,
+``set_parameters`` and ``list_parameters`` services over three parameters,
+and a ``rcl_interfaces/msg/ParameterEvent`` on ``/parameter_events`` for every
+change ``set_parameters`` makes), ``action`` (a
 ``test_msgs/action/Fibonacci`` server assembled from the sdk's services and
 publishers, see :func:`_action_server`), ``client`` (a
 ``ROS2ServiceClient`` of ``--name`` / ``--type`` that waits until the sdk's
@@ -90,7 +93,16 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--definitions", required=True, help="directory <pkg>/<msg|srv>/*")
     parser.add_argument(
         "role",
-        choices=["talker", "listener", "service", "params", "action", "client", "discover"],
+        choices=[
+            "talker",
+            "listener",
+            "service",
+            "add_two_ints",
+            "params",
+            "action",
+            "client",
+            "discover",
+        ],
     )
     parser.add_argument("--topic", default="/chatter")
     parser.add_argument("--type", default="std_msgs/msg/String")
@@ -197,6 +209,19 @@ def main(argv: list[str]) -> int:
         if describing:
             closers.append(_describer(sdk, where, node, args))
         emit("HASH", srv_type, server.type_hash)
+        emit("READY")
+    elif args.role == "add_two_ints":
+        adders: list[Any] = []
+
+        def add(request: Any) -> Any:
+            return adders[0].response_msg_class(sum=int(request.a) + int(request.b))
+
+        adder = sdk.ROS2ServiceServer(
+            args.name, "example_interfaces/srv/AddTwoInts", add, node_name="sdk_adder", **where
+        )
+        adders.append(adder)
+        closers.append(adder)
+        emit("HASH", "example_interfaces/srv/AddTwoInts", adder.type_hash)
         emit("READY")
     elif args.role == "client":
         closers.append(_client(sdk, where, args, stop))
@@ -388,15 +413,47 @@ def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
     def set_(request: Any) -> Any:
         result_cls = store.types["rcl_interfaces/msg/SetParametersResult"]
         results = []
+        changed: list[tuple[str, Any]] = []
+        added: list[tuple[str, Any]] = []
         with lock:
             for param in request.parameters:
                 if param.name == "readonly":
                     results.append(result_cls(successful=False, reason="read-only"))
                     continue
-                values[param.name] = from_msg(param.value)
+                value = from_msg(param.value)
+                (changed if param.name in values else added).append((param.name, value))
+                values[param.name] = value
                 results.append(result_cls(successful=True, reason=""))
+        if changed or added:
+            publish_event(changed, added)
         return servers[2].response_msg_class(results=results)
 
+    def publish_event(changed: list[tuple[str, Any]], added: list[tuple[str, Any]]) -> None:
+        # as rclcpp/rclpy nodes do: one ParameterEvent per accepted
+        # set_parameters call, every parameter it set listed (unchanged
+        # values too). Built from plain values: the request's objects are of
+        # the sdk's "srv/msg" alias types (see alias_nested_types)
+        now = time.time_ns()
+        stamp = store.types["builtin_interfaces/msg/Time"](
+            sec=now // 1_000_000_000, nanosec=now % 1_000_000_000
+        )
+        param_cls = store.types["rcl_interfaces/msg/Parameter"]
+
+        def params(pairs: list[tuple[str, Any]]) -> list[Any]:
+            return [param_cls(name=name, value=value_msg(value)) for name, value in pairs]
+
+        events.publish(
+            stamp=stamp,
+            node="/sdk_params",
+            new_parameters=params(added),
+            changed_parameters=params(changed),
+            deleted_parameters=[],
+        )
+
+    events = sdk.ROS2Publisher(
+        "/parameter_events", "rcl_interfaces/msg/ParameterEvent", node_name="sdk_params", **where
+    )
+    emit("HASH", "rcl_interfaces/msg/ParameterEvent", events.type_hash)
     for service, srv_type, handler in (
         ("get_parameters", "GetParameters", get),
         ("list_parameters", "ListParameters", list_),
@@ -412,7 +469,7 @@ def _params_node(sdk: Any, where: dict[str, Any]) -> list[Any]:
             )
         )
     alias_nested_types(store, "rcl_interfaces")
-    return servers
+    return [*servers, events]
 
 
 def alias_nested_types(store: Any, package: str) -> None:

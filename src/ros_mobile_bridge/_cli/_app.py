@@ -35,9 +35,9 @@ ENV_URL = "RMB_URL"
 
 
 def _verbs() -> list[Verb]:
-    from . import _demo, _record, _ros, _topic  # they import _verb, never this module
+    from . import _demo, _interface, _record, _ros, _topic  # they import _verb, never this module
 
-    return [*_demo.VERBS, *_topic.VERBS, *_ros.VERBS, *_record.VERBS]
+    return [*_demo.VERBS, *_topic.VERBS, *_ros.VERBS, *_interface.VERBS, *_record.VERBS]
 
 
 # -- parsing -------------------------------------------------------------------------------

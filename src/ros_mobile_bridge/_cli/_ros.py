@@ -10,8 +10,7 @@ from typing import Any
 
 from .._action import ActionGoal
 from .._client import Client
-from .._errors import RosBridgeError, SchemaError
-from ..codec import FieldDef
+from .._errors import RosBridgeError
 from ._common import missing_line, open_robot, out, warn
 from ._format import (
     UsageError,
@@ -156,60 +155,6 @@ def _build_param_list(p: argparse.ArgumentParser) -> None:
     p.add_argument("--values", action="store_true", help="print each parameter's value too")
 
 
-# -- interface show --------------------------------------------------------------------------
-
-
-def _type_text(f: FieldDef) -> str:
-    base = f.type
-    if not f.array and f.upper_bound is not None and base == "string":
-        base = f"string<={f.upper_bound}"
-    if f.array:
-        if f.array_length is not None:
-            base += f"[{f.array_length}]"
-        elif f.upper_bound is not None:
-            base += f"[<={f.upper_bound}]"
-        else:
-            base += "[]"
-    return base
-
-
-def _render(robot: Client, name: str, indent: int, lines: list[str]) -> None:
-    for f in robot.schema_definition(name):
-        default = "" if f.default is None else f" {_flow(f.default)}"
-        lines.append("\t" * indent + f"{_type_text(f)} {f.name}{default}")
-        if "/" in f.type:
-            _render(robot, f.type, indent + 1, lines)
-
-
-async def _definition(robot: Client, name: str) -> list[str]:
-    try:
-        robot.schema_definition(name)
-    except SchemaError:
-        # rosbridge: ask the bridge (/rosapi/message_details) for it
-        await robot.fetch_definition(name)
-    lines: list[str] = []
-    _render(robot, name, 0, lines)
-    return lines
-
-
-async def _interface_show(ns: argparse.Namespace) -> int:
-    name = ns.type
-    if "/srv/" in name:
-        parts = [f"{name}_Request", f"{name}_Response"]
-    elif "/action/" in name:
-        parts = [f"{name}_Goal", f"{name}_Result", f"{name}_Feedback"]
-    else:
-        parts = [name]
-    async with open_robot(ns) as robot:
-        try:
-            sections = [await _definition(robot, part) for part in parts]
-        except SchemaError:
-            warn(f"unknown type {name!r}: neither bundled nor known to the server (misspelled?)")
-            return 1
-    out("\n---\n".join("\n".join(s) for s in sections))
-    return 0
-
-
 # -- action send -----------------------------------------------------------------------------
 
 
@@ -311,14 +256,6 @@ VERBS = [
         _params,
         graph_names=False,
         hidden=True,
-    ),
-    Verb(
-        ("interface", "show"),
-        "print a message, service or action definition",
-        ("TYPE",),
-        None,
-        _interface_show,
-        graph_names=False,
     ),
     Verb(
         ("action", "send"),

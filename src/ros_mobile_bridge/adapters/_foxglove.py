@@ -44,6 +44,7 @@ from ._shared import (
     CannotServe,
     EventSource,
     Publishes,
+    codec_registry,
     open_websocket,
     socket_frame,
 )
@@ -145,9 +146,7 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         self._engine = engine
         self._options = options
         self._log: logging.Logger = options.logger
-        self.codecs = CodecRegistry(
-            max_schema_size=options.max_schema_size, max_schema_fields=options.max_schema_fields
-        )
+        self.codecs = codec_registry(options)
         # channel id -> (the channel it was built for, its decoder)
         self._decoders: dict[int, tuple[fx.Channel, Decoder | None]] = {}
         # topic -> its channels, oldest first; the sorted topic list follows it

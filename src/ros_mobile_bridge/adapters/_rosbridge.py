@@ -31,7 +31,7 @@ from .._errors import (
 from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo
-from ..codec import CodecRegistry, SchemaTooLarge, same_type_name
+from ..codec import SchemaTooLarge, same_type_name
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket
 from ..wire import foxglove as fx
@@ -48,6 +48,7 @@ from ._shared import (
     Advertisements,
     EventSource,
     Publishes,
+    codec_registry,
     open_websocket,
     socket_frame,
 )
@@ -198,9 +199,7 @@ class RosbridgeAdapter(
             fragment_timeout=options.fragment_timeout,
             max_json_depth=options.max_json_depth,
         )
-        self.codecs = CodecRegistry(
-            max_schema_size=options.max_schema_size, max_schema_fields=options.max_schema_fields
-        )
+        self.codecs = codec_registry(options)
         self.server_info = ServerInfo(name="rosbridge", protocol=self.protocol)
         self._ids = itertools.count(1)
         self._topics: dict[str, str] = {}  # name -> type, from /rosapi/topics

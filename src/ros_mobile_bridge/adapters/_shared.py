@@ -13,7 +13,8 @@ import anyio
 
 from .._errors import NotSupportedError
 from .._options import HTTPX_MISSING, ClientOptions
-from ..codec import same_type_name
+from ..codec import CodecRegistry, same_type_name
+from ..codec._workspace import interface_paths_for
 from ..flow import TopicMessage, WireMessage
 from ..transport import WebSocket, connect_websocket
 from ._seam import Event, EventSink, Rejected, ServiceHandler
@@ -220,3 +221,16 @@ class CannotServe:
 
     async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
         raise NotSupportedError(self.serve_refusal)
+
+
+def codec_registry(options: ClientOptions) -> CodecRegistry:
+    """A connection's :class:`CodecRegistry`: the options' schema bounds, and
+    their local interface paths (plus ``$AMENT_PREFIX_PATH`` unless turned
+    off), scanned once per process for each distinct list."""
+    return CodecRegistry(
+        max_schema_size=options.max_schema_size,
+        max_schema_fields=options.max_schema_fields,
+        interfaces=interface_paths_for(
+            options.interface_paths, ament_prefix_path=options.ament_prefix_path
+        ),
+    )

@@ -23,7 +23,9 @@ What it maps:
 * actions: the action's ``_action/send_goal``, ``get_result`` and
   ``cancel_goal`` services and its ``_action/feedback`` topic;
 * parameters: the nodes' standard ``rcl_interfaces`` parameter services,
-  names written ``/node:param`` as over rosbridge.
+  names written ``/node:param`` as over rosbridge; watching them is one
+  internal ``/parameter_events`` subscription
+  (``adapters/_zenoh_parameter_events.py``).
 
 Our own node token (``rmb_<zid>``) and one token per publisher,
 subscription, service client and served service make this client visible
@@ -52,14 +54,21 @@ from .._errors import (
 from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
-from ..codec import CodecRegistry, same_type_name, type_hash
+from ..codec import same_type_name, type_hash
 from ..flow import PendingRequests, RawFrame, TopicMessage, WireMessage
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
-from ._shared import Advertisement, Advertisements, EventSource, Publishes
+from ._shared import (
+    Advertisement,
+    Advertisements,
+    EventSource,
+    Publishes,
+    codec_registry,
+)
 from ._zenoh_calls import ZenohCalls
 from ._zenoh_describe import ZenohDescribe
+from ._zenoh_parameter_events import ZenohParameterEvents
 from ._zenoh_serving import ZenohServing
 from ._zenoh_values import (
     Goal,
@@ -131,7 +140,9 @@ class _Held:
     samples: list[tuple[str, bytes, bytes | None]]
 
 
-class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publishes):
+class ZenohAdapter(
+    ZenohCalls, ZenohDescribe, ZenohParameterEvents, ZenohServing, EventSource, Publishes
+):
     """One zenoh session to one router (see :class:`~.Adapter`)."""
 
     protocol = "zenoh"
@@ -143,9 +154,7 @@ class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publish
         self._log: logging.Logger = options.logger
         domain = options.domain_id
         self.domain = default_domain() if domain is None else domain
-        self.codecs = CodecRegistry(
-            max_schema_size=options.max_schema_size, max_schema_fields=options.max_schema_fields
-        )
+        self.codecs = codec_registry(options)
         self.server_info = ServerInfo(
             name=f"zenoh router at {endpoint}",
             protocol=self.protocol,
@@ -176,6 +185,7 @@ class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publish
         self._calls: PendingRequests[list[tuple[bool, bytes, bytes | None]]] = PendingRequests()
         self._goals: dict[bytes, Goal] = {}
         self._feedback_subs: dict[str, Subscription] = {}
+        self._init_parameter_events()
         self._served = {}
         self._served_by_tag = {}
         self._open_calls = {}
@@ -351,6 +361,8 @@ class ZenohAdapter(ZenohCalls, ZenohDescribe, ZenohServing, EventSource, Publish
                         pass
                     elif sub.feedback_of is not None:
                         self._on_feedback(sub, item.payload, item.attachment)
+                    elif sub.parameter_events:
+                        self._on_parameter_event(item.key, item.payload, item.attachment)
                     else:
                         self._on_sample(sub, item.key, item.payload, item.attachment)
                 elif type(item) is rz.LivelinessChange:

@@ -13,7 +13,7 @@ import uuid
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Final
 
-from .._errors import ActionGoalError, DecodeError, NotSupportedError, SchemaError, ServiceError
+from .._errors import ActionGoalError, DecodeError, SchemaError, ServiceError
 from .._options import ClientOptions
 from .._types import ServiceInfo
 from ..codec import CodecRegistry
@@ -358,8 +358,4 @@ class ZenohCalls:
                     raise ServiceError(f"{node}/set_parameters", f"{param}: {reason}")
         return await self.get_parameters(list(values))
 
-    async def subscribe_parameters(self, names: Sequence[str]) -> None:
-        raise NotSupportedError("parameter updates over zenoh are not implemented yet")
-
-    async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
-        return None
+    # watching parameters: adapters/_zenoh_parameter_events.py

@@ -44,6 +44,7 @@ class Subscription:
     handle: int
     token: int | None = None
     feedback_of: str | None = None  # the action whose feedback topic this is
+    parameter_events: bool = False  # the internal /parameter_events subscription
     # sample key -> (type name, decoder); bounded by _zenoh._MAX_KEYS_PER_TOPIC
     keys: dict[str, tuple[str, Decoder | None]] = field(default_factory=dict)
 

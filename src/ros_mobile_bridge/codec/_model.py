@@ -172,7 +172,22 @@ def _spec_from_desc(name: str, desc: Any, default: object | None) -> FieldSpec:
     if node == Nodetype.NAME:
         return FieldSpec(name, None, str(desc[1]), 0, cardinality, int(size), default)
     base, bound = desc[1]
+    if base in _FLOATS:
+        default = _as_float(default)
     return FieldSpec(name, str(base), None, int(bound), cardinality, int(size), default)
+
+
+_FLOATS = frozenset({"float32", "float64"})
+
+
+def _as_float(default: object | None) -> object | None:
+    """A float field's default as floats (a ``.msg`` may write ``1`` for
+    ``1.0``), so templates and JSON carry the field's type."""
+    if type(default) is int:
+        return float(default)
+    if isinstance(default, tuple):
+        return tuple(float(v) if type(v) is int else v for v in default)
+    return default
 
 
 def msgdef_from_rosbags(

@@ -9,6 +9,7 @@ time, and fixes the names up.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from typing import Any
@@ -19,7 +20,7 @@ from rosbags.typesys.msg import MSGParser
 
 from .._errors import SchemaError
 from ._convert import Invalid, check_default
-from ._model import MsgDef, msgdef_from_rosbags
+from ._model import FieldSpec, MsgDef, msgdef_from_rosbags
 from ._names import canonical_name, is_valid_type_name, same_type_name, split_type_name
 
 __all__ = ["parse_jsonschema", "parse_ros2idl", "parse_ros2msg", "parse_srv"]
@@ -77,6 +78,13 @@ def _fix_ref(ref: str, renames: dict[str, str]) -> str:
     return _checked_name(ref)
 
 
+def _wstring(spec: FieldSpec) -> FieldSpec:
+    """rosbags' ``.msg`` parser reads the primitive ``wstring`` as a type name
+    of the package; it is the primitive (a type hash needs it; rosbags'
+    CDR codec refuses it)."""
+    return dataclasses.replace(spec, base="wstring", ref=None)
+
+
 def _to_msgdefs(messages: list[Any], renames: dict[str, str]) -> dict[str, MsgDef]:
     typesdict = make_typesdict(messages)
     out: dict[str, MsgDef] = {}
@@ -87,7 +95,12 @@ def _to_msgdefs(messages: list[Any], renames: dict[str, str]) -> dict[str, MsgDe
             renames.get(message.name, message.name), constants, fields, defaults
         )
         specs = tuple(
-            f.with_ref(_fix_ref(f.ref, renames)) if f.ref is not None else f for f in msgdef.fields
+            _wstring(f)
+            if f.ref is not None and f.ref.endswith("/wstring")
+            else f.with_ref(_fix_ref(f.ref, renames))
+            if f.ref is not None
+            else f
+            for f in msgdef.fields
         )
         name = _checked_name(msgdef.name)
         for spec in specs:

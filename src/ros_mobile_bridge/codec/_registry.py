@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable, Iterator, Mapping
@@ -15,6 +16,7 @@ import numpy as np
 from rosbags.typesys.store import Typestore
 
 from .._errors import DecodeError, SchemaError
+from ._bundled import bundled_definition, bundled_interface
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
 from ._model import DescribedTypes, FieldDef, MsgDef
 from ._names import (
@@ -23,10 +25,12 @@ from ._names import (
     lookup_candidates,
     same_type_name,
     service_type_names,
+    split_type_name,
 )
 from ._parse import action_texts, parse_jsonschema, parse_ros2idl, parse_ros2msg
 from ._templates import json_definition, json_template, ros_template
-from ._wellknown import builtin_definitions, wellknown_definitions
+from ._wellknown import builtin_definitions
+from ._workspace import InterfacePaths
 
 __all__ = ["CodecRegistry", "SchemaTooLarge"]
 
@@ -266,6 +270,16 @@ def _make_cdr_encoder(typename: str, store: Typestore, build: Builder) -> Encode
     return encode
 
 
+_MSG_SEPARATOR_LINE: Final = "=" * 80 + "\n"
+_MSG_SEPARATOR: Final = re.compile(r"^={80}\n", re.MULTILINE)
+
+
+def _builtin(name: str) -> MsgDef | None:
+    """rosbags' Jazzy definition of ``name`` (the last fallback: message
+    packages the bundle does not hold), read on first use."""
+    return builtin_definitions().get(name)
+
+
 def _unsupported(message_encoding: str, schema_name: str) -> SchemaError:
     return SchemaError(
         f"unsupported message encoding {message_encoding!r} for {schema_name!r} "
@@ -280,13 +294,15 @@ class CodecRegistry:
     decoders and encoders for them (:meth:`decoder`, :meth:`encoder`). Type
     names are looked up tolerantly (``std_msgs/String`` finds
     ``std_msgs/msg/String``, see :func:`~ros_mobile_bridge.codec.same_type_name`).
-    A name the server did not register falls back to the built-in definitions:
-    every message of ROS 2 Jazzy (as bundled with rosbags) and the request and
-    response types of a few standard services (``std_srvs/srv/{Empty,Trigger,
-    SetBool}``, the ``rcl_interfaces/srv`` parameter services,
-    ``action_msgs/srv/CancelGoal``). Server definitions win over built-in ones;
-    a schema's own type wins over a dependency definition embedded in another
-    schema.
+    A name the server did not register falls back, in this order, to the
+    local interface files of ``interfaces`` (a colcon workspace, a ROS
+    installation: see :class:`InterfacePaths`), to the interfaces bundled
+    with the package (every message, service and action of the standard ROS 2
+    Jazzy packages, with the types ROS derives from services and actions:
+    ``pkg/srv/X_Request``, ``pkg/action/X_SendGoal_Request``, ...), and last
+    to rosbags' own Jazzy message definitions. Server definitions win over
+    local ones, local ones over bundled ones; a schema's own type wins over
+    a dependency definition embedded in another schema.
 
     Each registry has its own rosbags typestore (nothing global is mutated).
     The registry is thread-safe; the decoders and encoders it returns are
@@ -294,7 +310,11 @@ class CodecRegistry:
     """
 
     def __init__(
-        self, *, max_schema_size: int | None = None, max_schema_fields: int | None = None
+        self,
+        *,
+        max_schema_size: int | None = None,
+        max_schema_fields: int | None = None,
+        interfaces: InterfacePaths | None = None,
     ) -> None:
         self.max_schema_size = max_schema_size
         """Characters of one schema text :meth:`add_schema` accepts (None: any)."""
@@ -307,6 +327,17 @@ class CodecRegistry:
         self._described: dict[str, MsgDef] = {}
         self._sources: dict[str, str] = {}
         self._gen: _Generation | None = None
+        self.interfaces = interfaces
+        """The local interface files this registry falls back to (None: none)."""
+        local = interfaces.definition if interfaces is not None else None
+        self._layers: tuple[Callable[[str], MsgDef | _JsonSchema | None], ...] = (
+            self._described.get,
+            self._own.get,
+            self._deps.get,
+            *((local,) if local is not None else ()),
+            bundled_definition,
+            _builtin,
+        )
 
     # ------------------------------------------------------------------ schemas
 
@@ -420,16 +451,9 @@ class CodecRegistry:
             yield functools.partial(self._find, ros_only=True)
 
     def _find(self, name: str, *, ros_only: bool) -> tuple[str, MsgDef | _JsonSchema] | None:
-        layers: tuple[Mapping[str, MsgDef | _JsonSchema], ...] = (
-            self._described,
-            self._own,
-            self._deps,
-            wellknown_definitions(),
-            builtin_definitions(),
-        )
         for candidate in lookup_candidates(name):
-            for layer in layers:
-                entry = layer.get(candidate)
+            for layer in self._layers:
+                entry = layer(candidate)
                 if entry is None or (ros_only and isinstance(entry, _JsonSchema)):
                     continue
                 return candidate, entry
@@ -544,21 +568,51 @@ class CodecRegistry:
         """The ``.msg`` text of ``schema_name`` with the definition of every
         type it uses appended in the concatenated form (an ``=`` * 80 line,
         then ``MSG: pkg/Type`` and its text): what an MCAP file's ``ros2msg``
-        schema and rosbag2 carry. Generated from the definition this registry
-        decodes and encodes with; when a type description from the robot
-        carried the ``.msg`` texts of the type and of everything it uses
-        (:meth:`add_description`), those texts, comments kept.
-        :class:`SchemaError` when it has none."""
+        schema and rosbag2 carry. Each message that comes from an interface
+        file (bundled or local) is that file's text, comments and defaults
+        included; any other (a server's schema, a type derived from a service
+        or an action) is generated from the definition this registry decodes
+        and encodes with. When a type description from the robot carried the
+        ``.msg`` texts of the type and of everything it uses
+        (:meth:`add_description`), those texts. :class:`SchemaError` when it
+        has none."""
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
             closure = self._closure(key, msgdef)
             if all(name in self._sources for name in closure):
-                return self._source_text(key, closure)
+                return self._described_text(key, closure)
             gen = self._prepare(key, msgdef)
             text, _digest = gen.store.generate_msgdef(key, ros_version=2)
-        return text
+            blocks = _MSG_SEPARATOR.split(text)
+            out = [self._source_text(key, gen.defs[key]) or blocks[0]]
+            for block in blocks[1:]:
+                header, _, body = block.partition("\n")
+                name = header.removeprefix("MSG: ").strip()
+                try:
+                    dep = canonical_name(name)
+                except (TypeError, ValueError):
+                    dep = name
+                source = self._source_text(dep, gen.defs.get(dep))
+                out.append(f"{header}\n{source or body}")
+        return _MSG_SEPARATOR_LINE.join(out)
 
-    def _source_text(self, key: str, closure: Mapping[str, MsgDef]) -> str:
+    def _source_text(self, key: str, msgdef: MsgDef | None) -> str | None:
+        """The interface file text of the message ``key`` when ``msgdef`` is
+        the definition that file gives (local files first), else None."""
+        if msgdef is None or split_type_name(key)[1] != "msg":
+            return None
+        text: str | None = None
+        local = self.interfaces
+        if local is not None and local.definition(key) == msgdef:
+            text = local.text(key)
+        elif bundled_definition(key) == msgdef:
+            found = bundled_interface(key)
+            text = found.text if found is not None and found.name == key else None
+        if text is None:
+            return None
+        return text if text.endswith("\n") else text + "\n"
+
+    def _described_text(self, key: str, closure: Mapping[str, MsgDef]) -> str:
         """The concatenated ``.msg`` form of the source texts a type
         description carried (comments and constants kept)."""
         parts = [self._sources[key].rstrip("\n") + "\n"]
