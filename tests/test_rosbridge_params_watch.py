@@ -204,6 +204,38 @@ async def test_a_user_subscription_to_parameter_events_lives_beside_the_watch(
             await restore(setter)
 
 
+async def test_undecodable_cbor_raw_events_are_counted_and_json_comes_back(
+    rosbridge: RosBridge,
+) -> None:
+    # rosbridge_server_rs 0.1.6 sends ParameterEvent cbor-raw bytes that do
+    # not decode (8 bytes past the message): with the user's cbor-raw
+    # subscription the watch gets those, counts them and goes on; once the
+    # user's subscription ends the watch asks for JSON again and decodes
+    async with (
+        rmb.connect(rosbridge.url, protocol="rosbridge", options=options()) as client,
+        rmb.connect(rosbridge.url, protocol="rosbridge", options=options()) as setter,
+    ):
+        try:
+            async with client.watch_parameters([SPEED]) as updates:
+                async with client.subscribe(
+                    "/parameter_events", schema=EVENT, compression="cbor-raw"
+                ):
+                    with anyio.fail_after(20):
+                        while not client.rejections.get("decode"):
+                            await setter.set_parameters({SPEED: fresh()})
+                            await anyio.sleep(0.3)
+                assert set(client.rejections) == {"decode"}
+                await anyio.sleep(0.3)  # the watch's own subscribe reaches the bridge
+                speed = fresh()
+                await setter.set_parameters({SPEED: speed})
+                with anyio.fail_after(10):
+                    async for update in updates:  # (an update may still be on its way)
+                        if update == {SPEED: speed}:
+                            break
+        finally:
+            await restore(setter)
+
+
 async def test_events_that_are_not_parameter_events_are_counted_not_fatal(
     rosbridge: RosBridge,
 ) -> None:
