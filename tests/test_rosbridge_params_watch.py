@@ -12,13 +12,14 @@ messages while a watch lives and after it ends; events that are not
 from __future__ import annotations
 
 import itertools
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Iterator
 from typing import Any
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from peers.ros_env import PeerEnv
 from peers.rosbridge import RosBridge, RosGraph
 
 pytest_plugins = ["peers.ros_fixtures"]
@@ -284,42 +285,69 @@ async def test_events_that_are_not_parameter_events_are_counted_not_fatal(
             assert message.data["data"].startswith("hello ")
 
 
+@pytest.fixture
+def own_graph(ros_peer_env: PeerEnv) -> Iterator[RosGraph]:
+    """A graph on a domain of its own. Bridges stopped and restarted must not
+    share the session's graph: each serves the /rosapi services over ROS,
+    and a rosbridge_server_rs 0.1.6 that answers a request of a bridge that
+    died meanwhile exits ("client will not receive response"), taking the
+    session's bridge down with it."""
+    graph = RosGraph.start(ros_peer_env)
+    try:
+        yield graph
+    finally:
+        graph.stop()
+
+
 async def test_the_watch_is_restored_after_a_reconnect(
-    rosbridge_factory: Any, ros_graph: RosGraph
+    ros_peer_env: PeerEnv, own_graph: RosGraph
 ) -> None:
-    bridge = rosbridge_factory()
+    def start_bridge(port: int | None = None) -> RosBridge:
+        bridge = RosBridge.start(ros_peer_env, own_graph.domain_id, port=port)
+        bridges.append(bridge)
+        return bridge
+
+    bridges: list[RosBridge] = []
+    bridge = await anyio.to_thread.run_sync(start_bridge)
     port = bridge.port
     policy = rmb.ReconnectPolicy(initial_delay=0.1, max_delay=0.5)
     seen: list[dict[str, Any]] = []
-    async with (
-        rmb.connect(bridge.url, protocol="rosbridge", options=options(reconnect=policy)) as watcher,
-        watcher.watch_parameters([SPEED]) as updates,
-        anyio.create_task_group() as tg,
-    ):
+    try:
+        async with (
+            rmb.connect(
+                bridge.url, protocol="rosbridge", options=options(reconnect=policy)
+            ) as watcher,
+            watcher.watch_parameters([SPEED]) as updates,
+            anyio.create_task_group() as tg,
+        ):
 
-        async def consume() -> None:
-            async for update in updates:
-                seen.append(update)
+            async def consume() -> None:
+                async for update in updates:
+                    seen.append(update)
 
-        tg.start_soon(consume)
+            tg.start_soon(consume)
 
-        async def set_until_seen(n: int) -> None:
-            async with rmb.connect(bridge.url, protocol="rosbridge", options=options()) as setter:
-                with anyio.fail_after(20):
-                    while len(seen) < n:
-                        await setter.set_parameters({SPEED: fresh()})
-                        await anyio.sleep(0.3)
-                await restore(setter)
+            async def set_until_seen(n: int) -> None:
+                async with rmb.connect(
+                    bridge.url, protocol="rosbridge", options=options()
+                ) as setter:
+                    with anyio.fail_after(20):
+                        while len(seen) < n:
+                            await setter.set_parameters({SPEED: fresh()})
+                            await anyio.sleep(0.3)
 
-        await set_until_seen(1)
-        first = watcher._conn.adapter
-        await anyio.to_thread.run_sync(bridge.stop)
-        await until(lambda: watcher.status == "reconnecting")
-        bridge = await anyio.to_thread.run_sync(lambda: rosbridge_factory(port=port))
-        await until(lambda: watcher.status == "connected", 30)
-        assert watcher._conn.adapter is not first  # a new connection ...
-        assert subscribed(watcher)  # ... with the watch restored
-        count = len(seen)
-        await set_until_seen(count + 1)
-        assert seen[-1][SPEED] is not None
-        tg.cancel_scope.cancel()
+            await set_until_seen(1)
+            first = watcher._conn.adapter
+            await anyio.to_thread.run_sync(bridge.stop)
+            await until(lambda: watcher.status == "reconnecting")
+            bridge = await anyio.to_thread.run_sync(lambda: start_bridge(port))
+            await until(lambda: watcher.status == "connected", 30)
+            assert watcher._conn.adapter is not first  # a new connection ...
+            assert subscribed(watcher)  # ... with the watch restored
+            count = len(seen)
+            await set_until_seen(count + 1)
+            assert isinstance(seen[-1][SPEED], float)
+            tg.cancel_scope.cancel()
+    finally:
+        for started in bridges:
+            await anyio.to_thread.run_sync(started.stop)
