@@ -36,6 +36,7 @@ from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
+from ._parameter_events import PARAMETER_EVENTS
 from ._rosbridge_definitions import RosbridgeDefinitions
 from ._rosbridge_definitions import _typedefs_to_msg as _typedefs_to_msg
 from ._rosbridge_discovery import _INTERNAL_TIMEOUT as _INTERNAL_TIMEOUT
@@ -222,6 +223,7 @@ class RosbridgeAdapter(
         self._over_limit: set[str] = set()  # graph limits exceeded at the last poll
         self._served: dict[str, _Served] = {}
         self._failed_answers: dict[str, str] = {}  # request id -> service, answered false
+        self._init_parameters()
 
     # -- helpers ---------------------------------------------------------------
     def _next_id(self, kind: str) -> str:
@@ -337,8 +339,12 @@ class RosbridgeAdapter(
 
     def _on_publish(self, event: rb.Publish, received_ns: int) -> None:
         topic = event.topic
+        if topic == PARAMETER_EVENTS and self._parameter_sub_id is not None:
+            self._on_parameter_event(event)  # the watch's, and the user's if any
         wire = self._subs.get(topic)
         if wire is None:
+            if topic == PARAMETER_EVENTS and self._parameter_sub_id is not None:
+                return
             if topic not in self._stray and len(self._stray) < _STRAY_LOGGED:
                 self._stray.add(topic)  # logged once per topic, for a bounded set
                 self._log.warning(
@@ -572,6 +578,8 @@ class RosbridgeAdapter(
             self._sub_topics.pop(wire.id, None)
             if not self._ws.closed:
                 await self._ws.send(self._engine.unsubscribe(topic, id=wire.id))
+            if topic == PARAMETER_EVENTS:
+                await self._user_left_parameter_events()
 
     # -- publishing --------------------------------------------------------------
     async def advertise(

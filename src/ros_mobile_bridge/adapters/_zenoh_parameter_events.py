@@ -26,7 +26,7 @@ Contract:
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any
 
 import anyio
 
@@ -34,13 +34,11 @@ from .._errors import DecodeError
 from ..codec import CodecRegistry
 from ..flow import Decoder
 from ..transport._zenoh import ZenohSession
+from ._parameter_events import PARAMETER_EVENT_TYPE, PARAMETER_EVENTS, by_node, watched_values
 from ._seam import ParameterValues
-from ._zenoh_values import Subscription, by_node, parameter_from_ros, ros_field, valid_attachment
+from ._zenoh_values import Subscription, valid_attachment
 
 __all__ = ["PARAMETER_EVENTS", "PARAMETER_EVENT_TYPE", "ZenohParameterEvents"]
-
-PARAMETER_EVENTS: Final = "/parameter_events"
-PARAMETER_EVENT_TYPE: Final = "rcl_interfaces/msg/ParameterEvent"
 
 
 class ZenohParameterEvents:
@@ -120,21 +118,8 @@ class ZenohParameterEvents:
         except DecodeError as exc:
             self._reject("decode", f"{PARAMETER_EVENTS}: {exc}")
             return
-        node = ros_field(event, "node")
-        if not isinstance(node, str) or not node.startswith("/"):
-            self._reject("malformed", f"{PARAMETER_EVENTS}: an event without a node name")
-            return
-        watched = self._watched_parameters
-        values: dict[str, Any] = {}
-        for group in ("new_parameters", "changed_parameters"):
-            for param in ros_field(event, group) or ():
-                name = f"{node}:{ros_field(param, 'name')}"
-                if name in watched:
-                    known, plain = parameter_from_ros(ros_field(param, "value"))
-                    values[name] = plain if known else None
-        for param in ros_field(event, "deleted_parameters") or ():
-            name = f"{node}:{ros_field(param, 'name')}"
-            if name in watched:
-                values[name] = None
-        if values:
+        values = watched_values(event, self._watched_parameters)
+        if values is None:
+            self._reject("malformed", f"{PARAMETER_EVENTS}: not a {PARAMETER_EVENT_TYPE}")
+        elif values:
             self._emit(ParameterValues(values))

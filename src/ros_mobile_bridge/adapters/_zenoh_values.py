@@ -5,12 +5,13 @@ values (parameters, action type names, decoded fields, attachments)."""
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Final
 
 from ..flow import Decoder
 from ..wire import rmw_zenoh as rz
+from ._parameter_events import by_node, parameter_from_ros, ros_field
 from ._seam import GoalEvents
 
 __all__ = [
@@ -76,53 +77,6 @@ def valid_attachment(attachment: bytes | None) -> bool:
     if attachment is not None and len(attachment) == _ATTACHMENT_SIZE:
         return attachment[16] == 0x10
     return rz.attachment_timestamp(attachment) is not None
-
-
-def ros_field(value: Any, name: str) -> Any:
-    if isinstance(value, Mapping):
-        return value.get(name)
-    return getattr(value, name, None)
-
-
-def by_node(names: Sequence[str]) -> dict[str, list[str]]:
-    """``["/a:x", "/a:y", "/b:z"]`` -> ``{"/a": ["x", "y"], "/b": ["z"]}``;
-    ``ValueError`` for a name that is not ``/node:param``."""
-    out: dict[str, list[str]] = {}
-    for name in names:
-        node, sep, param = name.partition(":")
-        if not sep or not node.startswith("/") or not param:
-            raise ValueError(f"a parameter name is /node:param, got {name!r}")
-        out.setdefault(node, []).append(param)
-    return out
-
-
-# rcl_interfaces/msg/ParameterType codes and the ParameterValue field of each
-_PARAM_FIELDS: Final = {
-    1: "bool_value",
-    2: "integer_value",
-    3: "double_value",
-    4: "string_value",
-    5: "byte_array_value",
-    6: "bool_array_value",
-    7: "integer_array_value",
-    8: "double_array_value",
-    9: "string_array_value",
-}
-
-
-def parameter_from_ros(value: Any) -> tuple[bool, Any]:
-    """A decoded ``rcl_interfaces/msg/ParameterValue`` as ``(set, plain)``:
-    ``(False, None)`` for PARAMETER_NOT_SET."""
-    code = ros_field(value, "type")
-    name = _PARAM_FIELDS.get(code) if isinstance(code, int) else None
-    if name is None:
-        return False, None
-    plain = ros_field(value, name)
-    if code == 5 and not isinstance(plain, bytes | bytearray):
-        plain = bytes(plain or ())
-    elif code >= 6 and plain is not None and not isinstance(plain, list):
-        plain = list(plain)
-    return True, plain
 
 
 def parameter_to_ros(value: Any) -> dict[str, Any]:
