@@ -247,7 +247,7 @@ def test_the_cache_is_bounded_and_counts() -> None:
     cache = DescriptionCache(max_entries=2)
     entries = [DescribedTypes(f"p/msg/T{i}", f"RIHS01_{i:064x}", {}) for i in range(3)]
     for entry in entries:
-        cache.put(entry)
+        cache.remember(entry)
     assert len(cache) == 2
     assert (cache.stored, cache.evicted) == (3, 1)
     assert cache.get(entries[0].type_hash) is None

@@ -259,7 +259,7 @@ class ZenohDescribe:
                 f"node {node} described {described.type_name} when asked for {type_name}"
             )
         await anyio.to_thread.run_sync(self._register_described, described)
-        DESCRIPTION_CACHE.put(described)
+        DESCRIPTION_CACHE.remember(described)
 
     def _register_described(self, described: DescribedTypes) -> None:
         """Register in this connection's registry and build the codecs the

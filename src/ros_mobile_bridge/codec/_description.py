@@ -30,13 +30,12 @@ from __future__ import annotations
 
 import ast
 import re
-import threading
-from collections import OrderedDict
 from collections.abc import Iterable, Mapping
 from typing import Any, Final
 
 from .._errors import SchemaError
 from ._convert import Invalid, check_default
+from ._lru import LruCache
 from ._model import DUMMY_FIELD, SCALAR, DescribedTypes, FieldSpec, MsgDef
 from ._names import is_valid_type_name
 from ._parse import parse_ros2msg
@@ -317,7 +316,7 @@ def describe(
     return DescribedTypes(top.name, actual, defs, texts)
 
 
-class DescriptionCache:
+class DescriptionCache(LruCache[str, DescribedTypes]):
     """Descriptions learnt from the robot, by RIHS01 hash, shared by every
     connection in the process (a hash names one definition, whoever serves
     it). Bounded at ``max_entries`` (default :data:`DESCRIPTION_CACHE_MAX`),
@@ -325,36 +324,11 @@ class DescriptionCache:
     what happened. Thread-safe."""
 
     def __init__(self, max_entries: int = DESCRIPTION_CACHE_MAX) -> None:
-        self.max_entries = max_entries
-        self.evicted = 0
-        self.hits = 0
-        self.stored = 0
-        self._entries: OrderedDict[str, DescribedTypes] = OrderedDict()
-        self._lock = threading.Lock()
+        super().__init__(max_entries)
 
-    def get(self, type_hash: str) -> DescribedTypes | None:
-        with self._lock:
-            found = self._entries.get(type_hash)
-            if found is not None:
-                self._entries.move_to_end(type_hash)
-                self.hits += 1
-            return found
-
-    def put(self, described: DescribedTypes) -> None:
-        with self._lock:
-            self._entries[described.type_hash] = described
-            self._entries.move_to_end(described.type_hash)
-            self.stored += 1
-            while len(self._entries) > self.max_entries:
-                self._entries.popitem(last=False)
-                self.evicted += 1
-
-    def __len__(self) -> int:
-        return len(self._entries)
-
-    def clear(self) -> None:
-        with self._lock:
-            self._entries.clear()
+    def remember(self, described: DescribedTypes) -> None:
+        """Keep ``described`` under its hash."""
+        self.put(described.type_hash, described)
 
 
 DESCRIPTION_CACHE = DescriptionCache()

@@ -6,7 +6,6 @@ import functools
 import json
 import re
 import threading
-from collections import OrderedDict
 from collections.abc import Callable, Hashable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -18,6 +17,7 @@ from rosbags.typesys.store import Typestore
 from .._errors import DecodeError, SchemaError
 from ._bundled import bundled_definition, bundled_interface
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
+from ._lru import LruCache
 from ._model import DescribedTypes, FieldDef, MsgDef
 from ._names import (
     canonical_name,
@@ -63,7 +63,7 @@ SHARED_CODECS_MAX: Final = 512
 """How many built CDR codecs the process keeps for reuse by any registry."""
 
 
-class _SharedCodecs:
+class _SharedCodecs(LruCache[Hashable, object]):
     """Built CDR codecs shared by every registry in the process, keyed by the
     type and the exact definitions of it and everything it uses: a thousand
     connections that see the same ``std_msgs/String`` build its decoder once
@@ -75,34 +75,7 @@ class _SharedCodecs:
     either way). Thread-safe."""
 
     def __init__(self, max_entries: int = SHARED_CODECS_MAX) -> None:
-        self.max_entries = max_entries
-        self.evicted = 0
-        self.hits = 0
-        self._entries: OrderedDict[Hashable, object] = OrderedDict()
-        self._lock = threading.Lock()
-
-    def get(self, key: Hashable) -> object | None:
-        with self._lock:
-            value = self._entries.get(key)
-            if value is not None:
-                self._entries.move_to_end(key)
-                self.hits += 1
-            return value
-
-    def put(self, key: Hashable, value: object) -> None:
-        with self._lock:
-            self._entries[key] = value
-            self._entries.move_to_end(key)
-            while len(self._entries) > self.max_entries:
-                self._entries.popitem(last=False)
-                self.evicted += 1
-
-    def __len__(self) -> int:
-        return len(self._entries)
-
-    def clear(self) -> None:
-        with self._lock:
-            self._entries.clear()
+        super().__init__(max_entries)
 
 
 _SHARED = _SharedCodecs()
