@@ -3,8 +3,10 @@ mode (pyproject.toml) with this backend fixture."""
 
 from __future__ import annotations
 
+import json
 import random
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 
@@ -34,6 +36,22 @@ def zenoh_router() -> Iterator[ZenohRouter]:
     pytest.importorskip("zenoh")
     with ZenohRouter() as router:
         yield router
+
+
+@pytest.fixture
+def raw(zenoh_router: ZenohRouter) -> Iterator[Any]:
+    """A bare eclipse-zenoh client session to the test's router: the fault
+    injector and the raw caller of the Zenoh tests."""
+    zenoh = pytest.importorskip("zenoh")
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([zenoh_router.locator]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(config)
+    try:
+        yield session
+    finally:
+        session.close()
 
 
 @pytest.fixture

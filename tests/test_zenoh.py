@@ -17,7 +17,6 @@ import sys
 import textwrap
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import anyio
@@ -35,20 +34,6 @@ TWIST = "geometry_msgs/msg/Twist"
 
 def options(domain: int, **kw: Any) -> rmb.ClientOptions:
     return rmb.ClientOptions(domain_id=domain, **kw)
-
-
-@pytest.fixture
-def raw(zenoh_router: Any) -> Iterator[Any]:
-    """A bare eclipse-zenoh client session to the router (the fault injector)."""
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([zenoh_router.locator]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
-    try:
-        yield session
-    finally:
-        session.close()
 
 
 def data_key(domain: int, topic: str, type_name: str = STRING) -> str:

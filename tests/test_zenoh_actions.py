@@ -18,7 +18,6 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from peers.ros_env import PeerEnv
 from peers.zenoh_router import ZenohRouter
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
@@ -44,20 +43,15 @@ def fibonacci(order: int) -> list[int]:
     return sequence
 
 
-@pytest.fixture(scope="session")
-def share(ros_peer_env: PeerEnv) -> Path:
-    return ros_peer_env.prefix / "share"
-
-
 @pytest.fixture
 def action_server(
-    zenoh_router: ZenohRouter, zenoh_domain: int, share: Path
+    zenoh_router: ZenohRouter, zenoh_domain: int, ros_share: Path
 ) -> Iterator[Callable[..., SdkNode]]:
     nodes: list[SdkNode] = []
 
     def start(*args: str, router: ZenohRouter | None = None) -> SdkNode:
         where = (router or zenoh_router).locator
-        node = SdkNode(where, zenoh_domain, share, "action", "--name", "/fibonacci", *args)
+        node = SdkNode(where, zenoh_domain, ros_share, "action", "--name", "/fibonacci", *args)
         nodes.append(node)
         return node
 
@@ -68,11 +62,11 @@ def action_server(
             node.stop()
 
 
-def official_hash(share: Path, type_name: str) -> str:
+def official_hash(ros_share: Path, type_name: str) -> str:
     """The RIHS01 hash in the Jazzy wheels' REP-2011 type description."""
     pkg, kind, name = type_name.split("/")
     source = f"{pkg}/{kind}/{name.split('_')[0] if kind == 'action' else name}.json"
-    hashes = json.loads((share / source).read_text())["type_hashes"]
+    hashes = json.loads((ros_share / source).read_text())["type_hashes"]
     return next(h["hash_string"] for h in hashes if h["type_name"] == type_name)
 
 
@@ -86,10 +80,10 @@ async def until(predicate: Callable[[], bool], what: str, timeout: float = 15.0)
             await anyio.sleep(0.05)
 
 
-async def connected(client: rmb.Client, share: Path) -> None:
+async def connected(client: rmb.Client, ros_share: Path) -> None:
     """The official Fibonacci.action registered (Zenoh carries no
     definitions), then wait for the server's services."""
-    client.register_type(FIB, (share / f"{FIB}.action").read_text(), encoding="ros2action")
+    client.register_type(FIB, (ros_share / f"{FIB}.action").read_text(), encoding="ros2action")
     await until(
         lambda: any(s.name == "/fibonacci/_action/cancel_goal" for s in client.services),
         "the action server's services",
@@ -97,25 +91,25 @@ async def connected(client: rmb.Client, share: Path) -> None:
 
 
 def test_the_peer_hashes_are_the_official_ones_and_ours(
-    action_server: Callable[..., SdkNode], share: Path
+    action_server: Callable[..., SdkNode], ros_share: Path
 ) -> None:
     node = action_server()
     ours = CodecRegistry()
-    ours.add_schema(FIB, "ros2action", (share / f"{FIB}.action").read_text())
+    ours.add_schema(FIB, "ros2action", (ros_share / f"{FIB}.action").read_text())
     assert sorted(node.hashes) == sorted(DERIVED)
     for name in DERIVED:
-        assert node.hashes[name] == official_hash(share, name) == type_hash(ours, name), name
+        assert node.hashes[name] == official_hash(ros_share, name) == type_hash(ours, name), name
 
 
 async def test_feedback_in_order_then_the_result(
     action_server: Callable[..., SdkNode],
     zenoh_router: ZenohRouter,
     zenoh_domain: int,
-    share: Path,
+    ros_share: Path,
 ) -> None:
     action_server("--step", "0.05")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await connected(client, share)
+        await connected(client, ros_share)
         assert {s.name: s.type for s in client.services}["/fibonacci/_action/send_goal"] == (
             f"{FIB}_SendGoal"
         )
@@ -137,11 +131,11 @@ async def test_a_canceled_goal_ends_canceled(
     action_server: Callable[..., SdkNode],
     zenoh_router: ZenohRouter,
     zenoh_domain: int,
-    share: Path,
+    ros_share: Path,
 ) -> None:
     action_server("--step", "0.1")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await connected(client, share)
+        await connected(client, ros_share)
         async with client.send_action_goal("/fibonacci", FIB, {"order": 200}) as goal:
             async for _ in goal.feedback:
                 break
@@ -159,11 +153,11 @@ async def test_leaving_the_block_cancels_the_goal_at_the_server(
     action_server: Callable[..., SdkNode],
     zenoh_router: ZenohRouter,
     zenoh_domain: int,
-    share: Path,
+    ros_share: Path,
 ) -> None:
     action_server("--step", "0.1")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await connected(client, share)
+        await connected(client, ros_share)
         async with client.send_action_goal("/fibonacci", FIB, {"order": 200}) as goal:
             await goal.accepted()
         with anyio.fail_after(10):
@@ -175,11 +169,11 @@ async def test_a_rejected_goal_raises_action_goal_error(
     action_server: Callable[..., SdkNode],
     zenoh_router: ZenohRouter,
     zenoh_domain: int,
-    share: Path,
+    ros_share: Path,
 ) -> None:
     action_server()
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await connected(client, share)
+        await connected(client, ros_share)
         with pytest.raises(rmb.ActionGoalError, match="rejected"):
             async with client.send_action_goal("/fibonacci", FIB, {"order": -1}):
                 pytest.fail("a rejected goal was handed out")
@@ -193,7 +187,7 @@ async def test_a_rejected_goal_raises_action_goal_error(
 
 
 async def test_a_goal_fails_with_a_reason_when_the_router_goes(
-    action_server: Callable[..., SdkNode], zenoh_domain: int, share: Path
+    action_server: Callable[..., SdkNode], zenoh_domain: int, ros_share: Path
 ) -> None:
     router = ZenohRouter().start()
     try:
@@ -205,7 +199,7 @@ async def test_a_goal_fails_with_a_reason_when_the_router_goes(
             reconnect=rmb.ReconnectPolicy(initial_delay=0.1, max_delay=0.3),
         )
         async with rmb.connect(router.locator, options=opts) as client:
-            await connected(client, share)
+            await connected(client, ros_share)
             async with client.send_action_goal("/fibonacci", FIB, {"order": 500}) as goal:
                 await goal.accepted()
                 await anyio.to_thread.run_sync(router.stop)
@@ -221,12 +215,12 @@ async def test_a_goal_fails_with_a_reason_when_the_action_server_goes(
     action_server: Callable[..., SdkNode],
     zenoh_router: ZenohRouter,
     zenoh_domain: int,
-    share: Path,
+    ros_share: Path,
 ) -> None:
     server = action_server("--step", "0.1")
     opts = options(zenoh_domain, keepalive_interval=0.2)
     async with rmb.connect(zenoh_router.locator, options=opts) as client:
-        await connected(client, share)
+        await connected(client, ros_share)
         async with client.send_action_goal("/fibonacci", FIB, {"order": 500}) as goal:
             await goal.accepted()
             await anyio.to_thread.run_sync(server.stop)
@@ -241,13 +235,13 @@ async def test_unanswered_result_queries_are_asked_again_then_the_goal_fails(
     action_server: Callable[..., SdkNode],
     zenoh_router: ZenohRouter,
     zenoh_domain: int,
-    share: Path,
+    ros_share: Path,
 ) -> None:
     # the server stays in the graph but ends every get_result query unanswered
     server = action_server("--step", "0.05", "--drop-results")
     opts = options(zenoh_domain, keepalive_interval=0.2)
     async with rmb.connect(zenoh_router.locator, options=opts) as client:
-        await connected(client, share)
+        await connected(client, ros_share)
         async with client.send_action_goal("/fibonacci", FIB, {"order": 3}) as goal:
             with anyio.fail_after(15), pytest.raises(rmb.ActionGoalError) as caught:
                 await goal.result()

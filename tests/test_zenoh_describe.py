@@ -22,7 +22,6 @@ import pytest
 from mcap.reader import make_reader
 
 import ros_mobile_bridge as rmb
-from peers.ros_env import PeerEnv
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import DESCRIPTION_CACHE, CodecRegistry, description_hash
 
@@ -54,29 +53,6 @@ def _fresh_cache() -> Iterator[None]:
     DESCRIPTION_CACHE.clear()
     yield
     DESCRIPTION_CACHE.clear()
-
-
-@pytest.fixture(scope="session")
-def definitions(ros_peer_env: PeerEnv) -> Path:
-    return ros_peer_env.prefix / "share"
-
-
-@pytest.fixture
-def sdk(
-    zenoh_router: Any, zenoh_domain: int, definitions: Path
-) -> Iterator[Callable[..., SdkNode]]:
-    nodes: list[SdkNode] = []
-
-    def start(role: str, *args: str) -> SdkNode:
-        node = SdkNode(zenoh_router.locator, zenoh_domain, definitions, role, *args)
-        nodes.append(node)
-        return node
-
-    try:
-        yield start
-    finally:
-        for node in nodes:
-            node.stop()
 
 
 def options(domain: int, **kw: Any) -> rmb.ClientOptions:
@@ -220,7 +196,7 @@ async def test_fetch_definition_schema_definition_and_recorder_text(
     zenoh_router: Any,
     zenoh_domain: int,
     tmp_path: Path,
-    definitions: Path,
+    ros_share: Path,
 ) -> None:
     talker(sdk, NESTED, NESTED_VALUES, "--describe")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
@@ -247,8 +223,8 @@ async def test_fetch_definition_schema_definition_and_recorder_text(
     assert (schema.name, schema.encoding) == (NESTED, "ros2msg")
     text = schema.data.decode()
     # the official .msg texts the node sent, verbatim (comments kept)
-    nested = (definitions / f"{NESTED}.msg").read_text().rstrip("\n")
-    basic = (definitions / "test_msgs/msg/BasicTypes.msg").read_text().rstrip("\n")
+    nested = (ros_share / f"{NESTED}.msg").read_text().rstrip("\n")
+    basic = (ros_share / "test_msgs/msg/BasicTypes.msg").read_text().rstrip("\n")
     assert text == f"{nested}\n{'=' * 80}\nMSG: test_msgs/BasicTypes\n{basic}\n"
 
 
@@ -276,9 +252,9 @@ DESCRIBE = "type_description_interfaces/srv/GetTypeDescription"
 
 
 async def test_our_node_describes_the_types_it_publishes_to_an_sdk_client(
-    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int, definitions: Path
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int, ros_share: Path
 ) -> None:
-    official = json.loads((definitions / f"{TWIST}.json").read_text())
+    official = json.loads((ros_share / f"{TWIST}.json").read_text())
     twist_hash = official["type_hashes"][0]["hash_string"]
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
         await client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.1}})

@@ -10,7 +10,6 @@ of the others, and nothing after it stops watching; garbage on
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
@@ -20,7 +19,6 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from peers.ros_env import PeerEnv
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
@@ -35,33 +33,14 @@ NAME = "/sdk_params:name"
 STRING = "std_msgs/msg/String"
 
 
-@pytest.fixture(scope="session")
-def definitions(ros_peer_env: PeerEnv) -> Path:
-    return ros_peer_env.prefix / "share"
-
-
 @pytest.fixture
-def params_node(zenoh_router: Any, zenoh_domain: int, definitions: Path) -> Iterator[SdkNode]:
+def params_node(zenoh_router: Any, zenoh_domain: int, ros_share: Path) -> Iterator[SdkNode]:
     """The sdk's ``/sdk_params`` node on this test's router and domain."""
-    node = SdkNode(zenoh_router.locator, zenoh_domain, definitions, "params")
+    node = SdkNode(zenoh_router.locator, zenoh_domain, ros_share, "params")
     try:
         yield node
     finally:
         node.stop()
-
-
-@pytest.fixture
-def raw(zenoh_router: Any) -> Iterator[Any]:
-    """A bare eclipse-zenoh client session to the router (the fault injector)."""
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([zenoh_router.locator]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
-    try:
-        yield session
-    finally:
-        session.close()
 
 
 def options(domain: int) -> rmb.ClientOptions:
@@ -192,7 +171,7 @@ async def test_hostile_parameter_events_are_counted_not_fatal(
 
 
 async def test_the_watch_is_restored_after_a_router_restart(
-    zenoh_domain: int, definitions: Path
+    zenoh_domain: int, ros_share: Path
 ) -> None:
     from peers.zenoh_router import ZenohRouter
 
@@ -204,7 +183,7 @@ async def test_the_watch_is_restored_after_a_router_restart(
         reconnect=rmb.ReconnectPolicy(initial_delay=0.1, max_delay=0.3),
     )
     router = ZenohRouter().start()
-    node = SdkNode(router.locator, zenoh_domain, definitions, "params")
+    node = SdkNode(router.locator, zenoh_domain, ros_share, "params")
     seen: list[dict[str, Any]] = []
     try:
         async with (

@@ -7,9 +7,7 @@ queryable is undeclared or the session closes are answered with an error."""
 
 from __future__ import annotations
 
-import json
 import threading
-from collections.abc import Iterator
 from typing import Any
 
 import anyio
@@ -21,20 +19,6 @@ from ros_mobile_bridge.wire import rmw_zenoh as rz
 zenoh = pytest.importorskip("zenoh")
 
 KEY = "7/svc/std_srvs::srv::dds_::Trigger_/RIHS01_" + "0" * 64
-
-
-@pytest.fixture
-def raw(zenoh_router: Any) -> Iterator[Any]:
-    """A bare eclipse-zenoh client session to the router (the caller)."""
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([zenoh_router.locator]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
-    try:
-        yield session
-    finally:
-        session.close()
 
 
 async def open_session(router: Any, **kw: Any) -> ZenohSession:

@@ -9,7 +9,7 @@ every type it uses."""
 from __future__ import annotations
 
 import re
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
-from peers.ros_env import PeerEnv
 from peers.zenoh_router import ZenohRouter
 from peers.zenoh_sdk_node import IMU, SdkNode, imu_fields
 
@@ -31,29 +30,6 @@ from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
 STRING = "std_msgs/msg/String"
 COUNT = 40  # messages per talker
-
-
-@pytest.fixture(scope="session")
-def share(ros_peer_env: PeerEnv) -> Path:
-    return ros_peer_env.prefix / "share"
-
-
-@pytest.fixture
-def sdk(
-    zenoh_router: ZenohRouter, zenoh_domain: int, share: Path
-) -> Iterator[Callable[..., SdkNode]]:
-    nodes: list[SdkNode] = []
-
-    def start(role: str, *args: str) -> SdkNode:
-        node = SdkNode(zenoh_router.locator, zenoh_domain, share, role, *args)
-        nodes.append(node)
-        return node
-
-    try:
-        yield start
-    finally:
-        for node in nodes:
-            node.stop()
 
 
 def plain(value: Any) -> Any:
@@ -99,10 +75,10 @@ def schema_blocks(text: str) -> dict[str, list[str]]:
     return out
 
 
-def official(share: Path, type_name: str) -> list[str]:
+def official(ros_share: Path, type_name: str) -> list[str]:
     parts = type_name.split("/")  # pkg/msg/Type or pkg/Type
     pkg, name = parts[0], parts[-1]
-    return fields_of((share / pkg / "msg" / f"{name}.msg").read_text())
+    return fields_of((ros_share / pkg / "msg" / f"{name}.msg").read_text())
 
 
 async def until(predicate: Callable[[], bool], what: str, timeout: float = 20.0) -> None:
@@ -115,7 +91,7 @@ async def test_sdk_talkers_are_recorded_and_read_back_with_mcap_ros2(
     sdk: Callable[..., SdkNode],
     zenoh_router: ZenohRouter,
     zenoh_domain: int,
-    share: Path,
+    ros_share: Path,
     tmp_path: Path,
 ) -> None:
     path = tmp_path / "zenoh.mcap"
@@ -158,9 +134,9 @@ async def test_sdk_talkers_are_recorded_and_read_back_with_mcap_ros2(
     # official .msg files of the Jazzy wheels have them
     assert {t: s.name for t, s in schemas.items()} == topics
     string = schema_blocks(schemas["/chatter"].data.decode())
-    assert string == {"": official(share, STRING)}
+    assert string == {"": official(ros_share, STRING)}
     imu = schema_blocks(schemas["/imu"].data.decode())
-    assert imu.pop("") == official(share, IMU)
+    assert imu.pop("") == official(ros_share, IMU)
     used = {name.replace("/msg/", "/") for name in imu}
     assert used == {
         "std_msgs/Header",
@@ -169,4 +145,4 @@ async def test_sdk_talkers_are_recorded_and_read_back_with_mcap_ros2(
         "geometry_msgs/Vector3",
     }
     for name, lines in imu.items():
-        assert lines == official(share, name), name
+        assert lines == official(ros_share, name), name

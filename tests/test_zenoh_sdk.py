@@ -10,15 +10,13 @@ talker on another domain stays invisible."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from peers.ros_env import PeerEnv
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 
@@ -32,37 +30,6 @@ OFFICIAL = {
     STRING: "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
     TWIST: "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
 }
-
-
-@pytest.fixture(scope="session")
-def definitions(ros_peer_env: PeerEnv) -> Path:
-    """The official interface files, laid out as the sdk looks for them."""
-    return ros_peer_env.prefix / "share"
-
-
-@pytest.fixture
-def sdk(
-    zenoh_router: Any, zenoh_domain: int, definitions: Path
-) -> Iterator[Callable[..., SdkNode]]:
-    """Start sdk nodes on this test's router and domain; all stopped after."""
-    nodes: list[SdkNode] = []
-
-    def start(role: str, *args: str, domain: int | None = None) -> SdkNode:
-        node = SdkNode(
-            zenoh_router.locator,
-            zenoh_domain if domain is None else domain,
-            definitions,
-            role,
-            *args,
-        )
-        nodes.append(node)
-        return node
-
-    try:
-        yield start
-    finally:
-        for node in nodes:
-            node.stop()
 
 
 def options(domain: int, **kw: Any) -> rmb.ClientOptions:

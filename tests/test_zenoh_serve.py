@@ -22,7 +22,6 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from peers.ros_env import PeerEnv
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
@@ -34,45 +33,6 @@ zenoh = pytest.importorskip("zenoh")
 
 SET_BOOL = "std_srvs/srv/SetBool"
 TRIGGER = "std_srvs/srv/Trigger"
-
-
-@pytest.fixture(scope="session")
-def definitions(ros_peer_env: PeerEnv) -> Path:
-    """The official interface files, laid out as the sdk looks for them."""
-    return ros_peer_env.prefix / "share"
-
-
-@pytest.fixture
-def sdk(
-    zenoh_router: Any, zenoh_domain: int, definitions: Path
-) -> Iterator[Callable[..., SdkNode]]:
-    """Start sdk nodes on this test's router and domain; all stopped after."""
-    nodes: list[SdkNode] = []
-
-    def start(role: str, *args: str) -> SdkNode:
-        node = SdkNode(zenoh_router.locator, zenoh_domain, definitions, role, *args)
-        nodes.append(node)
-        return node
-
-    try:
-        yield start
-    finally:
-        for node in nodes:
-            node.stop()
-
-
-@pytest.fixture
-def raw(zenoh_router: Any) -> Iterator[Any]:
-    """A bare eclipse-zenoh client session to the router (the fault injector)."""
-    config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([zenoh_router.locator]))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(config)
-    try:
-        yield session
-    finally:
-        session.close()
 
 
 def options(domain: int, **kw: Any) -> rmb.ClientOptions:
@@ -125,13 +85,13 @@ ADD_TWO_INTS_SRV = "int64 a\nint64 b\n---\nint64 sum\n"
 
 @pytest.fixture
 def sdk_with_add_two_ints(
-    zenoh_router: Any, zenoh_domain: int, definitions: Path, tmp_path: Path
+    zenoh_router: Any, zenoh_domain: int, ros_share: Path, tmp_path: Path
 ) -> Iterator[Callable[..., SdkNode]]:
     """sdk nodes whose definitions directory is the official one plus
     ``example_interfaces/srv/AddTwoInts.srv`` (not in the peer environment)."""
     tree = tmp_path / "share"
     tree.mkdir()
-    for entry in definitions.iterdir():
+    for entry in ros_share.iterdir():
         (tree / entry.name).symlink_to(entry)
     srv_dir = tree / "example_interfaces" / "srv"
     srv_dir.mkdir(parents=True)

@@ -15,7 +15,13 @@ Fixtures (all session-scoped except ``rosbridge_factory``):
 - ``rosbridge``: a :class:`~peers.rosbridge.RosBridge` with default flags,
   ready (the graph discovered);
 - ``rosbridge_factory``: ``start(*flags) -> RosBridge``, another bridge on the
-  same graph with extra flags, stopped after the test.
+  same graph with extra flags, stopped after the test;
+- ``ros_share``: the official interface files (``share/<pkg>/<kind>/``), laid
+  out as zenoh-ros2-sdk nodes look for them;
+- ``sdk``: ``start(role, *args, domain=None, router=None) -> SdkNode``, a
+  zenoh-ros2-sdk node on the test's zenoh router and domain (the
+  ``zenoh_router`` and ``zenoh_domain`` fixtures of ``conftest.py``), every
+  one stopped after the test.
 
 They never skip: a failed build or start fails the test with the log's tail.
 """
@@ -23,14 +29,16 @@ They never skip: a failed build or start fails the test with the log's tail.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
 
 from peers.ros_env import PeerEnv, ensure_peer_env
 from peers.rosbridge import RosBridge, RosGraph
+from peers.zenoh_sdk_node import SdkNode
 
-_FIXTURES = {"ros_peer_env", "ros_graph", "rosbridge", "rosbridge_factory"}
+_FIXTURES = {"ros_peer_env", "ros_graph", "rosbridge", "rosbridge_factory", "ros_share", "sdk"}
 _built: PeerEnv | None = None
 _build_error: BaseException | None = None
 
@@ -99,3 +107,31 @@ def rosbridge_factory(
     finally:
         for bridge in started:
             bridge.stop()
+
+
+@pytest.fixture(scope="session")
+def ros_share(ros_peer_env: PeerEnv) -> Path:
+    return ros_peer_env.prefix / "share"
+
+
+@pytest.fixture
+def sdk(zenoh_router: Any, zenoh_domain: int, ros_share: Path) -> Iterator[Callable[..., SdkNode]]:
+    nodes: list[SdkNode] = []
+
+    def start(role: str, *args: str, domain: int | None = None, router: Any = None) -> SdkNode:
+        """One sdk node in the given role (see tests/peers/zenoh_sdk_node.py)."""
+        node = SdkNode(
+            (router or zenoh_router).locator,
+            zenoh_domain if domain is None else domain,
+            ros_share,
+            role,
+            *args,
+        )
+        nodes.append(node)
+        return node
+
+    try:
+        yield start
+    finally:
+        for node in nodes:
+            node.stop()
