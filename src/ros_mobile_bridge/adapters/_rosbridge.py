@@ -41,7 +41,7 @@ from ._rosbridge_definitions import RosbridgeDefinitions
 from ._rosbridge_definitions import _typedefs_to_msg as _typedefs_to_msg
 from ._rosbridge_discovery import _INTERNAL_TIMEOUT as _INTERNAL_TIMEOUT
 from ._rosbridge_discovery import RosbridgeDiscovery, _names
-from ._rosbridge_parameters import RosbridgeParameters
+from ._rosbridge_parameters import RosbridgeParameters, SentSubscription
 from ._rosbridge_serving import RosbridgeServing, _Served
 from ._seam import EventSink, GoalEvents, SubscribeHints, TopicState
 from ._shared import (
@@ -530,16 +530,7 @@ class RosbridgeAdapter(
         self._decoders.pop((topic, "cbor-raw"), None)
         if want.compression == "cbor-raw" and want.type:
             await self._prepare_decoder(topic, want.type)
-        await self._ws.send(
-            self._engine.subscribe(
-                topic,
-                id=want.id,
-                type=want.type,
-                throttle_rate=want.throttle_rate,
-                queue_length=want.queue_length,
-                compression=want.compression,
-            )
-        )
+        await self._send_subscribe(topic, want)
         if topic in self._topics and topic not in self._live:
             self._set_live(topic, True)
 
@@ -568,6 +559,19 @@ class RosbridgeAdapter(
         self._wanted[topic] = hints
         await self._sync(topic)
         self._post()
+
+    async def _send_subscribe(self, topic: str, sub: SentSubscription) -> None:
+        """The bridge's ``subscribe`` op for ``topic`` as ``sub`` describes it."""
+        await self._ws.send(
+            self._engine.subscribe(
+                topic,
+                id=sub.id,
+                type=sub.type,
+                throttle_rate=sub.throttle_rate,
+                queue_length=sub.queue_length,
+                compression=sub.compression,
+            )
+        )
 
     async def unsubscribe(self, topic: str) -> None:
         self._wanted.pop(topic, None)

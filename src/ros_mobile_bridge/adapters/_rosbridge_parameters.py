@@ -44,8 +44,8 @@ from ._rosbridge_discovery import _names
 from ._seam import ParameterValues
 
 
-class _UserSub(Protocol):
-    """What the adapter sent for a user's subscription (its ``_WireSub``)."""
+class SentSubscription(Protocol):
+    """What the adapter sent for a subscription (its ``_WireSub``)."""
 
     @property
     def id(self) -> str: ...
@@ -67,7 +67,7 @@ class RosbridgeParameters:
     codecs: CodecRegistry
     _ws: WebSocket
     _engine: rb.RosbridgeEngine
-    _subs: Mapping[str, _UserSub]
+    _subs: Mapping[str, SentSubscription]
     _decoders: dict[tuple[str, str], Decoder | None]
     _call: Callable[[str, Any, float | None], Awaitable[Any]]
     _watched_parameters: set[str]
@@ -78,6 +78,7 @@ class RosbridgeParameters:
         def _next_id(self, kind: str) -> str: ...
         def _reject(self, reason: str, detail: str, count: int = 1) -> None: ...
         def _emit(self, event: Any) -> None: ...
+        async def _send_subscribe(self, topic: str, sub: SentSubscription) -> None: ...
 
     def _init_parameters(self) -> None:
         self._watched_parameters = set()
@@ -144,16 +145,7 @@ class RosbridgeParameters:
         await self._ws.send(self._engine.unsubscribe(PARAMETER_EVENTS, id=sub_id))
         user = self._subs.get(PARAMETER_EVENTS)
         if user is not None:  # its encoding again (the engine forgot cbor-raw)
-            await self._ws.send(
-                self._engine.subscribe(
-                    PARAMETER_EVENTS,
-                    id=user.id,
-                    type=user.type,
-                    throttle_rate=user.throttle_rate,
-                    queue_length=user.queue_length,
-                    compression=user.compression,
-                )
-            )
+            await self._send_subscribe(PARAMETER_EVENTS, user)
 
     async def _send_parameter_subscribe(self, sub_id: str) -> None:
         """The watch's ``subscribe``, in the user's compression when the user
