@@ -495,6 +495,7 @@ class SyncClient:
         schema: str | None = None,
         buffer: int | None = None,
         compression: Compression | None = None,
+        decode: bool = True,
         timeout: float | None = None,
     ) -> SyncSubscription:
         """:meth:`Client.subscribe`, as a (plain) context manager yielding a
@@ -517,6 +518,7 @@ class SyncClient:
                 schema=schema,
                 buffer=buffer,
                 compression=compression,
+                decode=decode,
             )
 
         ctx = self._worker.run(_sync_call, make, (), what=f"subscribe to {topic}")
