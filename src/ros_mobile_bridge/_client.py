@@ -113,6 +113,16 @@ class Client:
         """Async iterator: the service list at once, then every change."""
         return self._router.services.watch()
 
+    async def nodes(self) -> list[str]:
+        """The ROS nodes of the robot's graph now: full names, sorted, this
+        client's own node left out. Zenoh: the nodes' liveliness tokens;
+        rosbridge: ``/rosapi/nodes`` (``ServiceError`` when the bridge has
+        no rosapi); Foxglove: the protocol has no nodes, so
+        ``NotSupportedError``. There is no node watch: the graph command
+        (``rmb graph --watch``) polls this."""
+        self._conn.require_connected()
+        return await self._conn.adapter.nodes()
+
     # -- subscriptions ------------------------------------------------------
     def subscribe(
         self,

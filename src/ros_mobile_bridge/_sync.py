@@ -420,6 +420,11 @@ class SyncClient:
         )
 
     @_mirrors
+    def nodes(self) -> list[str]:
+        """:meth:`Client.nodes`, blocking."""
+        return self._call(_nodes, self._client, timeout=None, what="nodes")
+
+    @_mirrors
     def get_parameters(
         self, names: Sequence[str], *, timeout: float | None = None
     ) -> dict[str, Any]:
@@ -745,6 +750,10 @@ async def _call_service(
     client: Client, name: str, request: Mapping[str, Any] | None, timeout: float | None
 ) -> Any:
     return await client.call_service(name, request, timeout=timeout)
+
+
+async def _nodes(client: Client) -> list[str]:
+    return await client.nodes()
 
 
 async def _get_parameters(

@@ -35,9 +35,17 @@ ENV_URL = "RMB_URL"
 
 
 def _verbs() -> list[Verb]:
-    from . import _demo, _interface, _record, _ros, _topic  # they import _verb, never this module
+    from . import _demo, _graph, _interface, _rate, _record, _ros, _topic  # never import _app
 
-    return [*_demo.VERBS, *_topic.VERBS, *_ros.VERBS, *_interface.VERBS, *_record.VERBS]
+    return [
+        *_demo.VERBS,
+        *_topic.VERBS,
+        *_rate.VERBS,
+        *_graph.VERBS,
+        *_ros.VERBS,
+        *_interface.VERBS,
+        *_record.VERBS,
+    ]
 
 
 # -- parsing -------------------------------------------------------------------------------

@@ -1,12 +1,11 @@
 """``rmb`` topic verbs, shaped like ``ros2 topic``: ``topics`` (``topic
-list``), ``echo``, ``hz``, ``bw``, ``info`` and ``pub``."""
+list``), ``echo``, ``info`` and ``pub`` (``hz``, ``bw`` and ``delay`` are in
+``_rate``)."""
 
 from __future__ import annotations
 
 import argparse
 import math
-import statistics
-from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -122,103 +121,6 @@ def _build_echo(p: argparse.ArgumentParser) -> None:
         help="one JSON object per line (full arrays; NaN and infinities as null)",
     )
     p.add_argument("--max-hz", type=float, default=None, help="deliver at most this rate")
-
-
-# -- hz and bw -----------------------------------------------------------------------------
-
-
-def _hz_lines(stamps: deque[int]) -> list[str] | None:
-    if len(stamps) < 2:
-        return None
-    gaps = [(b - a) / 1e9 for a, b in zip(stamps, list(stamps)[1:], strict=False)]
-    span = (stamps[-1] - stamps[0]) / 1e9
-    if span <= 0:
-        return None
-    std = statistics.pstdev(gaps)
-    return [
-        f"average rate: {(len(stamps) - 1) / span:.3f}",
-        f"\tmin: {min(gaps):.3f}s max: {max(gaps):.3f}s std dev: {std:.5f}s window: {len(stamps)}",
-    ]
-
-
-def _size(n: float) -> str:
-    for unit, scale in (("MB", 1e6), ("KB", 1e3)):
-        if n >= scale:
-            return f"{n / scale:.2f} {unit}"
-    return f"{n:.0f} B"
-
-
-def _bw_lines(samples: deque[tuple[int, int]]) -> list[str] | None:
-    if len(samples) < 2:
-        return None
-    span = (samples[-1][0] - samples[0][0]) / 1e9
-    if span <= 0:
-        return None
-    sizes = [s for _, s in samples]
-    rate = sum(sizes[1:]) / span
-    return [
-        f"{_size(rate)}/s from {len(sizes)} messages",
-        f"\tMessage size mean: {_size(statistics.fmean(sizes))} min: {_size(min(sizes))} "
-        f"max: {_size(max(sizes))}",
-    ]
-
-
-async def _measure(ns: argparse.Namespace, *, bandwidth: bool) -> int:
-    if ns.window < 2:
-        raise UsageError(f"--window must be 2 or more, got {ns.window}")
-    samples: deque[Any] = deque(maxlen=ns.window)
-    seen = [0]
-
-    async def report() -> None:
-        shown = 0
-        while True:
-            await anyio.sleep(1.0)
-            if seen[0] == shown:
-                if shown:
-                    out("no new messages")
-                continue
-            shown = seen[0]
-            lines = _bw_lines(samples) if bandwidth else _hz_lines(samples)
-            if lines:
-                out("\n".join(lines))
-
-    async with (
-        open_robot(ns) as robot,
-        robot.subscribe(ns.topic, adaptive=False, buffer=4096) as sub,
-    ):
-        if bandwidth:
-            out(f"Subscribed to [{ns.topic}]")
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(notice_if_missing, robot, ns.topic, seen)
-            tg.start_soon(report)
-            async for msg in sub:
-                seen[0] += 1
-                samples.append(
-                    (msg.receive_time_ns, msg.byte_size) if bandwidth else msg.receive_time_ns
-                )
-    return 0
-
-
-async def _hz(ns: argparse.Namespace) -> int:
-    return await _measure(ns, bandwidth=False)
-
-
-async def _bw(ns: argparse.Namespace) -> int:
-    return await _measure(ns, bandwidth=True)
-
-
-def _window(default: int) -> Any:
-    def build(p: argparse.ArgumentParser) -> None:
-        p.add_argument(
-            "-w",
-            "--window",
-            type=int,
-            default=default,
-            metavar="N",
-            help=f"measure over the last N messages (default {default})",
-        )
-
-    return build
 
 
 # -- info ----------------------------------------------------------------------------------
@@ -401,10 +303,6 @@ VERBS = [
     Verb(("topic", "list"), "list topics (-t: with types)", build=_build_topics, run=_topics),
     Verb(("echo",), "print a topic's messages as YAML (or --json)", ("TOPIC",), _build_echo, _echo),
     Verb(("topic", "echo"), "same as echo", ("TOPIC",), _build_echo, _echo, hidden=True),
-    Verb(("hz",), "print a topic's message rate every second", ("TOPIC",), _window(10000), _hz),
-    Verb(("topic", "hz"), "same as hz", ("TOPIC",), _window(10000), _hz, hidden=True),
-    Verb(("bw",), "print a topic's bandwidth every second", ("TOPIC",), _window(100), _bw),
-    Verb(("topic", "bw"), "same as bw", ("TOPIC",), _window(100), _bw, hidden=True),
     Verb(("info",), "the server (protocol, capabilities), or a topic", ("TOPIC?",), None, _info),
     Verb(("topic", "info"), "a topic's type and counts", ("TOPIC",), None, _info, hidden=True),
     Verb(

@@ -629,6 +629,17 @@ class ZenohAdapter(
     def _published_types(self) -> list[str]:
         return list(self._pubs.schemas().values())
 
+    async def nodes(self) -> list[str]:
+        """The nodes whose liveliness tokens (``NN``) are alive on this
+        domain, ours left out; bounded as the graph is (``max_channels``
+        tokens)."""
+        names = {
+            f"{token.namespace.rstrip('/')}/{token.node_name}"
+            for key, token in self._graph.items()
+            if token.kind is rz.EntityKind.NODE and key != self._node_key
+        }
+        return sorted(names)
+
     async def unadvertise(self, topic: str) -> None:
         pub = self._pubs.pop(topic, None)
         if pub is not None:

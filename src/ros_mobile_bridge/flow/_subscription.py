@@ -331,7 +331,7 @@ class Subscription:
         if not decode:
             # the raw form replaces the decoder on this instance only: a
             # decoded subscription's path is untouched
-            self._decode = self._raw
+            self._decode = self._raw  # type: ignore[method-assign]
         self._throttle = throttle
         self.breaker: CircuitBreaker = breaker if breaker is not None else CircuitBreaker()
         """This subscription's circuit breaker: ``state``, ``next_retry_at``
