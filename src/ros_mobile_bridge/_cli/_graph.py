@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import AsyncIterator, Callable, Iterable
+from functools import partial
 from typing import Any, Final, Literal
 
 import anyio
@@ -35,7 +36,7 @@ Entry = tuple[Kind, str, str | None]
 _SEND_GOAL: Final = "/_action/send_goal"
 
 
-def graph_entries(kind: Literal["topic", "service"], items: Iterable[Any]) -> set[Entry]:
+def graph_entries(kind: str, items: Iterable[Any]) -> set[Entry]:
     """The entries of a topic or service list (``TopicInfo``/``ServiceInfo``);
     actions are read off their ``send_goal`` services."""
     entries: set[Entry] = set()
@@ -53,11 +54,22 @@ def graph_entries(kind: Literal["topic", "service"], items: Iterable[Any]) -> se
 
 
 def changes(before: set[Entry], after: set[Entry]) -> list[tuple[bool, Entry]]:
-    """``(added, entry)`` pairs, removals first, each sorted by kind and name
-    (a type change is a removal and an addition)."""
-    gone = sorted(before - after, key=lambda e: (e[0], e[1], e[2] or ""))
-    new = sorted(after - before, key=lambda e: (e[0], e[1], e[2] or ""))
-    return [(False, e) for e in gone] + [(True, e) for e in new]
+    """``(added, entry)`` pairs, removals first, each sorted by kind and name.
+    A type change is a removal and an addition, except a type learnt late
+    (rosbridge looks service types up after listing them): that is no
+    event."""
+    untyped = {(kind, name) for kind, name, type_ in before if type_ is None}
+    typed_late = {e for e in after - before if e[2] is not None and (e[0], e[1]) in untyped}
+    settled = {(kind, name) for kind, name, _ in typed_late}
+    gone = [e for e in before - after if not (e[2] is None and (e[0], e[1]) in settled)]
+    new = [e for e in after - before if e not in typed_late]
+
+    def order(e: Entry) -> tuple[str, str, str]:
+        return (e[0], e[1], e[2] or "")
+
+    return [(False, e) for e in sorted(gone, key=order)] + [
+        (True, e) for e in sorted(new, key=order)
+    ]
 
 
 def _print(added: bool, entry: Entry, as_json: bool) -> None:
@@ -85,20 +97,18 @@ async def _follow(
             return
 
 
-async def _poll_nodes(robot: Client, watch: bool, interval: float, as_json: bool) -> None:
-    known: set[Entry] = set()
+async def _nodes_now(robot: Client) -> set[Entry]:
+    return {("node", name, None) for name in await robot.nodes()}
+
+
+async def _watch_nodes(robot: Client, known: set[Entry], interval: float, as_json: bool) -> None:
+    """Every ``interval`` seconds, the changes since ``known``."""
     while True:
-        try:
-            now: set[Entry] = {("node", name, None) for name in await robot.nodes()}
-        except NotSupportedError as exc:
-            warn(f"no nodes: {exc}")
-            return
+        await anyio.sleep(interval)
+        now = await _nodes_now(robot)
         for added, entry in changes(known, now):
             _print(added, entry, as_json)
         known = now
-        if not watch:
-            return
-        await anyio.sleep(interval)
 
 
 async def _graph(ns: argparse.Namespace) -> int:
@@ -106,40 +116,23 @@ async def _graph(ns: argparse.Namespace) -> int:
         raise UsageError(f"--interval must be a positive number of seconds, got {ns.interval!r}")
     async with open_robot(ns) as robot:
         # the nodes first, then topics, services and actions (a snapshot's order)
-        await _poll_nodes(robot, False, ns.interval, ns.json)
+        nodes: set[Entry] | None
+        try:
+            nodes = await _nodes_now(robot)
+        except NotSupportedError as exc:
+            warn(f"no nodes: {exc}")
+            nodes = None
+        for added, entry in changes(set(), nodes or set()):
+            _print(added, entry, ns.json)
         async with anyio.create_task_group() as tg:
-            nodes_known = ns.watch
-            tg.start_soon(
-                _follow,
-                robot.watch_topics(),
-                lambda items: graph_entries("topic", items),
-                ns.watch,
-                ns.json,
-            )
-            tg.start_soon(
-                _follow,
-                robot.watch_services(),
-                lambda items: graph_entries("service", items),
-                ns.watch,
-                ns.json,
-            )
-            if nodes_known:
-                tg.start_soon(_watch_nodes, robot, ns.interval, ns.json)
+            for kind, lists in (
+                ("topic", robot.watch_topics()),
+                ("service", robot.watch_services()),
+            ):
+                tg.start_soon(_follow, lists, partial(graph_entries, kind), ns.watch, ns.json)
+            if ns.watch and nodes is not None:
+                tg.start_soon(_watch_nodes, robot, nodes, ns.interval, ns.json)
     return 0
-
-
-async def _watch_nodes(robot: Client, interval: float, as_json: bool) -> None:
-    """After the snapshot: only the changes (the snapshot printed the rest)."""
-    try:
-        known: set[Entry] = {("node", name, None) for name in await robot.nodes()}
-    except NotSupportedError:
-        return  # said once already by the snapshot
-    while True:
-        await anyio.sleep(interval)
-        now: set[Entry] = {("node", name, None) for name in await robot.nodes()}
-        for added, entry in changes(known, now):
-            _print(added, entry, as_json)
-        known = now
 
 
 async def _node_list(ns: argparse.Namespace) -> int:

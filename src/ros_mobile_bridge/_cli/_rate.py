@@ -172,6 +172,7 @@ async def _measure(ns: argparse.Namespace, *, bandwidth: bool) -> int:
             ns.topic, decode=False, adaptive=False, buffer=max(_BUFFER, ns.window)
         ) as sub,
     ):
+
         def queue_stats() -> SubscriptionStats:
             return sub.stats
 
