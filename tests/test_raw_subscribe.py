@@ -94,6 +94,7 @@ async def test_foxglove_raw_messages_are_never_decoded(
     assert [bytes(m.data) for m in got] == [string_msg(f"n {i}") for i in range(50)]
     assert [bytes(m.data)[-1] for m in got2] == list(range(50))
     assert {m.schema_name for m in got} == {STRING}
+    assert {m.sequence for m in got} == {None}  # Foxglove carries none
     assert sub.stats.received == sub2.stats.received == 50
     assert decodes == []
 
@@ -129,6 +130,10 @@ async def test_zenoh_raw_messages_are_the_cdr_payload(
     decode = CodecRegistry().decoder(STRING, "cdr")
     numbers = [int(decode(m.data)["data"].split()[1]) for m in got]
     assert numbers == list(range(numbers[0], numbers[0] + 20))
+    # rmw_zenoh's attachment: the publisher's sequence number and clock
+    sequences = [m.sequence for m in got]
+    assert sequences == list(range(numbers[0] + 1, numbers[0] + 21)), (numbers, sequences)
+    assert all(m.log_time_ns is not None and m.log_time_ns <= m.receive_time_ns for m in got)
     assert {m.schema_name for m in got} == {STRING}
     assert decodes == []
 

@@ -49,13 +49,31 @@ def _build_topics(p: argparse.ArgumentParser) -> None:
 # -- echo --------------------------------------------------------------------------------
 
 
+def message_info(msg: Message) -> dict[str, Any]:
+    """The transport's message info: when it arrived, the wire's timestamp
+    (Foxglove's log time, rmw_zenoh's source timestamp; None over
+    rosbridge), the publisher's sequence number (Zenoh; else None) and the
+    payload's size."""
+    return {
+        "receive_time_ns": msg.receive_time_ns,
+        "log_time_ns": msg.log_time_ns,
+        "sequence": msg.sequence,
+        "byte_size": msg.byte_size,
+    }
+
+
+def _info_line(msg: Message) -> str:
+    return "# " + ", ".join(f"{k}: {v}" for k, v in message_info(msg).items() if v is not None)
+
+
 def _print_message(msg: Message, ns: argparse.Namespace) -> None:
     if msg.decode_error:
         if ns.json:
-            record = {"topic": msg.topic, "schema": msg.schema_name, "data": None}
-            out(json_line({**record, "decode_error": msg.decode_error}))
+            record = {"topic": msg.topic, "schema": msg.schema_name, **message_info(msg)}
+            out(json_line({**record, "data": None, "decode_error": msg.decode_error}))
         else:
-            out(f"# not decoded ({msg.decode_error}): {msg.byte_size} bytes\n---")
+            info = f"{_info_line(msg)}\n" if ns.info else ""
+            out(f"{info}# not decoded ({msg.decode_error}): {msg.byte_size} bytes\n---")
         return
     value: Any = msg.data
     if ns.field:
@@ -64,18 +82,14 @@ def _print_message(msg: Message, ns: argparse.Namespace) -> None:
         data = plain(value, no_arr=ns.no_arr, no_str=ns.no_str)
         out(
             json_line(
-                {
-                    "topic": msg.topic,
-                    "schema": msg.schema_name,
-                    "log_time_ns": msg.log_time_ns,
-                    "receive_time_ns": msg.receive_time_ns,
-                    "data": data,
-                }
+                {"topic": msg.topic, "schema": msg.schema_name, **message_info(msg), "data": data}
             )
         )
         return
     truncate = None if ns.full or ns.truncate_length <= 0 else ns.truncate_length
     data = plain(value, truncate=truncate, no_arr=ns.no_arr, no_str=ns.no_str)
+    if ns.info:
+        out(_info_line(msg))
     out(dump_yaml(data) + "---")
 
 
@@ -121,6 +135,12 @@ def _build_echo(p: argparse.ArgumentParser) -> None:
         help="one JSON object per line (full arrays; NaN and infinities as null)",
     )
     p.add_argument("--max-hz", type=float, default=None, help="deliver at most this rate")
+    p.add_argument(
+        "--info",
+        action="store_true",
+        help="print each message's info first: receive time, the wire's timestamp (Foxglove "
+        "log time, Zenoh source time), sequence number (Zenoh), size (--json: always)",
+    )
 
 
 # -- info ----------------------------------------------------------------------------------

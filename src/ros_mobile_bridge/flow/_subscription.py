@@ -479,6 +479,7 @@ class Subscription:
             frame.log_time_ns,
             payload.nbytes,
             error,
+            frame.sequence,
         )
 
     def _raw(self, frame: RawFrame) -> Message:
@@ -495,6 +496,7 @@ class Subscription:
             frame.log_time_ns,
             payload.nbytes,
             None,
+            frame.sequence,
         )
 
     def close(self) -> None:
