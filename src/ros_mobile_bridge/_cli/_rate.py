@@ -194,7 +194,6 @@ async def _measure(ns: argparse.Namespace, *, bandwidth: bool) -> int:
                 extra,
                 ns,
             )
-            meter.checkpoint(0, time.monotonic_ns())
             async for batch in sub.batches(_BATCH):
                 received = queue_stats().received
                 seen[0] = received
