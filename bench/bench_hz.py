@@ -34,9 +34,8 @@ import time
 from pathlib import Path
 from typing import Any, Final
 
-from websockets.sync.client import connect
-
 from _peer import STRING_TOPIC
+from websockets.sync.client import connect
 
 HERE: Final = Path(__file__).resolve().parent
 SUBPROTOCOL: Final = "foxglove.sdk.v1.1"
@@ -128,7 +127,8 @@ def bare_counter(url: str, stop: threading.Event, counts: dict[str, Any]) -> Non
 def one_rate(
     url: str, peer: subprocess.Popen[str], rate: int, seconds: float, backend: str
 ) -> dict[str, Any]:
-    assert peer.stdin is not None and peer.stdout is not None
+    assert peer.stdin is not None
+    assert peer.stdout is not None
     hz = HzProcess(url, backend)
     time.sleep(2.0)  # rmb connects and subscribes
     stop = threading.Event()
@@ -140,7 +140,8 @@ def one_rate(
     peer.stdin.write(f"pace {STRING_TOPIC} {count} {rate}\n")
     peer.stdin.flush()
     answers = [peer.stdout.readline().split() for _ in range(2)]
-    assert answers[0] == ["started"] and answers[1][0] == "done", answers
+    assert answers[0] == ["started"], answers
+    assert answers[1][0] == "done", answers
     sent_seconds = float(answers[1][2])
     time.sleep(2.5)  # both drain, and rmb hz prints its last figures
     stop.set()
