@@ -57,8 +57,8 @@ def start_peer(backlog: int) -> tuple[subprocess.Popen[str], int]:
 class HzProcess:
     """``rmb hz TOPIC --json`` in its own process; its JSON lines kept."""
 
-    def __init__(self, url: str, backend: str) -> None:
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE.parent / "src"), *sys.path])}
+    def __init__(self, url: str, backend: str, src: Path) -> None:
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(src), *sys.path])}
         self.proc = subprocess.Popen(
             [
                 sys.executable,
@@ -125,11 +125,11 @@ def bare_counter(url: str, stop: threading.Event, counts: dict[str, Any]) -> Non
 
 
 def one_rate(
-    url: str, peer: subprocess.Popen[str], rate: int, seconds: float, backend: str
+    url: str, peer: subprocess.Popen[str], rate: int, seconds: float, backend: str, src: Path
 ) -> dict[str, Any]:
     assert peer.stdin is not None
     assert peer.stdout is not None
-    hz = HzProcess(url, backend)
+    hz = HzProcess(url, backend, src)
     time.sleep(2.0)  # rmb connects and subscribes
     stop = threading.Event()
     counts: dict[str, Any] = {"ready": threading.Event()}
@@ -170,6 +170,12 @@ def main() -> int:
     parser.add_argument("--backend", choices=("asyncio", "trio"), default="asyncio")
     parser.add_argument("--backlog", type=int, default=1_000_000, help="server backlog per client")
     parser.add_argument("--json", type=Path, help="also write the rows here")
+    parser.add_argument(
+        "--src",
+        type=Path,
+        default=HERE.parent / "src",
+        help="the ros_mobile_bridge sources rmb hz runs from (another version's to compare)",
+    )
     args = parser.parse_args()
     peer, port = start_peer(args.backlog)
     url = f"ws://127.0.0.1:{port}"
@@ -181,7 +187,7 @@ def main() -> int:
             f"{'rmb n':>8} {'rmb drop':>8} {'rmb hz':>9} {'ratio':>6}"
         )
         for rate in (int(r) for r in args.rates.split(",")):
-            row = one_rate(url, peer, rate, args.seconds, args.backend)
+            row = one_rate(url, peer, rate, args.seconds, args.backend, args.src)
             rows.append(row)
             print(
                 f"{row['target_hz']:>8} {row['sent_hz']:>9.0f} {row['bare_received']:>8} "
