@@ -195,3 +195,31 @@ def test_echo_info(robot: DemoRobot) -> None:
     assert "log_time_ns: " in lines[0] and "byte_size: " in lines[0]
     assert "sequence" not in lines[0]  # Foxglove carries none
     assert lines[1] == "header:\n"
+
+
+def test_info_json(robot: DemoRobot) -> None:
+    def run(*args: str) -> Any:
+        result = subprocess.run(
+            [sys.executable, "-m", "ros_mobile_bridge", "-u", robot.url, "info", *args, "--json"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            cwd=ROOT,
+            env=_env(),
+            check=False,
+        )
+        assert result.returncode == 0, result.stderr
+        return json.loads(result.stdout)
+
+    server = run()
+    assert server["protocol"] == "foxglove-ws"
+    assert server["topics"] == 5 and server["services"] == 2
+    assert "services" in server["capabilities"]
+    topic = run("/odom")
+    assert topic == {
+        "topic": "/odom",
+        "type": "nav_msgs/msg/Odometry",
+        "encoding": "cdr",
+        "publishers": None,
+        "subscriptions": None,
+    }

@@ -166,8 +166,46 @@ async def _count(robot: Client, service: str, topic: str, key: str) -> str:
     return str(len(names)) if isinstance(names, list) else "unknown"
 
 
+def _server_record(robot: Client, url: str | None) -> dict[str, Any]:
+    info = robot.server_info
+    return {
+        "server": info.name,
+        "url": url,
+        "protocol": robot.protocol,
+        "subprotocol": info.subprotocol,
+        "capabilities": list(info.capabilities),
+        "encodings": list(info.supported_encodings),
+        "session": info.session_id,
+        "metadata": dict(info.metadata),
+        "topics": len(robot.topics),
+        "services": len(robot.services),
+    }
+
+
+async def _counts(robot: Client, topic: str) -> tuple[int | None, int | None]:
+    """Publisher and subscription counts where the transport reports them
+    (rosbridge), else None."""
+    if robot.protocol != "rosbridge":
+        return None, None
+    found = []
+    for service, key in (
+        ("/rosapi/publishers", "publishers"),
+        ("/rosapi/subscribers", "subscribers"),
+    ):
+        text = await _count(robot, service, topic, key)
+        found.append(int(text) if text.isdigit() else None)
+    return found[0], found[1]
+
+
+def _build_info(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="one JSON object instead of text")
+
+
 async def _info(ns: argparse.Namespace) -> int:
     async with open_robot(ns) as robot:
+        if ns.topic is None and ns.json:
+            out(json_line(_server_record(robot, ns.url)))
+            return 0
         if ns.topic is None:
             info = robot.server_info
             sub = f", subprotocol {info.subprotocol}" if info.subprotocol else ""
@@ -188,6 +226,11 @@ async def _info(ns: argparse.Namespace) -> int:
             warn(missing_line("topic", ns.topic, [t.name for t in robot.topics]))
             return 1
         topic = next(t for t in robot.topics if t.name == ns.topic)
+        if ns.json:
+            pubs_n, subs_n = await _counts(robot, ns.topic)
+            record = {"topic": ns.topic, "type": topic.schema_name, "encoding": topic.encoding}
+            out(json_line({**record, "publishers": pubs_n, "subscriptions": subs_n}))
+            return 0
         out(f"Type: {topic.schema_name}")
         if topic.encoding:
             out(f"Encoding: {topic.encoding}")
@@ -323,8 +366,16 @@ VERBS = [
     Verb(("topic", "list"), "list topics (-t: with types)", build=_build_topics, run=_topics),
     Verb(("echo",), "print a topic's messages as YAML (or --json)", ("TOPIC",), _build_echo, _echo),
     Verb(("topic", "echo"), "same as echo", ("TOPIC",), _build_echo, _echo, hidden=True),
-    Verb(("info",), "the server (protocol, capabilities), or a topic", ("TOPIC?",), None, _info),
-    Verb(("topic", "info"), "a topic's type and counts", ("TOPIC",), None, _info, hidden=True),
+    Verb(
+        ("info",),
+        "the server (protocol, capabilities), or a topic",
+        ("TOPIC?",),
+        _build_info,
+        _info,
+    ),
+    Verb(
+        ("topic", "info"), "a topic's type and counts", ("TOPIC",), _build_info, _info, hidden=True
+    ),
     Verb(
         ("pub",),
         "publish a message (YAML) at 1 Hz until stopped (-r, --once, -t)",
