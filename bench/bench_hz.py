@@ -57,8 +57,14 @@ def start_peer(backlog: int) -> tuple[subprocess.Popen[str], int]:
 class HzProcess:
     """``rmb hz TOPIC --json`` in its own process; its JSON lines kept."""
 
-    def __init__(self, url: str, backend: str, src: Path) -> None:
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(src), *sys.path])}
+    def __init__(
+        self, url: str, backend: str, src: Path, *, protocol: str = "auto", domain: int = 0
+    ) -> None:
+        env = {
+            **os.environ,
+            "PYTHONPATH": os.pathsep.join([str(src), *sys.path]),
+            "ROS_DOMAIN_ID": str(domain),
+        }
         self.proc = subprocess.Popen(
             [
                 sys.executable,
@@ -66,6 +72,8 @@ class HzProcess:
                 "ros_mobile_bridge",
                 "--backend",
                 backend,
+                "--protocol",
+                protocol,
                 "-u",
                 url,
                 "hz",
@@ -163,6 +171,61 @@ def one_rate(
     }
 
 
+def zenoh_rows(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """Zenoh: bursts as fast as the publisher puts (``bench_zenoh.py``'s
+    router and publisher), counted by a bare eclipse-zenoh subscriber
+    callback and by ``rmb hz --protocol zenoh``."""
+    import random
+    from contextlib import ExitStack
+
+    import bench_zenoh as bz
+    import zenoh
+
+    rows = []
+    with ExitStack() as stack:
+        locator, _what = bz.router(stack)
+        domain = random.randrange(100, 200)
+        publisher = bz.Publisher(locator, domain)
+        stack.callback(publisher.close)
+        for count in (int(c) for c in args.zenoh_counts.split(",")):
+            hz = HzProcess(locator, args.backend, args.src, protocol="zenoh", domain=domain)
+            time.sleep(3.0)  # rmb connects, subscribes, the declaration reaches the router
+            session = zenoh.open(bz.zenoh_config("client", locator))
+            got = {"n": 0, "first": 0.0, "last": 0.0}
+
+            def on_sample(_sample: Any, got: dict[str, Any] = got) -> None:
+                now = bz.monotonic()
+                if got["n"] == 0:
+                    got["first"] = now
+                got["last"] = now
+                got["n"] += 1
+
+            subscriber = session.declare_subscriber(bz.selector(domain, "string"), on_sample)
+            time.sleep(1.0)
+            sent, start, end = publisher.burst("string", count)
+            time.sleep(3.0)  # both drain, and rmb hz prints its last figures
+            subscriber.undeclare()  # type: ignore[no-untyped-call]
+            session.close()  # type: ignore[no-untyped-call]
+            hz.stop()
+            last = hz.last() or {}
+            span = got["last"] - got["first"]
+            bare_rate = (got["n"] - 1) / span if span > 0 else 0.0
+            rows.append(
+                {
+                    "target_hz": 0,
+                    "sent": sent,
+                    "sent_hz": sent / (end - start),
+                    "bare_received": got["n"],
+                    "bare_hz": bare_rate,
+                    "rmb_received": last.get("received", 0),
+                    "rmb_dropped": last.get("dropped", 0),
+                    "rmb_hz": last.get("rate_hz", 0.0),
+                    "ratio": last.get("rate_hz", 0.0) / bare_rate if bare_rate else 0.0,
+                }
+            )
+    return rows
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rates", default="1000,5000,20000,50000,100000")
@@ -170,6 +233,12 @@ def main() -> int:
     parser.add_argument("--backend", choices=("asyncio", "trio"), default="asyncio")
     parser.add_argument("--backlog", type=int, default=1_000_000, help="server backlog per client")
     parser.add_argument("--json", type=Path, help="also write the rows here")
+    parser.add_argument("--transport", choices=("foxglove", "zenoh"), default="foxglove")
+    parser.add_argument(
+        "--zenoh-counts",
+        default="100000,400000",
+        help="zenoh: the burst sizes (put as fast as the publisher goes)",
+    )
     parser.add_argument(
         "--src",
         type=Path,
@@ -177,33 +246,41 @@ def main() -> int:
         help="the ros_mobile_bridge sources rmb hz runs from (another version's to compare)",
     )
     args = parser.parse_args()
-    peer, port = start_peer(args.backlog)
-    url = f"ws://127.0.0.1:{port}"
-    rows = []
+    header = (
+        f"{'target':>8} {'sent/s':>9} {'bare n':>8} {'bare/s':>9} "
+        f"{'rmb n':>8} {'rmb drop':>8} {'rmb hz':>9} {'ratio':>6}"
+    )
+    rows: list[dict[str, Any]] = []
     failed: list[str] = []
-    try:
+
+    def show(row: dict[str, Any]) -> None:
+        rows.append(row)
         print(
-            f"{'target':>8} {'sent/s':>9} {'bare n':>8} {'bare/s':>9} "
-            f"{'rmb n':>8} {'rmb drop':>8} {'rmb hz':>9} {'ratio':>6}"
+            f"{row['target_hz'] or 'burst':>8} {row['sent_hz']:>9.0f} {row['bare_received']:>8} "
+            f"{row['bare_hz']:>9.0f} {row['rmb_received']:>8} {row['rmb_dropped']:>8} "
+            f"{row['rmb_hz']:>9.0f} {row['ratio']:>6.2f}",
+            flush=True,
         )
-        for rate in (int(r) for r in args.rates.split(",")):
-            row = one_rate(url, peer, rate, args.seconds, args.backend, args.src)
-            rows.append(row)
-            print(
-                f"{row['target_hz']:>8} {row['sent_hz']:>9.0f} {row['bare_received']:>8} "
-                f"{row['bare_hz']:>9.0f} {row['rmb_received']:>8} {row['rmb_dropped']:>8} "
-                f"{row['rmb_hz']:>9.0f} {row['ratio']:>6.2f}",
-                flush=True,
-            )
-            if row["rmb_received"] > row["sent"] or row["bare_received"] > row["sent"]:
-                failed.append(f"{rate}: more received than sent")
-            if row["rmb_received"] == 0:
-                failed.append(f"{rate}: rmb hz printed no figures")
-    finally:
-        assert peer.stdin is not None
-        peer.stdin.write("quit\n")
-        peer.stdin.flush()
-        peer.wait(10)
+        if row["rmb_received"] > row["sent"] or row["bare_received"] > row["sent"]:
+            failed.append(f"{row['target_hz']}: more received than sent")
+        if row["rmb_received"] == 0:
+            failed.append(f"{row['target_hz']}: rmb hz printed no figures")
+
+    print(header)
+    if args.transport == "zenoh":
+        for row in zenoh_rows(args):
+            show(row)
+    else:
+        peer, port = start_peer(args.backlog)
+        url = f"ws://127.0.0.1:{port}"
+        try:
+            for rate in (int(r) for r in args.rates.split(",")):
+                show(one_rate(url, peer, rate, args.seconds, args.backend, args.src))
+        finally:
+            assert peer.stdin is not None
+            peer.stdin.write("quit\n")
+            peer.stdin.flush()
+            peer.wait(10)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     if failed:

@@ -5,8 +5,9 @@ as ``ros2 topic hz / bw / delay`` print them, or one JSON object per line.
 subscribe with ``decode=False`` (the payload is never parsed), no rate cap
 and no adaptive throttle, and take the rate from the subscription's
 ``received`` counter, which counts every frame routed to it before any
-filter. Frames the buffer drops while the printer is busy are therefore
-still counted; only the gap statistics (min, max, std dev) and the message
+filter (plus, over Zenoh, the samples the client's inbox had no room for,
+counted before any subscription saw them). Frames the buffer drops while the
+printer is busy are therefore still counted; only the gap statistics (min, max, std dev) and the message
 sizes come from the frames actually taken. ``delay`` decodes each message
 for its ``header.stamp``."""
 
@@ -34,6 +35,10 @@ _BUFFER: Final = 65536
 """Frames a counting subscription may hold before it drops the oldest
 (dropped frames are still counted as arrivals)."""
 _BATCH: Final = 4096
+_INBOX_DROPS: Final = "backlog_overflow"
+"""The rejection a Zenoh client counts for a sample its inbox had no room
+for, before any subscription saw it: the command's only subscription is the
+one it was for, so it is an arrival too."""
 
 
 @dataclass
@@ -167,7 +172,7 @@ async def _measure(ns: argparse.Namespace, *, bandwidth: bool) -> int:
         raise UsageError(f"--window must be 2 or more, got {ns.window}")
     meter = ArrivalMeter(ns.window)
     async with (
-        open_robot(ns) as robot,
+        open_robot(ns, zenoh_backlog=_BUFFER) as robot,
         robot.subscribe(
             ns.topic, decode=False, adaptive=False, buffer=max(_BUFFER, ns.window)
         ) as sub,
@@ -176,10 +181,14 @@ async def _measure(ns: argparse.Namespace, *, bandwidth: bool) -> int:
         def queue_stats() -> SubscriptionStats:
             return sub.stats
 
+        def arrivals() -> int:
+            return queue_stats().received + robot.rejections.get(_INBOX_DROPS, 0)
+
         def extra() -> dict[str, Any]:
             s = queue_stats()
-            dropped = s.dropped_overflow + s.dropped_breaker
-            return {"received": s.received, "dropped": dropped}
+            inbox = robot.rejections.get(_INBOX_DROPS, 0)
+            dropped = s.dropped_overflow + s.dropped_breaker + inbox
+            return {"received": s.received + inbox, "dropped": dropped}
 
         seen = [0]
         if bandwidth and not ns.json:
@@ -195,7 +204,7 @@ async def _measure(ns: argparse.Namespace, *, bandwidth: bool) -> int:
                 ns,
             )
             async for batch in sub.batches(_BATCH):
-                received = queue_stats().received
+                received = arrivals()
                 seen[0] = received
                 meter.taken(batch, received, time.monotonic_ns())
     return 0
