@@ -530,6 +530,7 @@ async def test_bag_info_summarises_a_recording_offline(
         "start_ns": st.message_start_time,
         "end_ns": st.message_end_time,
         "messages": stats.total,
+        "complete": True,
         "topics": [
             {
                 "name": "/battery",
@@ -546,6 +547,18 @@ async def test_bag_info_summarises_a_recording_offline(
         ],
     }
 
+    # a recording cut short (no footer: killed, a full disk) is counted record by record
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[:-37])
+    verb, args = parse(["bag", "info", str(cut), "--json"])
+    assert verb.run_sync is not None and verb.run_sync(args) == 0
+    partial = json.loads(capsys.readouterr().out)
+    assert partial["complete"] is False
+    assert (partial["messages"], partial["topics"]) == (info["messages"], info["topics"])
+    verb, args = parse(["bag", "info", str(cut)])
+    assert verb.run_sync is not None and verb.run_sync(args) == 0
+    assert "Incomplete:" in capsys.readouterr().out
+
 
 def test_bag_info_refuses_what_is_not_a_recording(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
@@ -554,5 +567,8 @@ def test_bag_info_refuses_what_is_not_a_recording(
     bad.write_bytes(b"not an mcap file at all")
     verb, args = parse(["bag", "info", str(bad)])
     assert verb.run_sync is not None and verb.run_sync(args) == 1
+    assert "not a readable MCAP file" in capsys.readouterr().err
+    bad.write_bytes(b"\x89MC")  # the start of the magic, nothing more
+    assert verb.run_sync(args) == 1
     assert "not a readable MCAP file" in capsys.readouterr().err
     assert main(["bag", "info", str(tmp_path / "missing.mcap")]) == 1

@@ -2,7 +2,9 @@
 prints it (files, size, duration, start, end, messages, and per topic its
 type, count and serialization format). It reads the file alone, with no
 robot and no ``$RMB_URL``: the MCAP summary section when the file has one
-(every file ``rmb record`` finished), else it counts the messages."""
+(every file ``rmb record`` finished), else it counts the messages, up to
+the first damaged record of a file that was cut short (a recording killed
+with SIGKILL, a full disk): what it reports is then marked incomplete."""
 
 from __future__ import annotations
 
@@ -33,7 +35,8 @@ class TopicCount:
 @dataclass(frozen=True, slots=True)
 class BagInfo:
     """What ``rmb bag info`` reports; times in nanoseconds since the epoch
-    (0 when the file holds no message)."""
+    (0 when the file holds no message). ``complete`` is False for a file
+    cut short: the counts are those of the records before the damage."""
 
     path: str
     size: int
@@ -42,6 +45,7 @@ class BagInfo:
     start_ns: int
     end_ns: int
     topics: list[TopicCount] = field(default_factory=list)
+    complete: bool = True
 
     @property
     def duration_ns(self) -> int:
@@ -58,6 +62,7 @@ class BagInfo:
             "start_ns": self.start_ns,
             "end_ns": self.end_ns,
             "messages": self.messages,
+            "complete": self.complete,
             "topics": [
                 {
                     "name": t.name,
@@ -71,11 +76,11 @@ class BagInfo:
 
 
 def bag_info(path: str) -> BagInfo:
-    """Read ``path``'s summary (or scan its messages when it has none).
-    ``OSError`` when the file cannot be read, ``ValueError`` when it is not
-    an MCAP file; ``RuntimeError`` without the ``mcap`` package."""
+    """Read ``path``'s summary (or count its messages when it has none, or
+    when it was cut short). ``OSError`` when the file cannot be read,
+    ``ValueError`` when it is not an MCAP file; ``RuntimeError`` without the
+    ``mcap`` package."""
     try:
-        from mcap.exceptions import McapError
         from mcap.reader import make_reader
     except ImportError as exc:  # pragma: no cover - the [record] extra is missing
         raise RuntimeError(
@@ -87,40 +92,65 @@ def bag_info(path: str) -> BagInfo:
             reader = make_reader(f)
             profile = reader.get_header().profile
             summary = reader.get_summary()
-            stats = summary.statistics if summary is not None else None
-            if summary is not None and stats is not None:
-                channels = summary.channels
-                schemas = summary.schemas
-                counts = dict(stats.channel_message_counts)
-                total = stats.message_count
-                start, end = stats.message_start_time, stats.message_end_time
-            else:  # no summary: count the messages
-                channels, schemas, counts = {}, {}, {}
-                total, start, end = 0, 0, 0
-                for schema, channel, message in reader.iter_messages(log_time_order=False):
-                    channels[channel.id] = channel
-                    if schema is not None:
-                        schemas[schema.id] = schema
-                    counts[channel.id] = counts.get(channel.id, 0) + 1
-                    start = message.log_time if total == 0 else min(start, message.log_time)
-                    end = max(end, message.log_time)
-                    total += 1
-        except McapError as exc:
-            raise ValueError(f"{path} is not a readable MCAP file: {exc}") from None
-    topics = []
-    for channel_id, channel in sorted(channels.items(), key=lambda kv: kv[1].topic):
-        schema = schemas.get(channel.schema_id)
-        topics.append(
-            TopicCount(
-                channel.topic,
-                schema.name if schema is not None else "",
-                counts.get(channel_id, 0),
-                channel.message_encoding,
-            )
+        except Exception:  # no footer, a cut summary: _scan says what is left
+            summary = None
+        stats = summary.statistics if summary is not None else None
+        if summary is None or stats is None:
+            f.seek(0)
+            return _scan(path, size, f)
+    topics = [
+        TopicCount(
+            channel.topic,
+            summary.schemas[channel.schema_id].name if channel.schema_id in summary.schemas else "",
+            stats.channel_message_counts.get(channel_id, 0),
+            channel.message_encoding,
         )
-    if total == 0:
-        start = end = 0
+        for channel_id, channel in sorted(summary.channels.items(), key=lambda kv: kv[1].topic)
+    ]
+    total = stats.message_count
+    start, end = (stats.message_start_time, stats.message_end_time) if total else (0, 0)
     return BagInfo(path, size, profile, total, start, end, topics)
+
+
+def _scan(path: str, size: int, f: Any) -> BagInfo:
+    """Count the messages record by record, up to the first damaged one."""
+    from mcap.records import Channel, Header, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    profile, complete, seen_header = "", True, False
+    schemas: dict[int, str] = {}
+    channels: dict[int, Channel] = {}
+    counts: dict[int, int] = {}
+    total = start = end = 0
+    try:
+        for record in StreamReader(f).records:
+            if isinstance(record, Header):
+                profile, seen_header = record.profile, True
+            elif isinstance(record, Schema):
+                schemas[record.id] = record.name
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+                start = record.log_time if total == 0 else min(start, record.log_time)
+                end = max(end, record.log_time)
+                total += 1
+    except Exception as exc:  # a cut chunk fails in its decompressor, whatever it raises
+        if not seen_header:
+            raise ValueError(
+                f"{path} is not a readable MCAP file: {exc or type(exc).__name__}"
+            ) from None
+        complete = False
+    topics = [
+        TopicCount(
+            channel.topic,
+            schemas.get(channel.schema_id, ""),
+            counts.get(channel_id, 0),
+            channel.message_encoding,
+        )
+        for channel_id, channel in sorted(channels.items(), key=lambda kv: kv[1].topic)
+    ]
+    return BagInfo(path, size, profile, total, start, end, topics, complete)
 
 
 def _size(n: int) -> str:
@@ -153,6 +183,10 @@ def render(info: BagInfo) -> list[str]:
         f"End:               {_stamp(info.end_ns)}",
         f"Messages:          {info.messages}",
     ]
+    if not info.complete:
+        lines.append(
+            "Incomplete:        the file was cut short; counted up to the first damaged record"
+        )
     label = "Topic information: "
     if not info.topics:
         lines.append(label.rstrip())
