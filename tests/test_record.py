@@ -18,20 +18,23 @@ import os
 import re
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import anyio
 import numpy as np
 import pytest
+from foxglove import Schema
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 import ros_mobile_bridge as rmb
 from _recording import fields_only, read_with_recipe, read_with_rosbags, ros2_profile
 from _util import wait_until
+from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph
 from ros_mobile_bridge._cli._app import main, parse
 from ros_mobile_bridge._cli._record import default_output, summary_lines
@@ -232,6 +235,88 @@ async def test_every_topic_by_default_a_json_only_topic_is_skipped_and_counted(
     assert recipe["/odom"][0] == "nav_msgs/msg/Odometry"
     assert summary_count(path) == stats.total
     assert {t: len(v) for t, v in read_with_rosbags(path).items()} == stats.messages
+
+
+def _publish_until(stop: threading.Event, logs: list[Callable[[int], None]]) -> None:
+    n = 0
+    while not stop.wait(0.01):
+        for log in logs:
+            log(n)
+        n += 1
+
+
+async def test_foxglove_json_channels_of_ros_types_are_reencoded_to_cdr(tmp_path: Path) -> None:
+    """A Foxglove ``json`` channel of a ROS type (a ros2msg schema, or a JSON
+    schema named as a type the client knows) is encoded to CDR into a ros2
+    channel; one of a type nobody defines is skipped and counted."""
+    path = tmp_path / "json.mcap"
+    stop = threading.Event()
+    with SdkServer() as server:
+        twist = server.channel("/twist_json", "geometry_msgs/msg/Twist", encoding="json")
+        vector = server.raw_channel(
+            "/vector_json",
+            encoding="json",
+            schema=Schema(
+                name="geometry_msgs/msg/Vector3",
+                encoding="jsonschema",
+                data=json.dumps({"type": "object"}).encode(),
+            ),
+        )
+        acme = server.raw_channel(
+            "/acme",
+            encoding="json",
+            schema=Schema(name="acme/Status", encoding="jsonschema", data=b'{"type": "object"}'),
+        )
+
+        def log_twist(n: int) -> None:
+            twist.log(json.dumps({"linear": {"x": float(n)}, "angular": {"z": -1.0}}).encode())
+
+        def log_vector(n: int) -> None:
+            vector.log(json.dumps({"x": float(n), "y": 2.0, "z": 3.0}).encode())
+
+        def log_acme(n: int) -> None:
+            acme.log(json.dumps({"n": n}).encode())
+
+        publisher = threading.Thread(
+            target=_publish_until, args=(stop, [log_twist, log_vector, log_acme]), daemon=True
+        )
+        publisher.start()
+        try:
+            async with rmb.connect(server.url, options=options()) as robot:
+                topics = ["/twist_json", "/vector_json", "/acme"]
+                async with robot.record(path, topics=topics, adaptive=False) as rec:
+                    await wait_until(
+                        lambda: (
+                            min(rec.stats.messages.get(t, 0) for t in topics[:2]) >= 3
+                            and rec.stats.skipped.get("/acme", 0) >= 3
+                        ),
+                        10,
+                    )
+        finally:
+            stop.set()
+            publisher.join(5)
+    stats = rec.stats
+    assert stats.reencoded == stats.messages
+    assert set(stats.messages) == {"/twist_json", "/vector_json"}
+    assert stats.skip_reasons == {"/acme": {"no_ros2_definition": stats.skipped["/acme"]}}
+    profile = ros2_profile(path)
+    assert {t: p["type"] for t, p in profile.items()} == {
+        "/twist_json": "geometry_msgs/msg/Twist",
+        "/vector_json": "geometry_msgs/msg/Vector3",
+    }
+    decoded = decode_all(path)
+    twists = [m for _t, m in decoded["/twist_json"]]
+    first = twists[0]["linear"]["x"]
+    assert twists == [
+        {
+            "linear": {"x": first + i, "y": 0.0, "z": 0.0},
+            "angular": {"x": 0.0, "y": 0.0, "z": -1.0},
+        }
+        for i in range(len(twists))
+    ]
+    vectors = [m for _t, m in decoded["/vector_json"]]
+    assert vectors[0] == {"x": vectors[0]["x"], "y": 2.0, "z": 3.0}
+    assert read_with_rosbags(path) == {t: fields_only([m for _t, m in decoded[t]]) for t in decoded}
 
 
 async def test_the_file_is_valid_after_cancellation(demo: DemoRobot, tmp_path: Path) -> None:

@@ -318,27 +318,26 @@ class _Recorder:
             else:
                 self._skip(frame, "no_ros2_definition", f"no decoder for {schema!r}")
             return
-        ros_type = bool(schema) and codecs.resolves(schema) and codecs.jsonschema(schema) is None
-        if not ros_type:
-            self._skip(
-                frame,
-                "no_ros2_definition",
-                f"{schema or 'its type'!r} has no ROS 2 message definition "
-                f"({frame.encoding}); the MCAP ros2 profile holds CDR only",
-            )
-            return
         reencoded = frame.encoding != "cdr"
         if reencoded:
+            if not schema or not codecs.resolves(schema):
+                self._skip(frame, "no_ros2_definition", self._no_ros2(schema, frame.encoding))
+                return
             try:
                 message = frame.decode(frame.payload)
             except (DecodeError, ValueError) as exc:
                 self._skip(frame, "undecodable", f"a message did not decode: {exc}")
                 return
             try:
+                encode = codecs.encoder(schema, "cdr")
+            except (DecodeError, ValueError):  # only a JSON schema by that name
+                self._skip(frame, "no_ros2_definition", self._no_ros2(schema, frame.encoding))
+                return
+            try:
                 if frame.encoding == "json":
                     message = _fix_bytes(codecs, schema, message)
-                data = codecs.encoder(schema, "cdr")(message)
-            except (DecodeError, ValueError, TypeError) as exc:  # SchemaError included
+                data = encode(message)
+            except (DecodeError, ValueError, TypeError) as exc:
                 self._skip(frame, "unencodable", f"cannot encode {schema} as CDR: {exc}")
                 return
         else:
@@ -351,6 +350,13 @@ class _Recorder:
         self._add(frame, channel_id, data)
         if reencoded:
             self._reencoded[frame.topic] = self._reencoded.get(frame.topic, 0) + 1
+
+    @staticmethod
+    def _no_ros2(schema: str, encoding: str) -> str:
+        return (
+            f"{schema or 'its type'!r} has no ROS 2 message definition ({encoding}); "
+            "the MCAP ros2 profile holds CDR only"
+        )
 
     def _add(self, frame: RawFrame, channel_id: int, data: bytes) -> None:
         self._sequence += 1
