@@ -123,8 +123,8 @@ class RecordStats:
     ones encoded to CDR by the client (they came as JSON or CBOR);
     ``bytes``: CDR payload bytes written (before the file's compression);
     ``skipped``: messages per topic that were not written, and
-    ``skip_reasons`` the same per topic and :data:`SkipReason` (each
-    topic's first skip is logged); ``failed``: topics not recorded (any
+    ``skip_reasons`` the same per topic and :data:`SkipReason` (the first
+    skip of each topic and reason is logged); ``failed``: topics not recorded (any
     more) because the bridge or the client refused them, with the reason
     (logged once).
     """
