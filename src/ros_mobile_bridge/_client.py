@@ -30,6 +30,7 @@ from .flow import Subscription, Watcher
 
 if TYPE_CHECKING:
     import os
+    from typing import IO
 
     from ._record import Recording
 
@@ -290,7 +291,7 @@ class Client:
     # -- recording ----------------------------------------------------------
     def record(
         self,
-        path: str | os.PathLike[str],
+        path: str | os.PathLike[str] | IO[bytes],
         *,
         topics: Sequence[str] | None = None,
         max_hz: float | None = None,
@@ -316,7 +317,9 @@ class Client:
         indexes), on every exit path, cancellation included. Needs the
         ``mcap`` package (the ``[record]`` extra). Arguments are checked
         here, at once (``ValueError`` / ``TypeError``); the file is created
-        on entering (``OSError``). See docs/recording.md."""
+        (or truncated) on entering (``OSError``). ``path`` may also be a
+        binary stream (``sys.stdout.buffer``), written, flushed and left
+        open. See docs/recording.md."""
         from ._record import check_record_args, open_recording
 
         checked, wanted = check_record_args(path, topics, max_hz, compression)
