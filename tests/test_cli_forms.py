@@ -21,7 +21,10 @@ from typing import Any
 import pytest
 import yaml
 
+from peers.rosbridge import RosBridge
 from ros_mobile_bridge.demo import DemoRobot
+
+pytest_plugins = ["peers.ros_fixtures"]
 
 ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ["asyncio", "trio"]
@@ -308,3 +311,45 @@ def test_a_lost_connection_then_ctrl_c_is_one_line(backend: str) -> None:
     assert proc.returncode == 130
     assert "connection lost" in lost
     assert err == "", err
+
+
+# -- against rosbridge_server_rs on a ROS 2 graph (marked ros by its fixtures) ------------------
+
+
+def test_rosbridge_topics_verbose_counts_publishers_and_subscribers(rosbridge: RosBridge) -> None:
+    lines = ok(rmb("topics", "-v", url=rosbridge.url)).splitlines()
+    published = lines[1 : lines.index("")]
+    subscribed = lines[lines.index("Subscribed topics:") + 1 :]
+    assert " * /chatter [std_msgs/msg/String] 1 publisher" in published
+    assert any(line.startswith(" * /rmb_in [std_msgs/msg/String] ") for line in subscribed)
+    records = {
+        r["name"]: r for r in json_lines(ok(rmb("topics", "-v", "--json", url=rosbridge.url)))
+    }
+    assert records["/chatter"]["publishers"] == 1
+    assert isinstance(records["/chatter"]["subscribers"], int)
+
+
+def test_rosbridge_params_by_node(rosbridge: RosBridge) -> None:
+    got = rmb("param", "get", "/rmb_params", "speed", "label", url=rosbridge.url)
+    assert ok(got) == "speed: 0.5\nlabel: demo\n"
+    relative = rmb("param", "get", "rmb_params", "speed", url=rosbridge.url)
+    assert ok(relative) == "speed: 0.5\n"  # a node named relative is resolved against /
+    dumped = yaml.safe_load(ok(rmb("param", "dump", "/rmb_params", url=rosbridge.url)))
+    assert dumped["/rmb_params"]["ros__parameters"]["label"] == "demo"
+    listed = ok(rmb("param", "list", "/rmb_params", url=rosbridge.url)).split()
+    assert {"speed", "label"} <= set(listed)
+    missing = rmb("param", "dump", "/rmb_parms", url=rosbridge.url)
+    assert "nearest: /rmb_params" in refused(missing, 1)
+
+
+def test_rosbridge_action_send_json_lines(rosbridge: RosBridge) -> None:
+    goal = ("/fibonacci", "test_msgs/action/Fibonacci", "{order: 4}")
+    records = json_lines(ok(rmb("action", "send", *goal, "--json", url=rosbridge.url)))
+    assert records[0] == {
+        "action": "/fibonacci",
+        "type": "test_msgs/action/Fibonacci",
+        "goal": {"order": 4},
+    }
+    feedback = [r["feedback"] for r in records[1:-1]]
+    assert feedback and all(set(r) == {"feedback"} for r in records[1:-1])
+    assert records[-1] == {"status": "succeeded", "result": {"sequence": [0, 1, 1, 2, 3, 5]}}

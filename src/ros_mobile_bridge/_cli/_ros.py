@@ -165,6 +165,11 @@ def _flow(value: Any) -> str:
 async def _param_get(ns: argparse.Namespace) -> int:
     node, names = _node_first(list(ns.name))
     async with open_robot(ns) as robot:
+        if node is None and len(names) >= 2 and not _flat(robot) and ":" not in names[0]:
+            # a relative node (rmb_params speed): the first name when the robot has such a node
+            first = graph_name(names[0], "node")
+            if any(k.startswith(f"{first}:") for k in await robot.list_parameters()):
+                node, names = first, names[1:]
         wanted = [_qualified(robot, node, n) for n in names]
         values = await robot.get_parameters(wanted)
         known = list(await robot.list_parameters()) if len(values) < len(wanted) else []
