@@ -202,3 +202,18 @@ def test_the_yaml_hint_only_for_yaml_the_shell_split(args: tuple[str, ...], hint
     assert result.returncode == 2
     assert "unexpected argument(s)" in result.stderr
     assert ("quote YAML or JSON as one argument" in result.stderr) is hint, result.stderr
+
+
+def test_the_cli_page_lists_every_verb_next_to_ros2_and_hu() -> None:
+    text = (ROOT / "docs" / "cli.md").read_text()
+    table = text.split("## Every verb next to ros2 and hu", 1)[1].split("\n## ", 1)[0]
+    rows = [line for line in table.splitlines() if line.startswith("| `")]
+    first_columns = " ".join(row.split(" | ")[0] for row in rows)
+    for entry in _table.ENTRIES:
+        if entry.hidden or entry.path == ("params",):
+            continue
+        words = " ".join(entry.path)
+        group_form = f"`{entry.path[0]} " in first_columns and entry.path[-1] in first_columns
+        assert f"`{words}" in first_columns or group_form, f"{words} is not in the table"
+    for row in rows:
+        assert len(row.split(" | ")) == 4, row  # rmb, ros2, hu, what differs
