@@ -217,3 +217,40 @@ def test_the_cli_page_lists_every_verb_next_to_ros2_and_hu() -> None:
         assert f"`{words}" in first_columns or group_form, f"{words} is not in the table"
     for row in rows:
         assert len(row.split(" | ")) == 4, row  # rmb, ros2, hu, what differs
+
+
+def test_graph_names_resolve_as_ros2_reads_them() -> None:
+    from ros_mobile_bridge._cli._common import graph_name
+    from ros_mobile_bridge._cli._format import UsageError
+
+    assert graph_name("odom") == "/odom"
+    assert graph_name("/odom") == "/odom"
+    assert graph_name("camera/image") == "/camera/image"
+    for bad in ("", " ", "~/private", "a b"):
+        with pytest.raises(UsageError):
+            graph_name(bad)
+
+
+def test_a_type_matches_in_either_spelling_only() -> None:
+    from ros_mobile_bridge._cli._common import check_type, same_type
+    from ros_mobile_bridge._cli._format import UsageError
+
+    assert same_type("nav_msgs/Odometry", "nav_msgs/msg/Odometry")
+    assert same_type("nav_msgs/msg/Odometry", "nav_msgs/Odometry")
+    assert not same_type("nav_msgs/msg/Path", "nav_msgs/msg/Odometry")
+    assert not same_type("std_srvs/srv/Trigger", "std_srvs/msg/Trigger")
+    check_type("msg", "/odom", "nav_msgs/msg/Odometry", None)  # the robot does not say
+    with pytest.raises(UsageError, match="/odom is a nav_msgs/msg/Odometry, not a x/msg/Y"):
+        check_type("msg", "/odom", "x/msg/Y", "nav_msgs/msg/Odometry")
+    with pytest.raises(UsageError, match="not a ROS type"):
+        check_type("msg", "/odom", "odometry", None)
+
+
+def test_csv_line_flattens_as_ros2_does() -> None:
+    from ros_mobile_bridge._cli._format import csv_line, plain
+
+    message = {"header": {"stamp": {"sec": 1, "nanosec": 2}, "frame_id": "map"}, "ok": True}
+    assert csv_line(plain({**message, "ranges": [0.5, 1.5], "empty": [], "n": 3})) == (
+        "1,2,map,True,0.5,1.5,,3"
+    )
+    assert csv_line(plain({"data": [1, 2, 3, 4]}, truncate=2)) == "1,2,..."
