@@ -353,3 +353,35 @@ def test_rosbridge_action_send_json_lines(rosbridge: RosBridge) -> None:
     feedback = [r["feedback"] for r in records[1:-1]]
     assert feedback and all(set(r) == {"feedback"} for r in records[1:-1])
     assert records[-1] == {"status": "succeeded", "result": {"sequence": [0, 1, 1, 2, 3, 5]}}
+
+
+# -- over Zenoh, against a zenoh-ros2-sdk node (marked ros by its fixtures) ----------------------
+
+
+def test_zenoh_params_by_node(sdk: Any, zenoh_router: Any, zenoh_domain: int) -> None:
+    pytest.importorskip("zenoh_ros2_sdk")
+    sdk("params")
+    env = {**_env(None), "ROS_DOMAIN_ID": str(zenoh_domain)}
+    base = [sys.executable, "-m", "ros_mobile_bridge", "--protocol", "zenoh", "-u"]
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [*base, zenoh_router.locator, *args],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            cwd=ROOT,
+            env=env,
+            check=False,
+        )
+
+    got = run("param", "get", "/sdk_params", "speed", "name")
+    assert ok(got) == "speed: 0.5\nname: robot\n"
+    dumped = yaml.safe_load(ok(run("param", "dump", "sdk_params")))
+    assert dumped == {
+        "/sdk_params": {"ros__parameters": {"enabled": True, "name": "robot", "speed": 0.5}}
+    }
+    done = run("param", "set", "/sdk_params", "speed", "1.5", "--json")
+    assert json_lines(ok(done)) == [
+        {"node": "/sdk_params", "name": "speed", "value": 1.5, "set": True}
+    ]
