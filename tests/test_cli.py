@@ -143,7 +143,7 @@ def test_the_url_comes_from_rmb_url_a_leading_argument_or_u(robot: DemoRobot) ->
         (("echo", "/odom"), "no robot address"),
         (("echo",), "missing TOPIC"),
         (("ecko", "/odom"), "did you mean echo"),
-        (("param",), "param get, param list, param set"),
+        (("param",), "verbs:\n  param list "),
         ((), "a COMMAND is needed"),
         (("pub", "/cmd_vel"), "missing TYPE"),
         # a ROS name is never read as the address; unquoted YAML gets a hint
@@ -535,7 +535,7 @@ def test_pub_keeps_publishing_across_a_reconnect_then_stops_on_ctrl_c(
     try:
         wait_for(lambda: {"data": "tick"} in ros_graph.received("/rmb_in"), 30)
         bridge.stop()
-        read_until(proc.stderr, lambda s: "connection lost: waiting" in s)
+        read_until(proc.stderr, lambda s: "connection lost" in s)  # the library's one line
         ros_graph.command({"cmd": "clear", "topic": "/rmb_in"})
         rosbridge_factory(port=port)
         read_until(proc.stderr, lambda s: "connected again" in s)

@@ -14,6 +14,7 @@ from typing import Any
 __all__ = [
     "UsageError",
     "check_fields",
+    "csv_line",
     "dump_flow",
     "dump_yaml",
     "finite_or_none",
@@ -210,3 +211,16 @@ def check_fields(robot: Any, typename: str, data: Mapping[str, Any], what: str) 
             for i, element in enumerate(item):
                 if isinstance(element, Mapping):
                     check_fields(robot, spec.type, element, f"{inner}[{i}]")
+
+
+def csv_line(value: Any) -> str:
+    """``value`` (made by :func:`plain`) as ``ros2 topic echo --csv`` prints a
+    message: every leaf in field order, depth first, array items in order,
+    joined by commas (no quoting; an empty array adds nothing between its
+    commas); numbers and booleans as Python spells them, strings as they
+    are."""
+    if isinstance(value, Mapping):
+        return ",".join(csv_line(v) for v in value.values())
+    if isinstance(value, list):
+        return ",".join(csv_line(v) for v in value)
+    return str(value)
