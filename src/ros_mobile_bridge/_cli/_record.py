@@ -8,8 +8,7 @@ Without ``-o`` the file is named from the local date and time,
 ``rosbag2_YYYY_MM_DD-HH_MM_SS`` with another prefix: it is one MCAP file, not
 a rosbag2 directory). An existing output is refused (exit 1, before
 connecting) unless ``--overwrite`` (``-f``) is given. ``-o -`` writes the
-MCAP to stdout (refused when stdout is a terminal, exit 2). ``rmb bag info``
-(``_bag``) is listed here too."""
+MCAP to stdout (refused when stdout is a terminal, exit 2)."""
 
 from __future__ import annotations
 
@@ -24,7 +23,6 @@ import anyio
 
 from .._client import Client
 from .._record import Recording, RecordStats
-from . import _bag
 from ._common import NOTICE_AFTER_S, missing_line, open_robot, warn
 from ._verb import Verb
 
@@ -171,5 +169,4 @@ VERBS = [
         _build,
         _record,
     ),
-    *_bag.VERBS,
 ]

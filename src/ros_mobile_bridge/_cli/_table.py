@@ -84,6 +84,7 @@ ENTRIES: tuple[Entry, ...] = (
         "record topics to an MCAP file (every topic when none is named; Ctrl-C stops, "
         "the file is complete either way)",
     ),
+    Entry(("bag", "info"), "_bag", "summarise a recording as ros2 bag info does (no robot needed)"),
 )
 """Every verb, in the order ``rmb --help`` lists them."""
 
@@ -93,6 +94,7 @@ GROUP_HELP: dict[str, str] = {
     "param": "parameters: list, get, set, dump (as ros2 param)",
     "action": "actions: send a goal (as ros2 action)",
     "interface": "interface definitions, no robot needed (as ros2 interface)",
+    "bag": "recordings: summarise a file (as ros2 bag; rmb record writes them)",
 }
 """A line per verb group (the first word of verbs of two words)."""
 
