@@ -22,7 +22,7 @@ from typing import Any, Final, Literal
 
 import anyio
 
-from ._errors import ConnectError, DecodeError, NotConnected, RosBridgeError, ServiceError
+from ._errors import ConnectError, MessageError, NotConnected, RosBridgeError, ServiceError
 from .adapters import Adapter
 
 __all__ = ["ServeStats", "ServedServices", "ServiceRequest", "ServiceRequests", "Serving"]
@@ -316,9 +316,9 @@ class Serving:
         # answer is out, whatever cancellation lands next
         try:
             await adapter.respond_service(self.name, call.id, values, result)
-        except DecodeError as exc:
+        except MessageError as exc:
             self._unclaim(call)  # still the caller's to answer
-            raise ValueError(f"{self.name}: {exc}") from exc
+            raise exc.in_call(f"reply to {self.name}") from exc
         except ConnectError as exc:
             self._settle(call, "lost")
             raise NotConnected(

@@ -10,7 +10,7 @@ from typing import Any
 
 from .._action import ActionGoal
 from .._client import Client
-from .._errors import RosBridgeError
+from .._errors import ParameterError, RosBridgeError
 from ._common import missing_line, open_robot, out, warn
 from ._format import (
     UsageError,
@@ -85,35 +85,34 @@ def _flow(value: Any) -> str:
 
 
 async def _param_get(ns: argparse.Namespace) -> int:
+    reasons: dict[str, str] = {}
     async with open_robot(ns) as robot:
-        values = await robot.get_parameters(ns.name)
-        known = list(await robot.list_parameters()) if len(values) < len(ns.name) else []
+        try:
+            values = await robot.get_parameters(ns.name)
+        except ParameterError as exc:  # the found ones are printed, each missing one said
+            values, reasons = exc.values, exc.reasons
     for name in ns.name:
         if name in values:
             out(f"{name}: {_flow(values[name])}")
-    missing = [n for n in ns.name if n not in values]
-    for name in missing:
-        warn(missing_line("parameter", name, known))
-    return 1 if missing else 0
+    for name, why in reasons.items():
+        warn(f"parameter {name!r}: {why}")
+    return 1 if reasons else 0
 
 
 async def _set_and_check(robot: Client, wanted: Mapping[str, Any]) -> int:
     """Set ``wanted``, print what the server reports, exit 1 unless every
     value was taken as given."""
-    result = await robot.set_parameters(wanted)
-    failed = 0
+    reasons: dict[str, str] = {}
+    try:
+        result = await robot.set_parameters(wanted)
+    except ParameterError as exc:
+        result, reasons = exc.values, exc.reasons
     for name, value in wanted.items():
-        got = result.get(name, _ABSENT)
-        if got is _ABSENT or plain(got) != plain(value):
-            now = "it has no value" if got is _ABSENT else f"it stays {_flow(got)}"
-            warn(f"setting parameter {name} to {_flow(value)} failed: {now}")
-            failed += 1
+        if name in reasons:
+            warn(f"setting parameter {name} to {_flow(value)} failed: {reasons[name]}")
         else:
-            out(f"Set parameter successful: {name}: {_flow(got)}")
-    return 1 if failed else 0
-
-
-_ABSENT: Any = object()
+            out(f"Set parameter successful: {name}: {_flow(result.get(name))}")
+    return 1 if reasons else 0
 
 
 async def _param_set(ns: argparse.Namespace) -> int:
@@ -131,15 +130,16 @@ async def _params(ns: argparse.Namespace) -> int:
             raise UsageError(f"--set wants NAME=VALUE (a YAML value), got {item!r}")
         wanted[name] = parse_yaml_value(text, f"the value of {name}")
     async with open_robot(ns) as robot:
-        if wanted:
-            result = await robot.set_parameters(wanted)
-            bad = [n for n in wanted if n not in result or plain(result[n]) != plain(wanted[n])]
-        elif ns.name:
-            result = await robot.get_parameters(ns.name)
-            bad = [n for n in ns.name if n not in result]
-        else:
-            result = await robot.list_parameters()
-            bad = []
+        bad: list[str] = []
+        try:
+            if wanted:
+                result = await robot.set_parameters(wanted)
+            elif ns.name:
+                result = await robot.get_parameters(ns.name)
+            else:
+                result = await robot.list_parameters()
+        except ParameterError as exc:
+            result, bad = exc.values, list(exc.reasons)
     out(json.dumps(finite_or_none(plain(result)), indent=2, sort_keys=True))
     if bad:
         warn(f"{'not set' if wanted else 'not found'}: {', '.join(bad)}")
