@@ -178,7 +178,8 @@ class Client:
             return found[0]
         if ended:
             reason = f": {self._conn.last_error}" if self._conn.last_error else ""
-            raise NotConnected(f"the connection is {ended[0]} and {kind} {name} never came{reason}")
+            how = "was lost for good" if ended[0] == "error" else "closed"
+            raise NotConnected(f"the connection {how} before {kind} {name} appeared{reason}")
         assert limit is not None
         raise TimeoutError(
             f"the robot did not offer {kind} {name} within {limit:g} s{nearest_hint(name, known)}"

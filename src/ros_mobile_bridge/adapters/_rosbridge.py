@@ -640,7 +640,9 @@ class RosbridgeAdapter(
         args = dict(request) if request is not None else {}
         service_type = self._services.get(name)
         if service_type:
-            check_fits(self.codecs, CodecRegistry.service_type_names(service_type)[0], args)
+            request_type = CodecRegistry.service_type_names(service_type)[0]
+            await self.fetch_part(request_type)  # once per type and connection
+            check_fits(self.codecs, request_type, args)
         return await self._call(name, args, timeout)
 
     # -- actions ---------------------------------------------------------------------
@@ -657,7 +659,9 @@ class RosbridgeAdapter(
             if action not in servers:
                 raise ActionGoalError(action, "no action server offers it")
         parts = action_type.split("/")
-        check_fits(self.codecs, f"{parts[0]}/action/{parts[-1]}_Goal", goal)
+        goal_type = f"{parts[0]}/action/{parts[-1]}_Goal"
+        await self.fetch_part(goal_type)  # once per type and connection
+        check_fits(self.codecs, goal_type, goal)
         self._check_pending(action, ActionGoalError)
         goal_id = self._next_id(f"goal:{action}")
         frame = self._engine.send_action_goal(action, action_type, goal, id=goal_id)
