@@ -52,6 +52,15 @@ class RosbridgeDefinitions:
                 truncate_for_log(str(exc)),
             )
 
+    async def fetch_definition(self, schema: str) -> bool:
+        """Whether a definition of ``schema`` is known, asking the bridge
+        (``/rosapi/message_details``, once per connection and type) when it
+        is not. The client asks before publishing a type it cannot resolve
+        from the bundled definitions, the graph or the user's own."""
+        if schema not in self._no_definition and not self.codecs.has_schema(schema):
+            await self._fetch_definition(schema)
+        return self.codecs.resolves(schema)
+
     async def fetch_part(self, schema: str) -> None:
         """Fetch the definition of a request or goal type ``schema`` once per
         connection, unless it is known (quietly: a bridge without it only
