@@ -121,7 +121,8 @@ class ServiceRequest:
     async def reply(self, values: Mapping[str, Any] | None = None) -> None:
         """Answer with the response ``values`` (a dict; missing fields are
         zero when the type is known). Raises ``TypeError`` for a value that
-        is not a mapping, ``ValueError`` when it does not fit the response
+        is not a mapping, :class:`~ros_mobile_bridge.MessageError` (a
+        ``ValueError``) naming the field when it does not fit the response
         type (the request stays unanswered then), ``ServiceError`` when the
         request was answered already (by the library at its deadline, for
         instance) and ``NotConnected`` when the connection that carried it
