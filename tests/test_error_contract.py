@@ -98,6 +98,9 @@ async def test_foxglove_publish_and_call_misfits_are_one_class(robot: DemoRobot)
         with pytest.raises(rmb.NotSupportedError):
             async with client.send_action_goal("/fibonacci", FIB, {"order": 1}):
                 pass
+        with pytest.raises(rmb.NotSupportedError):
+            async with client.serve("/rmb_contract_served", SET_BOOL):
+                pass
         assert await client.call_service("/set_led", {"data": False}) == {
             "success": True,
             "message": "led off",

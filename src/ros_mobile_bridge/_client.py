@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -304,8 +304,10 @@ class Client:
         ready = adapter.advertised(topic)
         if ready is None or not same_type_name(ready, schema):
             await adapter.advertise(topic, schema)  # the hot path skips this await
-        with _naming(f"publish {topic}"):
+        try:
             message = adapter.encode_publish(topic, data)
+        except MessageError as exc:  # the call's name is built only here, off the hot path
+            raise exc.in_call(f"publish {topic}") from None
         if velocity:
             conn.velocity[topic] = schema
         if priority == "control":
@@ -415,13 +417,15 @@ class Client:
                 f"request must be a mapping (dict) or None, not {type(request).__name__}"
             )
         adapter = self._conn.adapter
-        with _naming(f"call_service {name}"):
+        try:
             return await self._request(
                 name,
                 lambda limit: adapter.call_service(name, request, limit),
                 timeout,
                 slack=adapter.wire_timeout_slack,
             )
+        except MessageError as exc:
+            raise exc.in_call(f"call_service {name}") from None
 
     def serve(
         self,
@@ -647,8 +651,10 @@ class Client:
                 await adapter.cancel_action_goal(action, goal_id[0])
 
         handle = ActionGoal(action, cancel)
-        with _naming(f"send_action_goal {action}"):
+        try:
             goal_id.append(await adapter.send_action_goal(action, action_type, dict(goal), handle))
+        except MessageError as exc:
+            raise exc.in_call(f"send_action_goal {action}") from None
         try:
             yield handle
         finally:
@@ -685,12 +691,3 @@ _SUBSCRIBE_HINT = (
     "subscribe() returns a context manager, not an iterator: "
     "use `async with client.subscribe(...) as sub: async for m in sub`"
 )
-
-
-@contextlib.contextmanager
-def _naming(call: str) -> Iterator[None]:
-    """A :class:`MessageError` raised inside names ``call`` (``"publish /x"``)."""
-    try:
-        yield
-    except MessageError as exc:
-        raise exc.in_call(call) from None

@@ -92,7 +92,7 @@ class RosbridgeParameters:
         for name in names:
             answer = await self._param_call("/rosapi/get_param", {"name": name})
             if not isinstance(answer, dict) or answer.get("successful") is False:
-                continue  # "Parameter not found": absent from the result
+                continue  # "Parameter not found": the client raises ParameterError for it
             raw = answer.get("value")
             if isinstance(raw, str) and raw:
                 try:  # the value is a JSON document in a string

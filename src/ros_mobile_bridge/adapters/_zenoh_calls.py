@@ -335,7 +335,7 @@ class ZenohCalls:
         values: dict[str, Any] = {}
         for node, params in by_node(names).items():
             if self._service_type(f"{node}/get_parameters") is None:
-                continue  # no such node: its parameters are absent from the result
+                continue  # no such node: absent here, the client raises ParameterError for it
             answer = await self._node_call(node, "get_parameters", {"names": params})
             for param, value in zip(params, ros_field(answer, "values") or (), strict=False):
                 known, plain = parameter_from_ros(value)
