@@ -422,6 +422,21 @@ def test_params_alias_keeps_working_and_fails_plainly(robot: DemoRobot) -> None:
     assert rmb("params", "nosuch", url=robot.url).returncode == 1
 
 
+def test_every_library_error_is_one_line_naming_its_class(robot: DemoRobot) -> None:
+    # the caller's mistake: a value that does not fit its field, exit 2
+    misfit = rmb("pub", "/cmd_vel", TWIST, "{linear: {x: fast}}", "--once", url=robot.url)
+    assert misfit.returncode == 2
+    line = one_line(misfit.stderr)
+    assert line.startswith("rmb: MessageError: publish /cmd_vel: cannot encode "), line
+    assert "field 'linear.x'" in line
+    # the robot's refusal: exit 1, the same shape
+    refused = rmb(
+        "action", "send", "/fib", "test_msgs/action/Fibonacci", "{order: 3}", url=robot.url
+    )
+    assert refused.returncode == 1
+    assert one_line(refused.stderr).startswith("rmb: NotSupportedError: ")
+
+
 def test_action_send_over_foxglove_is_a_one_line_runtime_error(robot: DemoRobot) -> None:
     result = rmb(
         "action", "send", "/fib", "test_msgs/action/Fibonacci", "{order: 3}", url=robot.url

@@ -25,7 +25,7 @@ import traceback
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from .._errors import DecodeError, RosBridgeError, SchemaError
+from .._errors import RosBridgeError
 from .._version import __version__
 from ._format import UsageError
 from ._table import ENTRIES, GROUP_HELP, Entry, group_entries, groups
@@ -419,21 +419,13 @@ def _exit_code_for(exc: BaseException, verbose: bool) -> int:
     if isinstance(exc, UsageError):
         _say(str(exc))
         return 2
-    if isinstance(exc, DecodeError) and not isinstance(exc, SchemaError):
-        # a request or goal that does not fit its type: the user's input
-        _say(f"{type(exc).__name__}: {exc}")
-        return 2
-    if isinstance(exc, RosBridgeError):
-        _say(f"{type(exc).__name__}: {exc}")
-        return 1
-    if isinstance(exc, ValueError | TypeError):
-        _say(str(exc))
-        return 2
-    if isinstance(exc, OSError):
-        _say(f"{type(exc).__name__}: {exc}")
-        return 1
-    _say(f"unexpected {type(exc).__name__}: {exc} (run with -v for the traceback)")
-    return 1
+    # one line per error, the same way for every class (docs/errors.md):
+    # the caller's mistakes (MessageError is a ValueError) exit 2, the
+    # robot's refusals and runtime failures 1
+    known = isinstance(exc, ValueError | TypeError | RosBridgeError | OSError)
+    hint = "" if known or verbose else " (unexpected: run with -v for the traceback)"
+    _say(f"{type(exc).__name__}: {exc}{hint}")
+    return 2 if isinstance(exc, ValueError | TypeError) else 1
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -5,7 +5,6 @@ the notice about a topic that has not appeared."""
 from __future__ import annotations
 
 import argparse
-import difflib
 import sys
 from collections.abc import Iterable
 from contextlib import AbstractAsyncContextManager
@@ -14,6 +13,7 @@ from typing import Any
 import anyio
 
 from .. import _connect
+from .._checks import nearest as nearest  # one nearest-names rule, the library's
 from .._client import Client
 from .._options import ClientOptions
 
@@ -90,11 +90,6 @@ def out(text: str) -> None:
 def warn(text: str) -> None:
     """One line on stderr."""
     print(f"rmb: {text}", file=sys.stderr, flush=True)
-
-
-def nearest(name: str, known: Iterable[str], n: int = 3) -> list[str]:
-    """The known names closest to ``name`` (difflib), best first."""
-    return difflib.get_close_matches(name, sorted(set(known)), n=n, cutoff=0.5)
 
 
 def missing_line(kind: str, name: str, known: Iterable[str]) -> str:

@@ -11,7 +11,7 @@ from typing import Any
 
 from .._action import ActionGoal
 from .._client import Client
-from .._errors import RosBridgeError
+from .._errors import ParameterError, RosBridgeError
 from ._common import check_type, graph_name, missing_line, open_robot, out, warn
 from ._format import (
     UsageError,
@@ -164,6 +164,7 @@ def _flow(value: Any) -> str:
 
 async def _param_get(ns: argparse.Namespace) -> int:
     node, names = _node_first(list(ns.name))
+    reasons: dict[str, str] = {}
     async with open_robot(ns) as robot:
         if node is None and len(names) >= 2 and not _flat(robot) and ":" not in names[0]:
             # a relative node (rmb_params speed): the first name when the robot has such a node
@@ -171,8 +172,10 @@ async def _param_get(ns: argparse.Namespace) -> int:
             if any(k.startswith(f"{first}:") for k in await robot.list_parameters()):
                 node, names = first, names[1:]
         wanted = [_qualified(robot, node, n) for n in names]
-        values = await robot.get_parameters(wanted)
-        known = list(await robot.list_parameters()) if len(values) < len(wanted) else []
+        try:
+            values = await robot.get_parameters(wanted)
+        except ParameterError as exc:  # the found ones are printed, each missing one said
+            values, reasons = exc.values, exc.reasons
     for name in wanted:
         if name in values:
             if ns.json:
@@ -180,10 +183,9 @@ async def _param_get(ns: argparse.Namespace) -> int:
                 out(json_line(record))
             else:
                 out(f"{_shown(node, name)}: {_flow(values[name])}")
-    missing = [n for n in wanted if n not in values]
-    for name in missing:
-        warn(missing_line("parameter", name, known))
-    return 1 if missing else 0
+    for name, why in reasons.items():
+        warn(f"parameter {_shown(node, name)!r}: {why}")
+    return 1 if reasons else 0
 
 
 async def _set_and_check(
@@ -191,21 +193,27 @@ async def _set_and_check(
 ) -> int:
     """Set ``wanted``, print what the server reports, exit 1 unless every
     value was taken as given."""
-    result = await robot.set_parameters(wanted)
-    failed = 0
+    reasons: dict[str, str] = {}
+    try:
+        result = await robot.set_parameters(wanted)
+    except ParameterError as exc:
+        result, reasons = exc.values, exc.reasons
     for name, value in wanted.items():
         got = result.get(name, _ABSENT)
-        ok = got is not _ABSENT and plain(got) == plain(value)
+        ok = name not in reasons
         if as_json:
             now = None if got is _ABSENT else plain(got)
-            out(json_line({"node": node, "name": _shown(node, name), "value": now, "set": ok}))
+            record = {"node": node, "name": _shown(node, name), "value": now, "set": ok}
+            if not ok:
+                record["reason"] = reasons[name]
+            out(json_line(record))
         if not ok:
-            now_text = "it has no value" if got is _ABSENT else f"it stays {_flow(got)}"
-            warn(f"setting parameter {name} to {_flow(value)} failed: {now_text}")
-            failed += 1
+            warn(
+                f"setting parameter {_shown(node, name)} to {_flow(value)} failed: {reasons[name]}"
+            )
         elif not as_json:
             out(f"Set parameter successful: {_shown(node, name)}: {_flow(got)}")
-    return 1 if failed else 0
+    return 1 if reasons else 0
 
 
 _ABSENT: Any = object()
@@ -269,15 +277,16 @@ async def _params(ns: argparse.Namespace) -> int:
             raise UsageError(f"--set wants NAME=VALUE (a YAML value), got {item!r}")
         wanted[name] = parse_yaml_value(text, f"the value of {name}")
     async with open_robot(ns) as robot:
-        if wanted:
-            result = await robot.set_parameters(wanted)
-            bad = [n for n in wanted if n not in result or plain(result[n]) != plain(wanted[n])]
-        elif ns.name:
-            result = await robot.get_parameters(ns.name)
-            bad = [n for n in ns.name if n not in result]
-        else:
-            result = await robot.list_parameters()
-            bad = []
+        bad: list[str] = []
+        try:
+            if wanted:
+                result = await robot.set_parameters(wanted)
+            elif ns.name:
+                result = await robot.get_parameters(ns.name)
+            else:
+                result = await robot.list_parameters()
+        except ParameterError as exc:
+            result, bad = exc.values, list(exc.reasons)
     out(json.dumps(finite_or_none(plain(result)), indent=2, sort_keys=True))
     if bad:
         warn(f"{'not set' if wanted else 'not found'}: {', '.join(bad)}")
