@@ -83,7 +83,9 @@ async def _call(ns: argparse.Namespace) -> int:
             check_type("srv", ns.service, given, svc.type if svc else None)
         service_type = svc.type if svc is not None and svc.type else given
         if service_type:
-            check_fields(robot, _part(service_type, "Request"), request, "the request")
+            check_fields(
+                robot, _part(service_type, "Request"), request, f"call_service {ns.service}"
+            )
         reply = await robot.call_service(ns.service, request, timeout=ns.call_timeout)
     value = finite_or_none(plain(reply))
     if ns.json:
@@ -319,7 +321,7 @@ async def _action_send(ns: argparse.Namespace) -> int:
 
     goal = parse_yaml_mapping(ns.goal or "", "the goal")
     async with open_robot(ns) as robot:
-        check_fields(robot, f"{ns.type}_Goal", goal, "the goal")
+        check_fields(robot, f"{ns.type}_Goal", goal, f"send_action_goal {ns.action}")
         async with (
             robot.send_action_goal(ns.action, ns.type, goal) as handle,
             anyio.create_task_group() as tg,

@@ -417,7 +417,7 @@ async def _pub(ns: argparse.Namespace) -> int:
     priority: Priority = "control" if ns.control else "data"
     shown = dump_flow(data)
     async with open_robot(ns) as robot:
-        check_fields(robot, ns.type, data, "the message")
+        check_fields(robot, ns.type, data, f"publish {ns.topic}")
         if velocity and ns.no_velocity_check and ns.type not in _VELOCITY_TYPES:
             # (without --no-velocity-check the library refuses such a publish)
             warn(
