@@ -160,16 +160,12 @@ def _build_graph(p: argparse.ArgumentParser) -> None:
     _json_option(p)
 
 
+# the verbs' help lines, as the index (_table) has them
+_NODES = "list the graph's nodes (Zenoh, rosbridge; --json)"
+_GRAPH = "the graph's nodes, topics, services, actions; --watch: every change"
+
 VERBS = [
-    Verb(
-        ("node", "list"), "list the graph's nodes (Zenoh, rosbridge)", (), _json_option, _node_list
-    ),
-    Verb(("nodes",), "same as node list", (), _json_option, _node_list, hidden=True),
-    Verb(
-        ("graph",),
-        "the graph's nodes, topics, services and actions; --watch: then every change",
-        (),
-        _build_graph,
-        _graph,
-    ),
+    Verb(("node", "list"), _NODES, (), _json_option, _node_list),
+    Verb(("nodes",), _NODES, (), _json_option, _node_list, hidden=True),
+    Verb(("graph",), _GRAPH, (), _build_graph, _graph),
 ]

@@ -310,17 +310,16 @@ _HZ = _options(10000, "messages")
 _BW = _options(100, "messages")
 _DELAY = _options(10000, "messages")
 
+# the verbs' help lines, as the index (_table) has them
+_HZ_HELP = "a topic's message rate every second, counted on arrival (--json)"
+_BW_HELP = "a topic's bandwidth every second, counted on arrival (--json)"
+_DELAY_HELP = "header.stamp against arrival every second, as ros2 topic delay (--json)"
+
 VERBS = [
-    Verb(("hz",), "a topic's message rate every second, counted on arrival", ("TOPIC",), _HZ, _hz),
-    Verb(("topic", "hz"), "same as hz", ("TOPIC",), _HZ, _hz, hidden=True),
-    Verb(("bw",), "a topic's bandwidth every second, counted on arrival", ("TOPIC",), _BW, _bw),
-    Verb(("topic", "bw"), "same as bw", ("TOPIC",), _BW, _bw, hidden=True),
-    Verb(
-        ("delay",),
-        "header.stamp against arrival every second (as ros2 topic delay)",
-        ("TOPIC",),
-        _DELAY,
-        _delay,
-    ),
-    Verb(("topic", "delay"), "same as delay", ("TOPIC",), _DELAY, _delay, hidden=True),
+    Verb(("hz",), _HZ_HELP, ("TOPIC",), _HZ, _hz),
+    Verb(("topic", "hz"), _HZ_HELP, ("TOPIC",), _HZ, _hz, hidden=True),
+    Verb(("bw",), _BW_HELP, ("TOPIC",), _BW, _bw),
+    Verb(("topic", "bw"), _BW_HELP, ("TOPIC",), _BW, _bw, hidden=True),
+    Verb(("delay",), _DELAY_HELP, ("TOPIC",), _DELAY, _delay),
+    Verb(("topic", "delay"), _DELAY_HELP, ("TOPIC",), _DELAY, _delay, hidden=True),
 ]
