@@ -21,7 +21,7 @@ from ros_mobile_bridge import _cli
 from ros_mobile_bridge._cli import _app, _table
 
 ROOT = Path(__file__).resolve().parent.parent
-GROUPS = ["action", "bag", "interface", "param", "service", "topic"]
+GROUPS = ["action", "bag", "interface", "node", "param", "service", "topic"]
 
 
 def rmb(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:

@@ -1014,7 +1014,7 @@ def test_the_fast_message_constructor_builds_the_same_frozen_message() -> None:
 
     from ros_mobile_bridge._types import Message, new_message
 
-    args = ("/t", "std_msgs/msg/String", "cdr", {"data": "x"}, 5, None, 9, "why")
+    args = ("/t", "std_msgs/msg/String", "cdr", {"data": "x"}, 5, None, 9, "why", 41)
     fast = new_message(*args)
     assert type(fast) is Message
     assert fast == Message(*args)

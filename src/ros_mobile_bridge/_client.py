@@ -122,6 +122,16 @@ class Client:
         """Async iterator: the service list at once, then every change."""
         return self._router.services.watch()
 
+    async def nodes(self) -> list[str]:
+        """The ROS nodes of the robot's graph now: full names, sorted, this
+        client's own node left out. Zenoh: the nodes' liveliness tokens;
+        rosbridge: ``/rosapi/nodes`` (``ServiceError`` when the bridge has
+        no rosapi); Foxglove: the protocol has no nodes, so
+        ``NotSupportedError``. There is no node watch: the graph command
+        (``rmb graph --watch``) polls this."""
+        self._conn.require_connected()
+        return await self._conn.adapter.nodes()
+
     async def wait_for_topic(self, topic: str, *, timeout: float | None = None) -> TopicInfo:
         """The topic's :class:`~ros_mobile_bridge.TopicInfo` once the robot
         offers ``topic`` (at once when it does already). ``TimeoutError``
@@ -197,6 +207,7 @@ class Client:
         schema: str | None = None,
         buffer: int | None = None,
         compression: Compression | None = None,
+        decode: bool = True,
     ) -> _SubscriptionContext:
         """Subscribe to ``topic``; an async context manager yielding a
         :class:`~ros_mobile_bridge.Subscription` (``async for msg in sub``).
@@ -212,7 +223,20 @@ class Client:
         message; ``"all"`` queues up to ``buffer`` and drops the oldest when
         the consumer falls behind. ``compression`` (rosbridge only, ignored
         elsewhere): ``"cbor"`` or ``"cbor-raw"`` (CDR, decoded here) instead
-        of JSON; images are far smaller and cheaper to decode. Arguments are
+        of JSON; images are far smaller and cheaper to decode.
+
+        ``decode=False`` delivers each payload as it arrived: ``Message.data``
+        is a ``memoryview`` of the wire bytes (CDR over Foxglove and Zenoh,
+        the JSON or CBOR text of the ``publish`` op over rosbridge) and
+        ``byte_size`` its length; the codec is never called for a message
+        (the adapter may still prepare a decoder for the topic's type), so
+        ``decode_error`` is always None and ``stats.decode_failures`` stays
+        0. ``max_hz``, ``adaptive``, ``dispatch``, ``buffer`` and the
+        breaker apply exactly as for decoded messages: a counter of every
+        frame (``rmb hz``) passes ``adaptive=False`` and no ``max_hz``, and
+        reads ``stats.received`` (every frame routed to the subscription,
+        counted before any filter) rather than the messages delivered, so
+        frames the buffer drops under load are still counted. Arguments are
         checked here, at once."""
         check_name("topic", topic)
         if schema is not None:
@@ -221,6 +245,8 @@ class Client:
             raise ValueError(f"compression must be 'cbor', 'cbor-raw' or None, got {compression!r}")
         if not isinstance(adaptive, bool):
             raise TypeError("adaptive must be a bool")
+        if not isinstance(decode, bool):
+            raise TypeError("decode must be a bool")
         route = self._router.route(
             topic,
             max_hz=max_hz,
@@ -229,6 +255,7 @@ class Client:
             schema=schema,
             buffer=buffer,
             compression=compression,
+            decode=decode,
         )
         return _SubscriptionContext(self._conn, route)
 

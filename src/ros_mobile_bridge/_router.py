@@ -187,6 +187,7 @@ class Router:
         schema: str | None,
         buffer: int | None,
         compression: Compression | None,
+        decode: bool = True,
     ) -> Route:
         """Build one subscription's pipeline (throttle, queue, breaker); not
         routed until :meth:`add`. The queue checks its own arguments."""
@@ -205,7 +206,9 @@ class Router:
         )
         policy = self._options.breaker
         breaker = policy.build() if policy is not None else None
-        sub = Subscription(topic, queue, logger=self._log, throttle=throttle, breaker=breaker)
+        sub = Subscription(
+            topic, queue, logger=self._log, throttle=throttle, breaker=breaker, decode=decode
+        )
         hints = SubscribeHints(max_hz=max_hz, schema=schema, compression=compression)
         return Route(sub, queue, throttle, hints)
 

@@ -421,6 +421,11 @@ class SyncClient:
         )
 
     @_mirrors
+    def nodes(self) -> list[str]:
+        """:meth:`Client.nodes`, blocking."""
+        return self._call(_nodes, self._client, timeout=None, what="nodes")
+
+    @_mirrors
     def get_parameters(
         self, names: Sequence[str], *, timeout: float | None = None
     ) -> dict[str, Any]:
@@ -496,6 +501,7 @@ class SyncClient:
         schema: str | None = None,
         buffer: int | None = None,
         compression: Compression | None = None,
+        decode: bool = True,
         timeout: float | None = None,
     ) -> SyncSubscription:
         """:meth:`Client.subscribe`, as a (plain) context manager yielding a
@@ -518,6 +524,7 @@ class SyncClient:
                 schema=schema,
                 buffer=buffer,
                 compression=compression,
+                decode=decode,
             )
 
         ctx = self._worker.run(_sync_call, make, (), what=f"subscribe to {topic}")
@@ -752,6 +759,10 @@ async def _call_service(
     client: Client, name: str, request: Mapping[str, Any] | None, timeout: float | None
 ) -> Any:
     return await client.call_service(name, request, timeout=timeout)
+
+
+async def _nodes(client: Client) -> list[str]:
+    return await client.nodes()
 
 
 async def _get_parameters(

@@ -46,7 +46,12 @@ class Message:
     view the received frame where the codec allows. When the payload could not
     be decoded, ``data`` is the raw ``memoryview`` and ``decode_error`` says why.
     ``receive_time_ns`` is ``time.time_ns()`` when the frame arrived;
-    ``log_time_ns`` is the server's timestamp (``None`` when the wire has none).
+    ``log_time_ns`` is the timestamp the wire carries: the Foxglove server's
+    log time, rmw_zenoh's source timestamp (the publisher's clock when it
+    published), ``None`` over rosbridge. ``sequence`` is the publisher's
+    sequence number where the wire carries one (Zenoh: rmw_zenoh's
+    attachment; it counts per publisher, so a gap is a lost sample), else
+    ``None``.
     """
 
     topic: str
@@ -57,6 +62,7 @@ class Message:
     log_time_ns: int | None
     byte_size: int
     decode_error: str | None = None
+    sequence: int | None = None
 
 
 _set_topic = slot_setter(Message, "topic")
@@ -67,6 +73,7 @@ _set_receive_time_ns = slot_setter(Message, "receive_time_ns")
 _set_log_time_ns = slot_setter(Message, "log_time_ns")
 _set_byte_size = slot_setter(Message, "byte_size")
 _set_decode_error = slot_setter(Message, "decode_error")
+_set_sequence = slot_setter(Message, "sequence")
 
 
 def new_message(
@@ -78,6 +85,7 @@ def new_message(
     log_time_ns: int | None,
     byte_size: int,
     decode_error: str | None,
+    sequence: int | None,
 ) -> Message:
     """``Message(...)`` for the delivery hot path: the same frozen object,
     built through its slots instead of the dataclass ``__init__`` (which sets
@@ -92,6 +100,7 @@ def new_message(
     _set_log_time_ns(message, log_time_ns)
     _set_byte_size(message, byte_size)
     _set_decode_error(message, decode_error)
+    _set_sequence(message, sequence)
     return message
 
 

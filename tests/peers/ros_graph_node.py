@@ -35,6 +35,9 @@ JSON line on stdout, ``{"ok": true, "result": ...}`` or ``{"ok": false,
   publisher, rgb8, deterministic pixels, header.stamp now and header.frame_id
   the decimal sequence number (0, 1, ...) so a receiver can count losses;
 - ``stop`` {topic}: destroy a publisher started by ``publish``/``image``;
+- ``node`` {name, topic}: a node of its own named ``name`` (no namespace)
+  with a ``std_msgs/msg/String`` publisher on ``topic`` (nothing published),
+  added to the executor; ``drop_node`` {name}: destroy it;
 - ``count`` {topic}: how many messages were published on a topic so far;
 - ``param`` {name}: the current value of an ``rmb_params`` parameter;
 - ``call`` {service, type, args={}, timeout=5}: call a service from this ROS
@@ -143,6 +146,8 @@ class Graph:
         self.subscriptions: dict[str, Subscription] = {}
         self.publishers: dict[str, tuple[Publisher, Timer]] = {}
         self.published: dict[str, int] = {}
+        self.extra_nodes: dict[str, Node] = {}
+        self.executor: MultiThreadedExecutor | None = None
 
         self._periodic("/chatter", "std_msgs/msg/String", 10.0, self._chatter)
         self._periodic("/odom", "nav_msgs/msg/Odometry", 20.0, self._odom)
@@ -349,6 +354,21 @@ class Graph:
         if cmd == "stop":
             self.stop(topic)
             return None
+        if cmd == "node":
+            from std_msgs.msg import String
+
+            node = Node(str(request["name"]))
+            node.create_publisher(String, topic, 10)
+            assert self.executor is not None
+            self.executor.add_node(node)
+            self.extra_nodes[node.get_name()] = node
+            return None
+        if cmd == "drop_node":
+            node = self.extra_nodes.pop(str(request["name"]))
+            assert self.executor is not None
+            self.executor.remove_node(node)
+            node.destroy_node()
+            return None
         if cmd == "count":
             with self.lock:
                 return self.published.get(topic, 0)
@@ -373,6 +393,7 @@ def main() -> int:
     rclpy.init()
     graph = Graph()
     executor = MultiThreadedExecutor(num_threads=4)
+    graph.executor = executor
     executor.add_node(graph.node)
     executor.add_node(graph.params)
     spinner = threading.Thread(target=executor.spin, name="ros-spin", daemon=True)

@@ -28,8 +28,10 @@ class Entry:
 
 
 _ECHO = "print a topic's messages as YAML (--json, --csv, --flow-style)"
-_HZ = "print a topic's message rate every second"
-_BW = "print a topic's bandwidth every second"
+_HZ = "a topic's message rate every second, counted on arrival (--json)"
+_BW = "a topic's bandwidth every second, counted on arrival (--json)"
+_DELAY = "header.stamp against arrival every second, as ros2 topic delay (--json)"
+_NODES = "list the graph's nodes (Zenoh, rosbridge; --json)"
 _PUB = "publish a message (YAML) at 1 Hz until stopped (-r, --once, -t)"
 _TOPICS = "list topics (-t types, -v publishers/subscribers, -c count, --json)"
 _SERVICES = "list services (-t types, -c count, --json)"
@@ -41,12 +43,14 @@ ENTRIES: tuple[Entry, ...] = (
     Entry(("topic", "list"), "_topic", _TOPICS, hidden=True),
     Entry(("echo",), "_topic", _ECHO),
     Entry(("topic", "echo"), "_topic", _ECHO, hidden=True),
-    Entry(("hz",), "_topic", _HZ),
-    Entry(("topic", "hz"), "_topic", _HZ, hidden=True),
-    Entry(("bw",), "_topic", _BW),
-    Entry(("topic", "bw"), "_topic", _BW, hidden=True),
-    Entry(("info",), "_topic", "the server (protocol, capabilities), or a topic"),
-    Entry(("topic", "info"), "_topic", "a topic's type and counts", hidden=True),
+    Entry(("hz",), "_rate", _HZ),
+    Entry(("topic", "hz"), "_rate", _HZ, hidden=True),
+    Entry(("bw",), "_rate", _BW),
+    Entry(("topic", "bw"), "_rate", _BW, hidden=True),
+    Entry(("delay",), "_rate", _DELAY),
+    Entry(("topic", "delay"), "_rate", _DELAY, hidden=True),
+    Entry(("info",), "_topic", "the server (protocol, capabilities), or a topic (--json)"),
+    Entry(("topic", "info"), "_topic", "a topic's type and counts (--json)", hidden=True),
     Entry(("pub",), "_topic", _PUB),
     Entry(("topic", "pub"), "_topic", _PUB, hidden=True),
     Entry(("topic", "type"), "_lookup", "print a topic's type"),
@@ -84,6 +88,11 @@ ENTRIES: tuple[Entry, ...] = (
         "record topics to an MCAP file (every topic when none is named; Ctrl-C stops, "
         "the file is complete either way)",
     ),
+    Entry(("node", "list"), "_graph", _NODES),
+    Entry(("nodes",), "_graph", _NODES, hidden=True),
+    Entry(
+        ("graph",), "_graph", "the graph's nodes, topics, services, actions; --watch: every change"
+    ),
     Entry(("bag", "info"), "_bag", "summarise a recording as ros2 bag info does (no robot needed)"),
 )
 """Every verb, in the order ``rmb --help`` lists them."""
@@ -94,6 +103,7 @@ GROUP_HELP: dict[str, str] = {
     "param": "parameters: list, get, set, dump (as ros2 param)",
     "action": "actions: send a goal (as ros2 action)",
     "interface": "interface definitions, no robot needed (as ros2 interface)",
+    "node": "nodes: list (as ros2 node)",
     "bag": "recordings: summarise a file (as ros2 bag; rmb record writes them)",
 }
 """A line per verb group (the first word of verbs of two words)."""

@@ -1,13 +1,12 @@
 """``rmb`` topic verbs, shaped like ``ros2 topic``: ``topics`` (``topic
-list``), ``echo``, ``hz``, ``bw``, ``info`` and ``pub``."""
+list``), ``echo``, ``info`` and ``pub`` (``hz``, ``bw`` and ``delay`` are in
+``_rate``)."""
 
 from __future__ import annotations
 
 import argparse
 import logging
 import math
-import statistics
-from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -37,8 +36,8 @@ __all__ = ["VERBS"]
 # the verbs' help lines, as the index (_table) has them
 _TOPICS = "list topics (-t types, -v publishers/subscribers, -c count, --json)"
 _ECHO = "print a topic's messages as YAML (--json, --csv, --flow-style)"
-_HZ = "print a topic's message rate every second"
-_BW = "print a topic's bandwidth every second"
+_INFO = "the server (protocol, capabilities), or a topic (--json)"
+_TOPIC_INFO = "a topic's type and counts (--json)"
 _PUB = "publish a message (YAML) at 1 Hz until stopped (-r, --once, -t)"
 
 _VELOCITY_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
@@ -124,13 +123,31 @@ def _build_topics(p: argparse.ArgumentParser) -> None:
 # -- echo --------------------------------------------------------------------------------
 
 
+def message_info(msg: Message) -> dict[str, Any]:
+    """The transport's message info: when it arrived, the wire's timestamp
+    (Foxglove's log time, rmw_zenoh's source timestamp; None over
+    rosbridge), the publisher's sequence number (Zenoh; else None) and the
+    payload's size."""
+    return {
+        "receive_time_ns": msg.receive_time_ns,
+        "log_time_ns": msg.log_time_ns,
+        "sequence": msg.sequence,
+        "byte_size": msg.byte_size,
+    }
+
+
+def _info_line(msg: Message) -> str:
+    return "# " + ", ".join(f"{k}: {v}" for k, v in message_info(msg).items() if v is not None)
+
+
 def _print_message(msg: Message, ns: argparse.Namespace) -> None:
     if msg.decode_error:
         if ns.json:
-            record = {"topic": msg.topic, "schema": msg.schema_name, "data": None}
-            out(json_line({**record, "decode_error": msg.decode_error}))
+            record = {"topic": msg.topic, "schema": msg.schema_name, **message_info(msg)}
+            out(json_line({**record, "data": None, "decode_error": msg.decode_error}))
         else:
-            out(f"# not decoded ({msg.decode_error}): {msg.byte_size} bytes\n---")
+            info = f"{_info_line(msg)}\n" if ns.info else ""
+            out(f"{info}# not decoded ({msg.decode_error}): {msg.byte_size} bytes\n---")
         return
     value: Any = msg.data
     if ns.field:
@@ -139,18 +156,14 @@ def _print_message(msg: Message, ns: argparse.Namespace) -> None:
         data = plain(value, no_arr=ns.no_arr, no_str=ns.no_str)
         out(
             json_line(
-                {
-                    "topic": msg.topic,
-                    "schema": msg.schema_name,
-                    "log_time_ns": msg.log_time_ns,
-                    "receive_time_ns": msg.receive_time_ns,
-                    "data": data,
-                }
+                {"topic": msg.topic, "schema": msg.schema_name, **message_info(msg), "data": data}
             )
         )
         return
     truncate = None if ns.full or ns.truncate_length <= 0 else ns.truncate_length
     data = plain(value, truncate=truncate, no_arr=ns.no_arr, no_str=ns.no_str)
+    if ns.info:
+        out(_info_line(msg))
     if ns.csv:
         out(csv_line(data))
     elif ns.flow_style:
@@ -235,103 +248,12 @@ def _build_echo(p: argparse.ArgumentParser) -> None:
         "--flow-style", action="store_true", help="each message as one line of flow-style YAML"
     )
     p.add_argument("--max-hz", type=float, default=None, help="deliver at most this rate")
-
-
-# -- hz and bw -----------------------------------------------------------------------------
-
-
-def _hz_lines(stamps: deque[int]) -> list[str] | None:
-    if len(stamps) < 2:
-        return None
-    gaps = [(b - a) / 1e9 for a, b in zip(stamps, list(stamps)[1:], strict=False)]
-    span = (stamps[-1] - stamps[0]) / 1e9
-    if span <= 0:
-        return None
-    std = statistics.pstdev(gaps)
-    return [
-        f"average rate: {(len(stamps) - 1) / span:.3f}",
-        f"\tmin: {min(gaps):.3f}s max: {max(gaps):.3f}s std dev: {std:.5f}s window: {len(stamps)}",
-    ]
-
-
-def _size(n: float) -> str:
-    for unit, scale in (("MB", 1e6), ("KB", 1e3)):
-        if n >= scale:
-            return f"{n / scale:.2f} {unit}"
-    return f"{n:.0f} B"
-
-
-def _bw_lines(samples: deque[tuple[int, int]]) -> list[str] | None:
-    if len(samples) < 2:
-        return None
-    span = (samples[-1][0] - samples[0][0]) / 1e9
-    if span <= 0:
-        return None
-    sizes = [s for _, s in samples]
-    rate = sum(sizes[1:]) / span
-    return [
-        f"{_size(rate)}/s from {len(sizes)} messages",
-        f"\tMessage size mean: {_size(statistics.fmean(sizes))} min: {_size(min(sizes))} "
-        f"max: {_size(max(sizes))}",
-    ]
-
-
-async def _measure(ns: argparse.Namespace, *, bandwidth: bool) -> int:
-    if ns.window < 2:
-        raise UsageError(f"--window must be 2 or more, got {ns.window}")
-    samples: deque[Any] = deque(maxlen=ns.window)
-    seen = [0]
-
-    async def report() -> None:
-        shown = 0
-        while True:
-            await anyio.sleep(1.0)
-            if seen[0] == shown:
-                if shown:
-                    out("no new messages")
-                continue
-            shown = seen[0]
-            lines = _bw_lines(samples) if bandwidth else _hz_lines(samples)
-            if lines:
-                out("\n".join(lines))
-
-    async with (
-        open_robot(ns) as robot,
-        robot.subscribe(ns.topic, adaptive=False, buffer=4096) as sub,
-    ):
-        if bandwidth:
-            out(f"Subscribed to [{ns.topic}]")
-        async with anyio.create_task_group() as tg:
-            tg.start_soon(notice_if_missing, robot, ns.topic, seen)
-            tg.start_soon(report)
-            async for msg in sub:
-                seen[0] += 1
-                samples.append(
-                    (msg.receive_time_ns, msg.byte_size) if bandwidth else msg.receive_time_ns
-                )
-    return 0
-
-
-async def _hz(ns: argparse.Namespace) -> int:
-    return await _measure(ns, bandwidth=False)
-
-
-async def _bw(ns: argparse.Namespace) -> int:
-    return await _measure(ns, bandwidth=True)
-
-
-def _window(default: int) -> Any:
-    def build(p: argparse.ArgumentParser) -> None:
-        p.add_argument(
-            "-w",
-            "--window",
-            type=int,
-            default=default,
-            metavar="N",
-            help=f"measure over the last N messages (default {default})",
-        )
-
-    return build
+    p.add_argument(
+        "--info",
+        action="store_true",
+        help="print each message's info first: receive time, the wire's timestamp (Foxglove "
+        "log time, Zenoh source time), sequence number (Zenoh), size (--json: always)",
+    )
 
 
 # -- info ----------------------------------------------------------------------------------
@@ -357,8 +279,31 @@ async def _count(robot: Client, service: str, topic: str, key: str) -> str:
     return str(len(names)) if isinstance(names, list) else "unknown"
 
 
+def _server_record(robot: Client, url: str | None) -> dict[str, Any]:
+    info = robot.server_info
+    return {
+        "server": info.name,
+        "url": url,
+        "protocol": robot.protocol,
+        "subprotocol": info.subprotocol,
+        "capabilities": list(info.capabilities),
+        "encodings": list(info.supported_encodings),
+        "session": info.session_id,
+        "metadata": dict(info.metadata),
+        "topics": len(robot.topics),
+        "services": len(robot.services),
+    }
+
+
+def _build_info(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true", help="one JSON object instead of text")
+
+
 async def _info(ns: argparse.Namespace) -> int:
     async with open_robot(ns) as robot:
+        if ns.topic is None and ns.json:
+            out(json_line(_server_record(robot, ns.url)))
+            return 0
         if ns.topic is None:
             info = robot.server_info
             sub = f", subprotocol {info.subprotocol}" if info.subprotocol else ""
@@ -379,6 +324,11 @@ async def _info(ns: argparse.Namespace) -> int:
             warn(missing_line("topic", ns.topic, [t.name for t in robot.topics]))
             return 1
         topic = next(t for t in robot.topics if t.name == ns.topic)
+        if ns.json:
+            pubs_n, subs_n = await _graph_counts(robot, ns.topic)
+            record = {"topic": ns.topic, "type": topic.schema_name, "encoding": topic.encoding}
+            out(json_line({**record, "publishers": pubs_n, "subscriptions": subs_n}))
+            return 0
         out(f"Type: {topic.schema_name}")
         if topic.encoding:
             out(f"Encoding: {topic.encoding}")
@@ -516,12 +466,8 @@ VERBS = [
     Verb(("topic", "list"), _TOPICS, build=_build_topics, run=_topics, hidden=True),
     Verb(("echo",), _ECHO, ("TOPIC", "TYPE?"), _build_echo, _echo),
     Verb(("topic", "echo"), _ECHO, ("TOPIC", "TYPE?"), _build_echo, _echo, hidden=True),
-    Verb(("hz",), _HZ, ("TOPIC",), _window(10000), _hz),
-    Verb(("topic", "hz"), _HZ, ("TOPIC",), _window(10000), _hz, hidden=True),
-    Verb(("bw",), _BW, ("TOPIC",), _window(100), _bw),
-    Verb(("topic", "bw"), _BW, ("TOPIC",), _window(100), _bw, hidden=True),
-    Verb(("info",), "the server (protocol, capabilities), or a topic", ("TOPIC?",), None, _info),
-    Verb(("topic", "info"), "a topic's type and counts", ("TOPIC",), None, _info, hidden=True),
+    Verb(("info",), _INFO, ("TOPIC?",), _build_info, _info),
+    Verb(("topic", "info"), _TOPIC_INFO, ("TOPIC",), _build_info, _info, hidden=True),
     Verb(("pub",), _PUB, ("TOPIC", "TYPE", "DATA?"), _build_pub, _pub),
     Verb(("topic", "pub"), _PUB, ("TOPIC", "TYPE", "DATA?"), _build_pub, _pub, hidden=True),
 ]

@@ -465,6 +465,11 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         finally:
             ready.set()
 
+    async def nodes(self) -> list[str]:
+        """The Foxglove protocol has no ROS nodes (its connection graph
+        names publishers of topics, not nodes)."""
+        raise NotSupportedError("the Foxglove protocol does not report ROS nodes")
+
     async def unadvertise(self, topic: str) -> None:
         channel = self._pubs.pop(topic, None)
         if channel is not None:

@@ -51,6 +51,13 @@ class RosbridgeDiscovery:
     def services(self) -> list[ServiceInfo]:
         return [ServiceInfo(name, schema) for name, schema in sorted(self._services.items())]
 
+    async def nodes(self) -> list[str]:
+        """The graph's nodes as ``/rosapi/nodes`` lists them (bounded by
+        ``max_channels``, as the topic table is); ``ServiceError`` when the
+        bridge offers no rosapi, ``TimeoutError`` after 5 s."""
+        names = sorted(set(_names(await self._rosapi("/rosapi/nodes"), "nodes")))
+        return names[: self._options.max_channels]
+
     async def _discover(self, *, first: bool = False) -> bool:
         """Poll the graph once; True when it changed. A failing rosapi is
         reported once and leaves the tables as they were."""

@@ -148,6 +148,11 @@ class Adapter(Protocol):
     def topic_active(self, topic: str) -> bool:
         """Whether the server currently carries ``topic`` to this client."""
 
+    async def nodes(self) -> list[str]:
+        """The ROS nodes of the graph now, full names, sorted (this client's
+        own node left out). ``NotSupportedError`` where the protocol does
+        not report nodes; ``ServiceError`` when the bridge cannot say."""
+
     async def run(self, sink: EventSink) -> None:
         """The reader loop: hands every event to ``sink`` (events that
         happened before it started first). Returns when the connection

@@ -416,16 +416,18 @@ class ZenohAdapter(
     ) -> None:
         if attachment is not None and len(attachment) == _FIXED and attachment[16] == 0x10:
             stamp = int.from_bytes(attachment[8:16], "little", signed=True)
+            sequence = int.from_bytes(attachment[:8], "little", signed=True)
         else:  # the older keyed form, or nothing readable
-            older = rz.attachment_timestamp(attachment)
-            if older is None:
+            try:
+                older = rz.decode_attachment(attachment)
+            except rz.MalformedAttachment:
                 self._reject(
                     "attachment",
                     f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
                     f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
                 )
                 return
-            stamp = older
+            stamp, sequence = older.timestamp_ns, older.sequence
         if self._held and sub.topic in self._held:  # its type is being described
             self._hold(sub.topic, self._held[sub.topic], key, payload, attachment)
             return
@@ -452,6 +454,7 @@ class ZenohAdapter(
                 stamp if stamp > 0 else None,
                 time.time_ns(),
                 decode,
+                sequence,
             )
         )
 
@@ -637,6 +640,17 @@ class ZenohAdapter(
 
     def _published_types(self) -> list[str]:
         return list(self._pubs.schemas().values())
+
+    async def nodes(self) -> list[str]:
+        """The nodes whose liveliness tokens (``NN``) are alive on this
+        domain, ours left out; bounded as the graph is (``max_channels``
+        tokens)."""
+        names = {
+            f"{token.namespace.rstrip('/')}/{token.node_name}"
+            for key, token in self._graph.items()
+            if token.kind is rz.EntityKind.NODE and key != self._node_key
+        }
+        return sorted(names)
 
     async def unadvertise(self, topic: str) -> None:
         pub = self._pubs.pop(topic, None)

@@ -16,7 +16,9 @@ class RawFrame:
     ``decode`` is bound to the schema of the channel that carried the frame,
     captured when it arrived, so a frame still queued after its channel was
     unadvertised or re-advertised with another schema decodes correctly.
-    ``payload`` is a zero-copy view of the received WebSocket message."""
+    ``payload`` is a zero-copy view of the received WebSocket message.
+    ``sequence`` is the publisher's sequence number where the wire carries
+    one (rmw_zenoh's attachment), else None."""
 
     __slots__ = (
         "decode",
@@ -25,6 +27,7 @@ class RawFrame:
         "payload",
         "receive_time_ns",
         "schema_name",
+        "sequence",
         "topic",
     )
 
@@ -37,6 +40,7 @@ class RawFrame:
         log_time_ns: int | None,
         receive_time_ns: int,
         decode: Decoder | None,
+        sequence: int | None = None,
     ) -> None:
         self.topic = topic
         self.schema_name = schema_name
@@ -45,3 +49,4 @@ class RawFrame:
         self.log_time_ns = log_time_ns
         self.receive_time_ns = receive_time_ns
         self.decode = decode
+        self.sequence = sequence

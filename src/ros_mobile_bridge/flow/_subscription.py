@@ -324,9 +324,14 @@ class Subscription:
         logger: logging.Logger,
         throttle: AdaptiveThrottle | None = None,
         breaker: CircuitBreaker | None = None,
+        decode: bool = True,
     ) -> None:
         self.topic = topic
         self._queue = queue
+        if not decode:
+            # the raw form replaces the decoder on this instance only: a
+            # decoded subscription's path is untouched
+            self._decode = self._raw  # type: ignore[method-assign]
         self._throttle = throttle
         self.breaker: CircuitBreaker = breaker if breaker is not None else CircuitBreaker()
         """This subscription's circuit breaker: ``state``, ``next_retry_at``
@@ -474,6 +479,24 @@ class Subscription:
             frame.log_time_ns,
             payload.nbytes,
             error,
+            frame.sequence,
+        )
+
+    def _raw(self, frame: RawFrame) -> Message:
+        """A subscription opened with ``decode=False``: the payload as it
+        came (``memoryview``), the codec never called."""
+        self._queue.delivered += 1
+        payload = frame.payload
+        return new_message(
+            frame.topic,
+            frame.schema_name,
+            frame.encoding,
+            payload,
+            frame.receive_time_ns,
+            frame.log_time_ns,
+            payload.nbytes,
+            None,
+            frame.sequence,
         )
 
     def close(self) -> None:
