@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 import signal
 import subprocess
@@ -22,6 +21,7 @@ from typing import IO, Any
 import pytest
 import yaml
 
+from _cli_run import ROOT, rmb, rmb_proc
 from peers.rosbridge import RosBridge, RosGraph
 from ros_mobile_bridge import __version__
 from ros_mobile_bridge._cli._format import dump_yaml, json_line, plain
@@ -29,7 +29,6 @@ from ros_mobile_bridge.demo import DemoRobot
 
 pytest_plugins = ["peers.ros_fixtures"]
 
-ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ["asyncio", "trio"]
 TWIST = "geometry_msgs/msg/Twist"
 
@@ -38,39 +37,6 @@ TWIST = "geometry_msgs/msg/Twist"
 def robot() -> Iterator[DemoRobot]:
     with DemoRobot() as bot:
         yield bot
-
-
-def _env(url: str | None) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k != "RMB_URL"}
-    if url is not None:
-        env["RMB_URL"] = url
-    return env
-
-
-def rmb(
-    *args: str, url: str | None = None, timeout: float = 60
-) -> subprocess.CompletedProcess[str]:
-    """``rmb ARGS`` to the end; ``url`` goes in ``$RMB_URL``."""
-    return subprocess.run(
-        [sys.executable, "-m", "ros_mobile_bridge", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-        env=_env(url),
-        check=False,
-    )
-
-
-def rmb_proc(*args: str, url: str | None = None) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [sys.executable, "-m", "ros_mobile_bridge", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=ROOT,
-        env=_env(url),
-    )
 
 
 def read_until(stream: IO[str] | None, found: Callable[[str], bool], lines: int = 200) -> str:

@@ -9,24 +9,21 @@ one stderr line per event (Ctrl-C, a lost connection)."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import socket
 import subprocess
-import sys
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
 import yaml
 
+from _cli_run import cli_env, rmb, rmb_proc
 from peers.rosbridge import RosBridge
 from ros_mobile_bridge.demo import DemoRobot
 
 pytest_plugins = ["peers.ros_fixtures"]
 
-ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ["asyncio", "trio"]
 TOPICS = {"/battery", "/camera/image/compressed", "/odom", "/pose", "/status"}
 
@@ -35,36 +32,6 @@ TOPICS = {"/battery", "/camera/image/compressed", "/odom", "/pose", "/status"}
 def robot() -> Iterator[DemoRobot]:
     with DemoRobot() as bot:
         yield bot
-
-
-def _env(url: str | None) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k != "RMB_URL"}
-    if url is not None:
-        env["RMB_URL"] = url
-    return env
-
-
-def rmb(*args: str, url: str | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "ros_mobile_bridge", *args],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        cwd=ROOT,
-        env=_env(url),
-        check=False,
-    )
-
-
-def rmb_proc(*args: str, url: str | None = None) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [sys.executable, "-m", "ros_mobile_bridge", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=ROOT,
-        env=_env(url),
-    )
 
 
 def ok(result: subprocess.CompletedProcess[str]) -> str:
@@ -361,19 +328,10 @@ def test_rosbridge_action_send_json_lines(rosbridge: RosBridge) -> None:
 def test_zenoh_params_by_node(sdk: Any, zenoh_router: Any, zenoh_domain: int) -> None:
     pytest.importorskip("zenoh_ros2_sdk")
     sdk("params")
-    env = {**_env(None), "ROS_DOMAIN_ID": str(zenoh_domain)}
-    base = [sys.executable, "-m", "ros_mobile_bridge", "--protocol", "zenoh", "-u"]
+    env = cli_env(ROS_DOMAIN_ID=str(zenoh_domain))
 
     def run(*args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
-            [*base, zenoh_router.locator, *args],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            cwd=ROOT,
-            env=env,
-            check=False,
-        )
+        return rmb("--protocol", "zenoh", "-u", zenoh_router.locator, *args, env=env)
 
     got = run("param", "get", "/sdk_params", "speed", "name")
     assert ok(got) == "speed: 0.5\nname: robot\n"

@@ -6,19 +6,19 @@ one error line (exit 1) over Foxglove."""
 from __future__ import annotations
 
 import json
-import os
 import queue
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
 
+from _cli_run import cli_env
+from _cli_run import rmb as run_rmb
+from _cli_run import rmb_proc as start_rmb
 from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph
 from peers.zenoh_sdk_node import SdkNode
@@ -27,38 +27,16 @@ from ros_mobile_bridge._types import ServiceInfo, TopicInfo
 
 pytest_plugins = ["peers.ros_fixtures"]
 
-ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ["asyncio", "trio"]
 
 
-def _env(**extra: str) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k not in ("RMB_URL", "ROS_DOMAIN_ID")}
-    env.update(extra)
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), env.get("PYTHONPATH", "")])
-    return env
+def rmb(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
+    """``rmb ARGS`` with ``env`` set and no inherited ``$ROS_DOMAIN_ID``."""
+    return run_rmb(*args, env=cli_env(drop=["ROS_DOMAIN_ID"], **env))
 
 
 def rmb_proc(*args: str, **env: str) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [sys.executable, "-m", "ros_mobile_bridge", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=ROOT,
-        env=_env(**env),
-    )
-
-
-def rmb(*args: str, **env: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "ros_mobile_bridge", *args],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        cwd=ROOT,
-        env=_env(**env),
-        check=False,
-    )
+    return start_rmb(*args, env=cli_env(drop=["ROS_DOMAIN_ID"], **env))
 
 
 class Events:

@@ -13,28 +13,14 @@ import pkgutil
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
+from _cli_run import ROOT, rmb
 from ros_mobile_bridge import _cli
 from ros_mobile_bridge._cli import _app, _table
 
-ROOT = Path(__file__).resolve().parent.parent
 GROUPS = ["action", "bag", "interface", "node", "param", "service", "topic"]
-
-
-def rmb(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if k != "RMB_URL"}
-    return subprocess.run(
-        [sys.executable, "-m", "ros_mobile_bridge", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-        env=env,
-        check=False,
-    )
 
 
 @pytest.mark.parametrize("group", GROUPS)

@@ -4,31 +4,20 @@ interface`` prints them (comments, constants, nested types indented)."""
 
 from __future__ import annotations
 
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from _cli_run import cli_env
+from _cli_run import rmb as run_rmb
 
 
 def rmb(*args: str, ament: str | None = None) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ)
-    env.pop("RMB_URL", None)
-    env.pop("AMENT_PREFIX_PATH", None)
+    env = cli_env(drop=["AMENT_PREFIX_PATH"])
     if ament is not None:
         env["AMENT_PREFIX_PATH"] = ament
-    return subprocess.run(
-        [sys.executable, "-m", "ros_mobile_bridge", "interface", *args],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        cwd=ROOT,
-        env=env,
-        check=False,
-    )
+    return run_rmb("interface", *args, env=env)
 
 
 def ok(*args: str, ament: str | None = None) -> list[str]:

@@ -5,21 +5,17 @@ robot (the official Foxglove SDK server) on both event loops."""
 from __future__ import annotations
 
 import json
-import os
 import signal
-import subprocess
-import sys
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
 
+from _cli_run import rmb, rmb_proc
 from ros_mobile_bridge._cli._rate import ArrivalMeter, delay_figures, header_stamp_ns
 from ros_mobile_bridge._types import new_message
 from ros_mobile_bridge.demo import DemoRobot
 
-ROOT = Path(__file__).resolve().parent.parent
 BACKENDS = ["asyncio", "trio"]
 
 
@@ -88,22 +84,9 @@ def robot() -> Iterator[DemoRobot]:
         yield bot
 
 
-def _env() -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if k != "RMB_URL"}
-    env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), env.get("PYTHONPATH", "")])
-    return env
-
-
 def lines_of(*args: str, count: int) -> tuple[list[str], int]:
     """The first ``count`` stdout lines of ``rmb ARGS``, then Ctrl-C."""
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "ros_mobile_bridge", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=ROOT,
-        env=_env(),
-    )
+    proc = rmb_proc(*args)
     assert proc.stdout is not None
     try:
         lines = [proc.stdout.readline() for _ in range(count)]
@@ -175,15 +158,7 @@ def test_delay_text_and_json(robot: DemoRobot, backend: str) -> None:
 
 
 def test_delay_of_a_topic_without_header_is_one_line(robot: DemoRobot) -> None:
-    result = subprocess.run(
-        [sys.executable, "-m", "ros_mobile_bridge", "-u", robot.url, "delay", "/status"],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        cwd=ROOT,
-        env=_env(),
-        check=False,
-    )
+    result = rmb("-u", robot.url, "delay", "/status")
     assert result.returncode == 1
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "has no header.stamp" in lines[0], result.stderr
@@ -199,15 +174,7 @@ def test_echo_info(robot: DemoRobot) -> None:
 
 def test_info_json(robot: DemoRobot) -> None:
     def run(*args: str) -> Any:
-        result = subprocess.run(
-            [sys.executable, "-m", "ros_mobile_bridge", "-u", robot.url, "info", *args, "--json"],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            cwd=ROOT,
-            env=_env(),
-            check=False,
-        )
+        result = rmb("-u", robot.url, "info", *args, "--json")
         assert result.returncode == 0, result.stderr
         return json.loads(result.stdout)
 
