@@ -153,8 +153,9 @@ def test_every_python_block_compiles() -> None:
 
 @pytest.mark.parametrize(("block", "backend"), _python_cases())
 def test_python_block_runs_against_the_demo_robot(
-    robot: DemoRobot, block: Block, backend: str, monkeypatch: pytest.MonkeyPatch
+    robot: DemoRobot, block: Block, backend: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
+    monkeypatch.chdir(tmp_path)  # what a block writes (a recording) stays out of the checkout
     run_python(block, robot.url, backend, monkeypatch)
 
 
