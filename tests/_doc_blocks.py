@@ -11,7 +11,9 @@ The conventions (CONTRIBUTING.md, "Code blocks in the docs"):
 - A block that cannot run against the demo robot is marked by an HTML comment
   on the line before it (blank lines between allowed), and the prose right
   before it says the same in words: ``<!-- needs: rosbridge -->``,
-  ``<!-- needs: zenoh -->`` (another transport), ``<!-- needs: robot -->``
+  ``<!-- needs: zenoh -->`` (another transport; run by the ``ros`` tests
+  against the peers of tests/peers/), ``<!-- needs: roslibpy -->`` (that
+  library and a rosbridge server), ``<!-- needs: robot -->``
   (a real robot, its network or files on it), ``<!-- needs: checkout -->``
   (a command run from a clone of the repository: its scripts, the test suite,
   benches, fuzzers), ``<!-- needs: install -->`` (a command that installs
@@ -27,8 +29,8 @@ The conventions (CONTRIBUTING.md, "Code blocks in the docs"):
   run it.
 
 The robot's documented address (``robot.local``, ``localhost``,
-``127.0.0.1``, with or without ``ws://`` and ``:8765``) is replaced by the demo
-robot's. A python block with no ``import`` is a fragment: it gets ``anyio``,
+``127.0.0.1``, with or without ``ws://`` or ``tcp/`` and ``:8765``, ``:9090`` or
+``:7447``) is replaced by the demo robot's (or the peer's). A python block with no ``import`` is a fragment: it gets ``anyio``,
 ``rmb`` and ``url`` (the robot's URL), and ``robot`` when it uses that name
 without binding it (the async client inside ``async with rmb.connect(url)``
 when the block awaits, else the blocking client of ``rmb.connect_sync(url)``).
@@ -53,6 +55,7 @@ NEEDS = {
     # what a marked block needs -> words one of which the prose before it must say
     "rosbridge": ("rosbridge",),
     "zenoh": ("zenoh",),
+    "roslibpy": ("roslibpy",),
     "robot": ("robot",),
     "checkout": ("checkout", "clone", "repository", ".venv"),
     "install": ("install", "extra"),
@@ -63,7 +66,8 @@ _FENCE = re.compile(r"^(?P<indent>\s*)(?P<fence>`{3,}|~{3,})\s*(?P<lang>[^\s`]*)
 _MARKER = re.compile(r"^\s*<!--\s*(?P<key>[a-z]+):\s*(?P<value>[a-z-]+)\s*-->\s*$")
 _INCLUDE = re.compile(r'^--8<--\s+"(?P<path>[^"]+)"\s*$')
 _ADDRESS = re.compile(
-    r"(?P<scheme>ws://)?(?:robot\.local|localhost|127\.0\.0\.1)(?::8765)?(?![\w.:])"
+    r"(?P<scheme>ws://|tcp/)?(?:robot\.local|localhost|127\.0\.0\.1)"
+    r"(?::(?:8765|9090|7447))?(?![\w.:])"
 )
 
 
@@ -217,8 +221,9 @@ def problem(block: Block) -> str | None:
 
 
 def localise(text: str, url: str) -> str:
-    """The text with the docs' robot address replaced by ``url`` (``ws://host:port``)."""
-    hostport = url.removeprefix("ws://")
+    """The text with the docs' robot address replaced by ``url`` (``ws://host:port``, or a
+    zenoh router's ``tcp/host:port``)."""
+    hostport = url.removeprefix("ws://").removeprefix("tcp/")
     return _ADDRESS.sub(lambda m: url if m["scheme"] else hostport, text)
 
 

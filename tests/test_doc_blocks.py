@@ -8,7 +8,6 @@ Plain (sync) tests: a block that awaits runs once on asyncio and once on trio.""
 from __future__ import annotations
 
 import ast
-import functools
 import inspect
 import os
 import re
@@ -17,7 +16,7 @@ import signal
 import socket
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +41,8 @@ from _doc_blocks import (
     runs_main_itself,
     uses_unbound,
 )
+from peers.rosbridge import RosBridge, RosGraph
+from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.demo import DemoRobot
 
 if sys.version_info >= (3, 11):
@@ -49,9 +50,12 @@ if sys.version_info >= (3, 11):
 else:  # pytest's own dependency on 3.10
     import tomli as tomllib
 
+pytest_plugins = ["peers.ros_fixtures"]
+
 BLOCKS, MARKER_PROBLEMS = all_blocks()
 BLOCK_S = 60.0
 """Deadline of a block that ends by itself."""
+ODOMETRY = "nav_msgs/msg/Odometry"
 UNTIL_S = 5.0
 """How long a ``block: until-stopped`` block runs before the harness stops it."""
 
@@ -76,10 +80,13 @@ def _awaits(block: Block) -> bool:
     )
 
 
-def _python_cases() -> list[Any]:
+def _python_cases(needs: str | None = None) -> list[Any]:
+    """The python blocks that run against the demo robot (or, with ``needs``, against that
+    peer), with the backends each runs on."""
     cases = []
     for block in BLOCKS:
-        if block.lang in PYTHON and _runs_on_demo(block):
+        runs = _runs_on_demo(block) if needs is None else block.needs == needs
+        if block.lang in PYTHON and block.include is None and runs:
             backends = ("asyncio", "trio") if _awaits(block) else ("sync",)
             cases += [pytest.param(block, b, id=f"{block.id}-{b}") for b in backends]
     return cases
@@ -136,7 +143,12 @@ def test_the_demo_address_is_replaced_and_others_are_not() -> None:
     assert localise('connect("ws://robot.local:8765")', url) == f'connect("{url}")'
     assert localise('connect("robot.local")', url) == 'connect("127.0.0.1:4242")'
     assert localise("rmb echo 127.0.0.1:8765 /odom", url) == "rmb echo 127.0.0.1:4242 /odom"
-    assert localise("tcp/robot.local:7447", url) == "tcp/robot.local:7447"
+    assert localise('connect("ws://robot.local:9090", protocol="rosbridge")', url) == (
+        f'connect("{url}", protocol="rosbridge")'
+    )
+    router = "tcp/127.0.0.1:7000"
+    assert localise('connect("tcp/robot.local:7447")', router) == f'connect("{router}")'
+    assert localise("ws://robot:9090", url) == "ws://robot:9090"
     assert localise("wss://robot.example.com", url) == "wss://robot.example.com"
 
 
@@ -172,7 +184,17 @@ def run_python(block: Block, url: str, backend: str, monkeypatch: pytest.MonkeyP
     until_stopped = "until-stopped" in block.flags
     real_run = anyio.run
     loop = "asyncio" if backend == "sync" else backend
-    monkeypatch.setattr(anyio, "run", functools.partial(real_run, backend=loop))
+
+    def bounded_run(func: Callable[..., Any], *args: Any, **_: Any) -> Any:
+        """The block's own ``anyio.run(main)``, on this test's backend, with a deadline."""
+
+        async def bounded() -> Any:
+            with anyio.fail_after(BLOCK_S):
+                return await func(*args)
+
+        return real_run(bounded, backend=loop)
+
+    monkeypatch.setattr(anyio, "run", bounded_run)
 
     if code.co_flags & inspect.CO_COROUTINE:
 
@@ -198,7 +220,7 @@ def run_python(block: Block, url: str, backend: str, monkeypatch: pytest.MonkeyP
         exec(code, namespace)
     main = namespace.get("main")
     if inspect.iscoroutinefunction(main) and not runs_main_itself(tree):
-        real_run(main, backend=loop)
+        bounded_run(main)
 
 
 # -- shell blocks -----------------------------------------------------------------------------
@@ -256,7 +278,12 @@ def _stop(proc: subprocess.Popen[str], what: str) -> None:
 def test_shell_block_runs_against_the_demo_robot(
     robot: DemoRobot, block: Block, tmp_path: Path
 ) -> None:
-    env = dict(os.environ, RMB_URL=robot.url)
+    run_shell(block, robot.url, tmp_path)
+
+
+def run_shell(block: Block, url: str, tmp_path: Path) -> None:
+    """Run the block's commands in order, in ``tmp_path``, with ``$RMB_URL`` set to ``url``."""
+    env = dict(os.environ, RMB_URL=url)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), *filter(None, [env.get("PYTHONPATH")])])
     until_stopped = "until-stopped" in block.flags
     background: list[tuple[subprocess.Popen[str], str]] = []
@@ -266,7 +293,7 @@ def test_shell_block_runs_against_the_demo_robot(
                 continue  # the harness's $RMB_URL stands for the docs' own
             what = " ".join(command.argv)
             proc = subprocess.Popen(
-                _argv(command.argv, robot.url),
+                _argv(command.argv, url),
                 cwd=tmp_path,
                 env=env,
                 stdin=subprocess.DEVNULL,
@@ -297,6 +324,81 @@ def test_shell_block_runs_against_the_demo_robot(
             if proc.poll() is None:
                 proc.kill()
                 proc.communicate()
+
+
+# -- blocks that need rosbridge or Zenoh, against the peers of tests/peers/ (marked ros) -------
+
+
+@pytest.fixture(scope="module")
+def camera(ros_graph: RosGraph) -> Iterator[str]:
+    """An image publisher on the graph, for the blocks that read ``/camera/image_raw``."""
+    topic = "/camera/image_raw"
+    ros_graph.command({"cmd": "image", "topic": topic, "hz": 10, "width": 64, "height": 48})
+    yield topic
+    ros_graph.command({"cmd": "stop", "topic": topic})
+
+
+@pytest.mark.parametrize(("block", "backend"), _python_cases("rosbridge"))
+def test_python_block_runs_against_rosbridge(
+    rosbridge: RosBridge,
+    camera: str,
+    block: Block,
+    backend: str,
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    run_python(block, rosbridge.url, backend, monkeypatch)
+
+
+@pytest.mark.parametrize(
+    "block",
+    [pytest.param(b, id=b.id) for b in BLOCKS if b.lang in SHELL and b.needs == "rosbridge"],
+)
+def test_shell_block_runs_against_rosbridge(
+    rosbridge: RosBridge, block: Block, tmp_path: Path
+) -> None:
+    run_shell(block, rosbridge.url, tmp_path)
+
+
+@pytest.mark.parametrize(("block", "backend"), _python_cases("zenoh"))
+def test_python_block_runs_against_zenoh(
+    sdk: Callable[..., Any],
+    ros_share: Path,
+    zenoh_router: Any,
+    block: Block,
+    backend: str,
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+) -> None:
+    """The docs' Zenoh robot: odometry and the tutorial's ``/add_two_ints`` on domain 0
+    (zenoh-ros2-sdk nodes on the test's own router; example_interfaces from the
+    supplement, as tests/test_interfaces.py does)."""
+    odom = '{"header": {"frame_id": "odom"}, "pose": {"pose": {"position": {"x": 1.0}}}}'
+    sdk(
+        "talker", "--topic", "/odom", "--type", ODOMETRY, "--values", odom, "--rate", "20", domain=0
+    )
+    definitions = tmp_path / "definitions"
+    definitions.mkdir()
+    for package in ros_share.iterdir():
+        (definitions / package.name).symlink_to(package)
+    (definitions / "example_interfaces").symlink_to(
+        ROOT / "scripts" / "interfaces" / "example_interfaces"
+    )
+    adder = SdkNode(zenoh_router.locator, 0, definitions, "add_two_ints", "--name", "/add_two_ints")
+    try:
+        monkeypatch.chdir(tmp_path)
+        run_python(block, zenoh_router.locator, backend, monkeypatch)
+    finally:
+        adder.stop()
+
+
+def test_every_transport_block_is_run_by_a_peer_test() -> None:
+    """A block marked for another transport is python or shell, and one of the tests above
+    runs it (python against rosbridge or Zenoh, shell against rosbridge)."""
+    for block in BLOCKS:
+        if block.needs in ("rosbridge", "zenoh"):
+            assert block.lang in PYTHON or (block.lang in SHELL and block.needs == "rosbridge")
 
 
 # -- the extras table -------------------------------------------------------------------------
