@@ -143,7 +143,7 @@ def test_the_url_comes_from_rmb_url_a_leading_argument_or_u(robot: DemoRobot) ->
         (("echo", "/odom"), "no robot address"),
         (("echo",), "missing TOPIC"),
         (("ecko", "/odom"), "did you mean echo"),
-        (("param",), "param get, param list, param set"),
+        (("param",), "verbs:\n  param list "),
         ((), "a COMMAND is needed"),
         (("pub", "/cmd_vel"), "missing TYPE"),
         # a ROS name is never read as the address; unquoted YAML gets a hint
@@ -360,7 +360,11 @@ def test_pub_repeats_at_1hz_until_ctrl_c_then_stops_the_robot(
 @pytest.mark.parametrize(
     ("data", "says"),
     [
-        ("{linar: {x: 0.1}}", "has no field 'linar' (its fields: linear, angular)"),
+        (
+            "{linar: {x: 0.1}}",
+            "rmb: MessageError: publish /cmd_vel: cannot encode geometry_msgs/msg/Twist: "
+            "field 'linar': unknown field (its fields: linear, angular)",
+        ),
         ("{linear: {x: fast}}", "expected a number"),
         ("{linear: {x: 0.1}", "not valid YAML"),
         ("[1, 2]", "must be a YAML mapping"),
@@ -385,7 +389,8 @@ def test_call_takes_yaml_and_a_bad_field_exits_2_like_pub(robot: DemoRobot) -> N
     assert json.loads(ok.stdout) == {"success": True, "message": "led on"}
     bad = rmb("call", "/set_led", "{dat: true}", url=robot.url)
     assert bad.returncode == 2
-    assert "has no field 'dat'" in one_line(bad.stderr)
+    assert one_line(bad.stderr).startswith("rmb: MessageError: call_service /set_led: ")
+    assert "field 'dat': unknown field" in one_line(bad.stderr)
     missing = rmb("call", "/set_le", "{data: true}", url=robot.url)
     assert missing.returncode == 1
     assert "nearest: /set_led" in one_line(missing.stderr)
@@ -420,6 +425,21 @@ def test_params_alias_keeps_working_and_fails_plainly(robot: DemoRobot) -> None:
     assert "NAME=VALUE" in one_line(no_equals.stderr)
     assert rmb("params", "--set", "max_speed=fast", url=robot.url).returncode == 1
     assert rmb("params", "nosuch", url=robot.url).returncode == 1
+
+
+def test_every_library_error_is_one_line_naming_its_class(robot: DemoRobot) -> None:
+    # the caller's mistake: a value that does not fit its field, exit 2
+    misfit = rmb("pub", "/cmd_vel", TWIST, "{linear: {x: fast}}", "--once", url=robot.url)
+    assert misfit.returncode == 2
+    line = one_line(misfit.stderr)
+    assert line.startswith("rmb: MessageError: publish /cmd_vel: cannot encode "), line
+    assert "field 'linear.x'" in line
+    # the robot's refusal: exit 1, the same shape
+    refused = rmb(
+        "action", "send", "/fib", "test_msgs/action/Fibonacci", "{order: 3}", url=robot.url
+    )
+    assert refused.returncode == 1
+    assert one_line(refused.stderr).startswith("rmb: NotSupportedError: ")
 
 
 def test_action_send_over_foxglove_is_a_one_line_runtime_error(robot: DemoRobot) -> None:
@@ -535,7 +555,7 @@ def test_pub_keeps_publishing_across_a_reconnect_then_stops_on_ctrl_c(
     try:
         wait_for(lambda: {"data": "tick"} in ros_graph.received("/rmb_in"), 30)
         bridge.stop()
-        read_until(proc.stderr, lambda s: "connection lost: waiting" in s)
+        read_until(proc.stderr, lambda s: "connection lost" in s)  # the library's one line
         ros_graph.command({"cmd": "clear", "topic": "/rmb_in"})
         rosbridge_factory(port=port)
         read_until(proc.stderr, lambda s: "connected again" in s)

@@ -111,8 +111,21 @@ def test_every_field_is_covered_here() -> None:
         # tests/test_interfaces.py
         "interface_paths",
         "ament_prefix_path",
+        # below, and tests/test_error_contract.py
+        "unknown_topic_warning",
     }
     assert names == set(FLOAT_FIELDS) | set(INT_FIELDS) | others
+
+
+def test_unknown_topic_warning_is_seconds_or_none() -> None:
+    assert ClientOptions().unknown_topic_warning == 3.0
+    assert ClientOptions(unknown_topic_warning=None).unknown_topic_warning is None
+    assert ClientOptions(unknown_topic_warning=0.5).unknown_topic_warning == 0.5
+    for bad in (0, -1.0, math.nan):
+        with pytest.raises(ValueError, match="unknown_topic_warning"):
+            ClientOptions(unknown_topic_warning=bad)
+    with pytest.raises(TypeError, match="unknown_topic_warning"):
+        ClientOptions(unknown_topic_warning="3")  # type: ignore[arg-type]
 
 
 def test_options_are_frozen() -> None:

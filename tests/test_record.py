@@ -2,8 +2,10 @@
 (the official Foxglove SDK server, CDR and JSON channels) and
 rosbridge_server_rs on a real ROS 2 graph (JSON messages encoded to CDR by
 the library, and cbor-raw CDR). Files are read back with ``mcap``'s own
-reader and ``mcap_ros2``'s decoder; every recorded message must equal what a
-parallel subscription of the same client received over the same window."""
+reader and ``mcap_ros2``'s decoder (the recipe of docs/recording.md, run as
+written) and with rosbags; every channel must follow the MCAP ros2 profile,
+and every recorded message must equal what a parallel subscription of the
+same client received over the same window."""
 
 from __future__ import annotations
 
@@ -12,20 +14,31 @@ import contextlib
 import errno
 import itertools
 import json
-from collections.abc import Iterator
+import os
+import re
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import anyio
 import numpy as np
 import pytest
+from foxglove import Schema
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 import ros_mobile_bridge as rmb
+from _recording import fields_only, read_with_recipe, read_with_rosbags, ros2_profile
 from _util import wait_until
+from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph
-from ros_mobile_bridge._cli._app import parse
+from ros_mobile_bridge._cli._app import main, parse
+from ros_mobile_bridge._cli._record import default_output, summary_lines
+from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.demo import DemoRobot
 
 pytest_plugins = ["peers.ros_fixtures"]
@@ -171,23 +184,139 @@ async def test_demo_topics_round_trip_through_mcap(demo: DemoRobot, tmp_path: Pa
     assert (encoding, schema.name, schema.encoding) == ("cdr", "nav_msgs/msg/Odometry", "ros2msg")
     text = schema.data.decode()
     assert "MSG: std_msgs/Header" in text and "MSG: geometry_msgs/PoseWithCovariance" in text
+    # the ros2 profile: QoS (Foxglove tells none: the documented default) and the type hash
+    profile = ros2_profile(path)
+    assert profile["/odom"]["qos"] == [DEFAULT_QOS]
+    assert profile["/odom"]["hash"] == type_hash(CodecRegistry(), "nav_msgs/msg/Odometry")
+    # rosbags reads every channel, the same values
+    by_rosbags = read_with_rosbags(path)
+    for topic in topics:
+        assert by_rosbags[topic] == fields_only([data for _t, data in decoded[topic]]), topic
+    assert stats.reencoded == {}
 
 
-async def test_every_topic_by_default_json_channels_with_their_schema(
+DEFAULT_QOS = {
+    "history": "keep_last",
+    "depth": 10,
+    "reliability": "reliable",
+    "durability": "volatile",
+    "deadline": {"sec": 9223372036, "nsec": 854775807},
+    "lifespan": {"sec": 9223372036, "nsec": 854775807},
+    "liveliness": "automatic",
+    "liveliness_lease_duration": {"sec": 9223372036, "nsec": 854775807},
+    "avoid_ros_namespace_conventions": False,
+}
+
+
+async def test_every_topic_by_default_a_json_only_topic_is_skipped_and_counted(
     demo: DemoRobot, tmp_path: Path
 ) -> None:
+    """The demo robot's /status is JSON with only a JSON schema: the ros2
+    profile has no place for it, so it is counted as skipped, and the
+    documented reading recipe reads every channel the file has."""
     path = tmp_path / "all.mcap"
+    cdr_topics = {"/odom", "/pose", "/battery", "/camera/image/compressed"}
     async with rmb.connect(demo.url, options=options()) as robot:
         async with robot.record(path) as rec:
-            await wait_until(lambda: len(rec.stats.messages) == 5, 10)
+            await wait_until(
+                lambda: (
+                    set(rec.stats.messages) == cdr_topics
+                    and rec.stats.skipped.get("/status", 0) >= 2
+                ),
+                10,
+            )
         assert sorted(rec.topics) == sorted(t.name for t in robot.topics)
-    messages, schemas = read_back(path)
-    encoding, schema = schemas["/status"]
-    assert (encoding, schema.encoding) == ("json", "jsonschema")
-    assert json.loads(schema.data)["type"] == "object"
-    assert isinstance(messages["/status"][0], dict)
-    assert all(schemas[t][0] == "cdr" for t in messages if t != "/status")
-    assert summary_count(path) == rec.stats.total
+    stats = rec.stats
+    assert set(stats.skipped) == {"/status"}
+    assert stats.skip_reasons == {"/status": {"no_ros2_definition": stats.skipped["/status"]}}
+    assert set(ros2_profile(path)) == cdr_topics
+    recipe = read_with_recipe(path)
+    assert {t: n for t, (_type, n) in recipe.items()} == stats.messages
+    assert recipe["/odom"][0] == "nav_msgs/msg/Odometry"
+    assert summary_count(path) == stats.total
+    assert {t: len(v) for t, v in read_with_rosbags(path).items()} == stats.messages
+
+
+def _publish_until(stop: threading.Event, logs: list[Callable[[int], None]]) -> None:
+    n = 0
+    while not stop.wait(0.01):
+        for log in logs:
+            log(n)
+        n += 1
+
+
+async def test_foxglove_json_channels_of_ros_types_are_reencoded_to_cdr(tmp_path: Path) -> None:
+    """A Foxglove ``json`` channel of a ROS type (a ros2msg schema, or a JSON
+    schema named as a type the client knows) is encoded to CDR into a ros2
+    channel; one of a type nobody defines is skipped and counted."""
+    path = tmp_path / "json.mcap"
+    stop = threading.Event()
+    with SdkServer() as server:
+        twist = server.channel("/twist_json", "geometry_msgs/msg/Twist", encoding="json")
+        vector = server.raw_channel(
+            "/vector_json",
+            encoding="json",
+            schema=Schema(
+                name="geometry_msgs/msg/Vector3",
+                encoding="jsonschema",
+                data=json.dumps({"type": "object"}).encode(),
+            ),
+        )
+        acme = server.raw_channel(
+            "/acme",
+            encoding="json",
+            schema=Schema(name="acme/Status", encoding="jsonschema", data=b'{"type": "object"}'),
+        )
+
+        def log_twist(n: int) -> None:
+            twist.log(json.dumps({"linear": {"x": float(n)}, "angular": {"z": -1.0}}).encode())
+
+        def log_vector(n: int) -> None:
+            vector.log(json.dumps({"x": float(n), "y": 2.0, "z": 3.0}).encode())
+
+        def log_acme(n: int) -> None:
+            acme.log(json.dumps({"n": n}).encode())
+
+        publisher = threading.Thread(
+            target=_publish_until, args=(stop, [log_twist, log_vector, log_acme]), daemon=True
+        )
+        publisher.start()
+        try:
+            async with rmb.connect(server.url, options=options()) as robot:
+                topics = ["/twist_json", "/vector_json", "/acme"]
+                async with robot.record(path, topics=topics, adaptive=False) as rec:
+                    await wait_until(
+                        lambda: (
+                            min(rec.stats.messages.get(t, 0) for t in topics[:2]) >= 3
+                            and rec.stats.skipped.get("/acme", 0) >= 3
+                        ),
+                        10,
+                    )
+        finally:
+            stop.set()
+            publisher.join(5)
+    stats = rec.stats
+    assert stats.reencoded == stats.messages
+    assert set(stats.messages) == {"/twist_json", "/vector_json"}
+    assert stats.skip_reasons == {"/acme": {"no_ros2_definition": stats.skipped["/acme"]}}
+    profile = ros2_profile(path)
+    assert {t: p["type"] for t, p in profile.items()} == {
+        "/twist_json": "geometry_msgs/msg/Twist",
+        "/vector_json": "geometry_msgs/msg/Vector3",
+    }
+    decoded = decode_all(path)
+    twists = [m for _t, m in decoded["/twist_json"]]
+    first = twists[0]["linear"]["x"]
+    assert twists == [
+        {
+            "linear": {"x": first + i, "y": 0.0, "z": 0.0},
+            "angular": {"x": 0.0, "y": 0.0, "z": -1.0},
+        }
+        for i in range(len(twists))
+    ]
+    vectors = [m for _t, m in decoded["/vector_json"]]
+    assert vectors[0] == {"x": vectors[0]["x"], "y": 2.0, "z": 3.0}
+    assert read_with_rosbags(path) == {t: fields_only([m for _t, m in decoded[t]]) for t in decoded}
 
 
 async def test_the_file_is_valid_after_cancellation(demo: DemoRobot, tmp_path: Path) -> None:
@@ -331,6 +460,15 @@ async def test_rosbridge_topics_round_trip_through_mcap(
         text = schemas["/chatter"][1].data.decode()
         assert text.startswith("# This was originally provided as an example message.")
         assert text.rstrip().endswith("\nstring data")
+        # JSON (and CBOR) messages are re-encoded to CDR and counted; cbor-raw's are not
+        assert stats.reencoded == ({} if compression == "cbor-raw" else stats.messages)
+        # the ros2 profile on every channel; the recipe and rosbags read every one
+        assert set(ros2_profile(path)) == set(topics)
+        recipe = read_with_recipe(path)
+        assert {t: n for t, (_type, n) in recipe.items()} == stats.messages
+        by_rosbags = read_with_rosbags(path)
+        for topic in topics:
+            assert by_rosbags[topic] == fields_only([data for _t, data in decoded[topic]]), topic
     finally:
         await anyio.to_thread.run_sync(lambda: ros_graph.command({"cmd": "stop", "topic": image}))
 
@@ -357,12 +495,165 @@ async def test_the_record_command_writes_a_file_for_its_duration(
     assert f"{total} messages" in err and "/odom:" in err
 
 
-def test_the_record_command_refuses_bad_numbers(capsys: pytest.CaptureFixture[str]) -> None:
+def test_the_record_command_refuses_bad_numbers() -> None:
     for bad in (["--duration", "0"], ["--max-hz", "-1"], ["--max-hz", "fast"]):
         with pytest.raises(SystemExit) as caught:
             parse(["record", "localhost:8765", "-o", "x.mcap", *bad])
         assert caught.value.code == 2
-    with pytest.raises(SystemExit) as caught:
-        parse(["record", "localhost:8765"])  # -o is required
-    assert caught.value.code == 2
-    assert "required" in capsys.readouterr().err
+
+
+async def test_the_record_command_names_the_file_from_the_date_without_o(
+    demo: DemoRobot, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    verb, args = parse(["record", demo.url, "/odom", "--duration", "1"])
+    assert verb.run is not None
+    assert await verb.run(args) == 0
+    made = [p.name for p in tmp_path.iterdir()]
+    assert len(made) == 1 and re.fullmatch(r"rmb_\d{4}_\d\d_\d\d-\d\d_\d\d_\d\d\.mcap", made[0])
+    assert summary_count(tmp_path / made[0]) > 0
+    assert default_output(0.0) == time.strftime("rmb_%Y_%m_%d-%H_%M_%S.mcap", time.localtime(0))
+
+
+async def test_the_record_command_refuses_an_existing_output_unless_overwrite(
+    demo: DemoRobot, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "kept.mcap"
+    path.write_bytes(b"precious")
+    verb, args = parse(["record", demo.url, "/odom", "-o", str(path), "--duration", "1"])
+    assert verb.run is not None
+    assert await verb.run(args) == 1
+    assert path.read_bytes() == b"precious"
+    assert "--overwrite" in capsys.readouterr().err
+    verb, args = parse(["record", demo.url, "/odom", "-o", str(path), "-f", "--duration", "1"])
+    assert verb.run is not None
+    assert await verb.run(args) == 0
+    assert summary_count(path) > 0
+
+
+def test_the_record_command_writes_mcap_to_stdout_with_o_dash(
+    demo: DemoRobot, tmp_path: Path
+) -> None:
+    """``-o -``: the MCAP on stdout (no file named ``-``), the summary on
+    stderr; the bytes are a complete file the recipe reads."""
+    command = ["record", demo.url, "/odom", "-o", "-", "--duration", "1.5"]
+    source = str(Path(rmb.__file__).resolve().parents[1])  # this checkout's package
+    done = subprocess.run(
+        [sys.executable, "-m", "ros_mobile_bridge", *command],
+        capture_output=True,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": source},
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert list(tmp_path.iterdir()) == []
+    path = tmp_path / "out.mcap"
+    path.write_bytes(done.stdout)
+    count = summary_count(path)
+    assert read_with_recipe(path) == {"/odom": ("nav_msgs/msg/Odometry", count)}
+    assert f"{count} messages" in done.stderr.decode() and "in stdout" in done.stderr.decode()
+
+
+def test_the_record_summary_says_1_message_and_the_fate_of_every_message() -> None:
+    stats = rmb.RecordStats(
+        messages={"/a": 1, "/b": 2},
+        bytes=1,
+        skipped={"/s": 3},
+        reencoded={"/b": 2},
+        skip_reasons={"/s": {"no_ros2_definition": 3}},
+        failed={"/f": "refused"},
+    )
+    assert summary_lines(stats, "x.mcap") == [
+        "  /a: 1 message",
+        "  /b: 2 messages (2 re-encoded to CDR)",
+        "  /s: 0 messages (3 skipped: no_ros2_definition)",
+        "  /f: not recorded: refused",
+        "3 messages, 3 skipped, 1 byte of payload in x.mcap",
+    ]
+
+
+# -- rmb bag info ----------------------------------------------------------------------
+
+
+async def test_bag_info_summarises_a_recording_offline(
+    demo: DemoRobot,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    path = tmp_path / "info.mcap"
+    async with rmb.connect(demo.url, options=options()) as robot:
+        async with robot.record(path, topics=["/odom", "/battery"]) as rec:
+            await wait_until(
+                lambda: min(rec.stats.messages.get(t, 0) for t in ("/odom", "/battery")) >= 2, 10
+            )
+    stats = rec.stats
+    capsys.readouterr()
+    monkeypatch.delenv("RMB_URL", raising=False)  # no robot is needed
+    verb, args = parse(["bag", "info", str(path)])
+    assert verb.run_sync is not None
+    assert verb.run_sync(args) == 0
+    text = capsys.readouterr().out
+    assert "Files:             info.mcap" in text
+    assert f"Messages:          {stats.total}\n" in text
+    assert (
+        f"Topic: /odom | Type: nav_msgs/msg/Odometry | Count: {stats.messages['/odom']} "
+        "| Serialization Format: cdr"
+    ) in text
+    verb, args = parse(["bag", "info", str(path), "--json"])
+    assert verb.run_sync is not None and verb.run_sync(args) == 0
+    info = json.loads(capsys.readouterr().out)
+    with path.open("rb") as f:
+        st = make_reader(f).get_summary().statistics  # type: ignore[union-attr]
+    assert info == {
+        "files": ["info.mcap"],
+        "size": path.stat().st_size,
+        "storage_id": "mcap",
+        "profile": "ros2",
+        "duration_ns": st.message_end_time - st.message_start_time,
+        "start_ns": st.message_start_time,
+        "end_ns": st.message_end_time,
+        "messages": stats.total,
+        "complete": True,
+        "topics": [
+            {
+                "name": "/battery",
+                "type": "sensor_msgs/msg/BatteryState",
+                "count": stats.messages["/battery"],
+                "serialization_format": "cdr",
+            },
+            {
+                "name": "/odom",
+                "type": "nav_msgs/msg/Odometry",
+                "count": stats.messages["/odom"],
+                "serialization_format": "cdr",
+            },
+        ],
+    }
+
+    # a recording cut short (no footer: killed, a full disk) is counted record by record
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[:-37])
+    verb, args = parse(["bag", "info", str(cut), "--json"])
+    assert verb.run_sync is not None and verb.run_sync(args) == 0
+    partial = json.loads(capsys.readouterr().out)
+    assert partial["complete"] is False
+    assert (partial["messages"], partial["topics"]) == (info["messages"], info["topics"])
+    verb, args = parse(["bag", "info", str(cut)])
+    assert verb.run_sync is not None and verb.run_sync(args) == 0
+    assert "Incomplete:" in capsys.readouterr().out
+
+
+def test_bag_info_refuses_what_is_not_a_recording(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(b"not an mcap file at all")
+    verb, args = parse(["bag", "info", str(bad)])
+    assert verb.run_sync is not None and verb.run_sync(args) == 1
+    assert "not a readable MCAP file" in capsys.readouterr().err
+    bad.write_bytes(b"\x89MC")  # the start of the magic, nothing more
+    assert verb.run_sync(args) == 1
+    assert "not a readable MCAP file" in capsys.readouterr().err
+    assert main(["bag", "info", str(tmp_path / "missing.mcap")]) == 1

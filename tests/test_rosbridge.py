@@ -535,8 +535,10 @@ async def test_parameters(peer: RosPeer) -> None:
         assert every["/rmb_params:speed"] == 0.5
         assert every["/rmb_params:label"] == "demo"
         assert every["/rmb_params:enabled"] is True
-        got = await robot.get_parameters(["/rmb_params:count", "/rmb_params:missing"])
-        assert got == {"/rmb_params:count": 3}
+        assert await robot.get_parameters(["/rmb_params:count"]) == {"/rmb_params:count": 3}
+        with pytest.raises(rmb.ParameterError, match="/rmb_params:missing") as missing:
+            await robot.get_parameters(["/rmb_params:count", "/rmb_params:missing"])
+        assert missing.value.values == {"/rmb_params:count": 3}
         try:
             after = await robot.set_parameters({"/rmb_params:count": 7})
             assert after == {"/rmb_params:count": 7}

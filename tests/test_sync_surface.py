@@ -21,7 +21,8 @@ NOT_MIRRORED: dict[str, str] = {
     "watch_status": "an async iterator of changes: read `status` instead, or iterate in `run()`",
     "watch_topics": "an async iterator of changes: `wait_for_topic()` is its blocking use, "
     "`topics` the snapshot, `run()` the rest",
-    "watch_services": "an async iterator of changes: `services` is the snapshot, `run()` the rest",
+    "watch_services": "an async iterator of changes: `wait_for_service()` is its blocking use, "
+    "`services` the snapshot, `run()` the rest",
     "watch_parameters": "an async context manager yielding an async iterator: `run()`",
     "record": "an async context manager that records while the caller's async code runs: `run()`",
     "serve": "an async context manager whose requests an async task answers: `run()`",
@@ -42,7 +43,6 @@ SYNC_ONLY: dict[str, str] = {
     "closed": "goes with close()",
     "worker_thread": "the thread the async client runs in",
     "run": "runs `await fn(client)` in the worker: the way to everything not mirrored",
-    "wait_for_topic": "the blocking use of `watch_topics()`",
 }
 
 

@@ -2,9 +2,10 @@
 not write: zenoh-ros2-sdk talkers (``std_msgs/msg/String`` and
 ``sensor_msgs/msg/Imu``) through a real eclipse-zenoh router, recorded with
 ``Client.record`` and read back with the ``mcap`` reader and ``mcap_ros2``'s
-decoder (the recipe of docs/recording.md): every message's values, their
-order and count, and each channel's ``ros2msg`` schema with the full text of
-every type it uses."""
+decoder (the recipe of docs/recording.md, also run as written) and with
+rosbags: every message's values, their order and count, each channel's
+``ros2msg`` schema with the full text of every type it uses, and the
+publishers' QoS from their liveliness tokens as ``offered_qos_profiles``."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
+from _recording import fields_only, read_with_recipe, read_with_rosbags, ros2_profile
 from peers.zenoh_router import ZenohRouter
 from peers.zenoh_sdk_node import IMU, SdkNode, imu_fields
 
@@ -29,6 +31,7 @@ from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
 STRING = "std_msgs/msg/String"
+IMU_QOS = "1:1:1,5:,:,:,,"  # rmw_zenoh's token form
 COUNT = 40  # messages per talker
 
 
@@ -103,6 +106,8 @@ async def test_sdk_talkers_are_recorded_and_read_back_with_mcap_ros2(
             await anyio.sleep(0.5)
             for topic, type_name in topics.items():
                 args = ["--topic", topic, "--type", type_name, "--count", str(COUNT)]
+                if topic == "/imu":  # reliable, transient local, keep last 5
+                    args += ["--qos", IMU_QOS]
                 await anyio.to_thread.run_sync(lambda a=args: sdk("talker", "--rate", "50", *a))
             await until(
                 lambda: all(rec.stats.messages.get(t, 0) >= COUNT for t in topics), "every message"
@@ -146,3 +151,22 @@ async def test_sdk_talkers_are_recorded_and_read_back_with_mcap_ros2(
     }
     for name, lines in imu.items():
         assert lines == official(ros_share, name), name
+    # the ros2 profile: each publisher's QoS as its token told it
+    profile = ros2_profile(path)
+    assert [
+        {k: q[k] for k in ("history", "depth", "reliability", "durability")}
+        for q in profile["/imu"]["qos"]
+    ] == [
+        {
+            "history": "keep_last",
+            "depth": 5,
+            "reliability": "reliable",
+            "durability": "transient_local",
+        }
+    ]
+    assert profile["/chatter"]["qos"][0]["durability"] == "volatile"
+    assert profile["/imu"]["hash"].startswith("RIHS01_")
+    # the recipe as written, and rosbags, read every channel
+    assert read_with_recipe(path) == {t: (n, COUNT) for t, n in topics.items()}
+    by_rosbags = read_with_rosbags(path)
+    assert by_rosbags == {t: fields_only(got[t]) for t in topics}

@@ -114,10 +114,11 @@ async def test_parameters_through_the_nodes_parameter_services(
         assert await client.get_parameters(["/sdk_params:speed"]) == {"/sdk_params:speed": 0.5}
         updated = await client.set_parameters({"/sdk_params:speed": 1.25, "/sdk_params:name": "r2"})
         assert updated == {"/sdk_params:speed": 1.25, "/sdk_params:name": "r2"}
-        with pytest.raises(rmb.ServiceError, match="read-only"):
+        with pytest.raises(rmb.ParameterError, match="read-only"):
             await client.set_parameters({"/sdk_params:readonly": 1})
-        # a node that does not exist: its parameters are absent
-        assert await client.get_parameters(["/nobody:x"]) == {}
+        # a node that does not exist: its parameters are not found
+        with pytest.raises(rmb.ParameterError, match="'/nobody:x': not found"):
+            await client.get_parameters(["/nobody:x"])
 
 
 @pytest.mark.parametrize("cancel", [False, True], ids=["exit", "cancel"])

@@ -27,8 +27,10 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._errors import ActionGoalError as ActionGoalError
     from ._errors import ConnectError as ConnectError
     from ._errors import DecodeError as DecodeError
+    from ._errors import MessageError as MessageError
     from ._errors import NotConnected as NotConnected
     from ._errors import NotSupportedError as NotSupportedError
+    from ._errors import ParameterError as ParameterError
     from ._errors import ProtocolMismatchError as ProtocolMismatchError
     from ._errors import RosBridgeError as RosBridgeError
     from ._errors import SchemaError as SchemaError
@@ -83,8 +85,10 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "ActionGoalError": ("._errors", "ActionGoalError"),
     "ConnectError": ("._errors", "ConnectError"),
     "DecodeError": ("._errors", "DecodeError"),
+    "MessageError": ("._errors", "MessageError"),
     "NotConnected": ("._errors", "NotConnected"),
     "NotSupportedError": ("._errors", "NotSupportedError"),
+    "ParameterError": ("._errors", "ParameterError"),
     "ProtocolMismatchError": ("._errors", "ProtocolMismatchError"),
     "RosBridgeError": ("._errors", "RosBridgeError"),
     "SchemaError": ("._errors", "SchemaError"),
@@ -178,8 +182,10 @@ __all__ = [
     "GoalState",
     "LagStats",
     "Message",
+    "MessageError",
     "NotConnected",
     "NotSupportedError",
+    "ParameterError",
     "Priority",
     "ProtocolMismatchError",
     "ReconnectPolicy",

@@ -3,11 +3,19 @@ same exception and the same words, wherever it is made."""
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 from collections.abc import Iterable
 
-__all__ = ["check_interface_paths", "check_name", "check_schema", "check_timeout"]
+__all__ = [
+    "check_interface_paths",
+    "check_name",
+    "check_schema",
+    "check_timeout",
+    "nearest",
+    "nearest_hint",
+]
 
 
 def check_name(kind: str, name: object) -> str:
@@ -63,3 +71,22 @@ def check_interface_paths(paths: object) -> tuple[str, ...]:
             raise ValueError("interface_paths entries must not be empty")
         out.append(text)
     return tuple(out)
+
+
+def nearest(name: str, known: Iterable[str], n: int = 3) -> list[str]:
+    """The known names closest to ``name`` (difflib), best first."""
+    return difflib.get_close_matches(name, sorted(set(known)), n=n, cutoff=0.5)
+
+
+def nearest_hint(name: str, known: Iterable[str]) -> str:
+    """``"; nearest: /odom, /odom_raw"`` for the names closest to ``name``,
+    ``"; it offers: ..."`` (the first eight) when none is close, ``""`` when
+    nothing is known: the words every "not found" shares."""
+    names = sorted(set(known))
+    close = nearest(name, names)
+    if close:
+        return f"; nearest: {', '.join(close)}"
+    if names:
+        more = f", ... ({len(names)} in all)" if len(names) > 8 else ""
+        return f"; it offers: {', '.join(names[:8])}{more}"
+    return ""

@@ -17,9 +17,16 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import anyio
 
 from ._action import ActionGoal
-from ._checks import check_name, check_schema, check_timeout
+from ._checks import check_name, check_schema, check_timeout, nearest_hint
 from ._connection import Connection, RouteContext, is_velocity_type, zero_twist
-from ._errors import ConnectError, DecodeError, NotConnected, ServiceTimeout
+from ._errors import (
+    ConnectError,
+    MessageError,
+    NotConnected,
+    ParameterError,
+    RosBridgeError,
+    ServiceTimeout,
+)
 from ._options import ClientOptions
 from ._published_types import PublishTypes
 from ._router import Route
@@ -30,12 +37,14 @@ from .flow import Subscription, Watcher
 
 if TYPE_CHECKING:
     import os
+    from typing import IO
 
     from ._record import Recording
 
 __all__ = ["Client"]
 
 T = TypeVar("T")
+_Info = TypeVar("_Info", TopicInfo, ServiceInfo)
 
 
 class Client:
@@ -112,6 +121,70 @@ class Client:
     def watch_services(self) -> Watcher[list[ServiceInfo]]:
         """Async iterator: the service list at once, then every change."""
         return self._router.services.watch()
+
+    async def wait_for_topic(self, topic: str, *, timeout: float | None = None) -> TopicInfo:
+        """The topic's :class:`~ros_mobile_bridge.TopicInfo` once the robot
+        offers ``topic`` (at once when it does already). ``TimeoutError``
+        naming the nearest offered names when it did not within ``timeout``
+        seconds (None: wait as long as it takes); ``NotConnected`` when the
+        connection is lost for good (or closes) first. While the connection
+        is being re-established it keeps waiting."""
+        check_name("topic", topic)
+        return await self._wait_for("topic", topic, self._router.topics.watch, timeout)
+
+    async def wait_for_service(self, name: str, *, timeout: float | None = None) -> ServiceInfo:
+        """The service's :class:`~ros_mobile_bridge.ServiceInfo` once the
+        robot offers ``name``; as :meth:`wait_for_topic`, for services."""
+        check_name("service name", name)
+        return await self._wait_for("service", name, self._router.services.watch, timeout)
+
+    async def _wait_for(
+        self,
+        kind: str,
+        name: str,
+        watch: Callable[[], Watcher[list[_Info]]],
+        timeout: float | None,
+    ) -> _Info:
+        """Watch the list and the status together, in the call's own task
+        group (both end with the call): the first of the name listed, the
+        connection ended, or the deadline."""
+        limit = check_timeout(timeout)
+        if self._conn.status.value != "reconnecting":
+            self._conn.require_connected()
+        found: list[_Info] = []
+        known: list[str] = []
+        ended: list[Status] = []
+
+        async def look(scope: anyio.CancelScope) -> None:
+            async for listed in watch():
+                match = [info for info in listed if info.name == name]
+                if match:
+                    found.append(match[0])
+                    scope.cancel()
+                    return
+                known[:] = [info.name for info in listed]
+
+        async def status(scope: anyio.CancelScope) -> None:
+            async for now in self._conn.status.watch():
+                if now in ("error", "closed"):
+                    ended.append(now)
+                    scope.cancel()
+                    return
+
+        with anyio.move_on_after(limit if limit is not None else float("inf")):
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(look, tg.cancel_scope)
+                tg.start_soon(status, tg.cancel_scope)
+        if found:
+            return found[0]
+        if ended:
+            reason = f": {self._conn.last_error}" if self._conn.last_error else ""
+            how = "was lost for good" if ended[0] == "error" else "closed"
+            raise NotConnected(f"the connection {how} before {kind} {name} appeared{reason}")
+        assert limit is not None
+        raise TimeoutError(
+            f"the robot did not offer {kind} {name} within {limit:g} s{nearest_hint(name, known)}"
+        )
 
     # -- subscriptions ------------------------------------------------------
     def subscribe(
@@ -212,7 +285,8 @@ class Client:
         not: the connection was lost first (a peer that stops reading is
         detected within ``keepalive_interval + keepalive_timeout``), or the
         client closed. It never returns for a frame that was not written.
-        ``ValueError`` when ``data`` does not fit the schema."""
+        :class:`~ros_mobile_bridge.MessageError` (a ``ValueError``) naming
+        the field when ``data`` does not fit the schema."""
         check_name("topic", topic)
         check_schema(schema)
         if priority not in ("data", "control"):
@@ -233,8 +307,8 @@ class Client:
             await adapter.advertise(topic, schema)  # the hot path skips this await
         try:
             message = adapter.encode_publish(topic, data)
-        except DecodeError as exc:
-            raise ValueError(f"{topic}: {exc}") from exc
+        except MessageError as exc:  # the call's name is built only here, off the hot path
+            raise exc.in_call(f"publish {topic}") from None
         if velocity:
             conn.velocity[topic] = schema
         if priority == "control":
@@ -290,7 +364,7 @@ class Client:
     # -- recording ----------------------------------------------------------
     def record(
         self,
-        path: str | os.PathLike[str],
+        path: str | os.PathLike[str] | IO[bytes],
         *,
         topics: Sequence[str] | None = None,
         max_hz: float | None = None,
@@ -316,7 +390,9 @@ class Client:
         indexes), on every exit path, cancellation included. Needs the
         ``mcap`` package (the ``[record]`` extra). Arguments are checked
         here, at once (``ValueError`` / ``TypeError``); the file is created
-        on entering (``OSError``). See docs/recording.md."""
+        (or truncated) on entering (``OSError``). ``path`` may also be a
+        binary stream (``sys.stdout.buffer``), written, flushed and left
+        open. See docs/recording.md."""
         from ._record import check_record_args, open_recording
 
         checked, wanted = check_record_args(path, topics, max_hz, compression)
@@ -331,22 +407,28 @@ class Client:
         """Call service ``name`` with ``request`` (a dict; missing fields are
         zero) and return the decoded response (a dict).
 
-        Raises ``ServiceError`` with the server's text when the call fails,
-        ``ServiceTimeout`` when no answer came within ``timeout`` seconds
-        (default ``options.service_timeout``), ``NotConnected`` when the
-        connection is or goes away. A call never waits forever."""
+        Raises :class:`~ros_mobile_bridge.MessageError` naming the field,
+        before anything is sent, when ``request`` does not fit the request
+        type (where the type is known); ``ServiceError`` with the server's
+        text when the call fails, ``ServiceTimeout`` when no answer came
+        within ``timeout`` seconds (default ``options.service_timeout``),
+        ``NotConnected`` when the connection is or goes away. A call never
+        waits forever."""
         check_name("service name", name)
         if request is not None and not isinstance(request, Mapping):
             raise TypeError(
                 f"request must be a mapping (dict) or None, not {type(request).__name__}"
             )
         adapter = self._conn.adapter
-        return await self._request(
-            name,
-            lambda limit: adapter.call_service(name, request, limit),
-            timeout,
-            slack=adapter.wire_timeout_slack,
-        )
+        try:
+            return await self._request(
+                name,
+                lambda limit: adapter.call_service(name, request, limit),
+                timeout,
+                slack=adapter.wire_timeout_slack,
+            )
+        except MessageError as exc:
+            raise exc.in_call(f"call_service {name}") from None
 
     def serve(
         self,
@@ -431,14 +513,33 @@ class Client:
     async def get_parameters(
         self, names: Sequence[str], *, timeout: float | None = None
     ) -> dict[str, Any]:
-        """Current values of the named parameters (names the server does not
-        know are absent from the result)."""
+        """Current values of the named parameters (over Zenoh and rosbridge
+        written ``/node:param``).
+
+        :class:`~ros_mobile_bridge.ParameterError` when the robot does not
+        have some of them: ``exc.reasons`` maps each missing name to
+        ``"not found"`` with the nearest names the robot has, ``exc.values``
+        holds the values of the names it has. ``NotSupportedError`` when the
+        server offers no parameters, ``ServiceTimeout`` past ``timeout``."""
         if isinstance(names, str) or not all(isinstance(n, str) for n in names):
             raise TypeError("names must be a sequence of str")
         names = list(names)
-        return await self._request(
+        values = await self._request(
             "getParameters", lambda _limit: self._conn.adapter.get_parameters(names), timeout
         )
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise ParameterError(await self._not_found(missing, timeout), values)
+        return values
+
+    async def _not_found(self, names: Sequence[str], timeout: float | None) -> dict[str, str]:
+        """``"not found"`` for each of ``names``, with the nearest names the
+        robot has (one listing; none when it cannot be had)."""
+        try:
+            known = sorted(await self.list_parameters(timeout=timeout))
+        except RosBridgeError:
+            known = []
+        return {name: "not found" + nearest_hint(name, known) for name in names}
 
     async def list_parameters(self, *, timeout: float | None = None) -> dict[str, Any]:
         """Every parameter the server exposes, with its value."""
@@ -449,13 +550,37 @@ class Client:
     async def set_parameters(
         self, values: Mapping[str, Any], *, timeout: float | None = None
     ) -> dict[str, Any]:
-        """Set parameters; returns the values the server reports afterwards."""
+        """Set parameters; returns the values the robot reports afterwards,
+        each as it was sent.
+
+        When the robot refuses some of them (a value of the wrong type, out
+        of range, a read-only parameter) or does not have them, every value
+        it accepted is applied, and then
+        :class:`~ros_mobile_bridge.ParameterError` is raised:
+        ``exc.reasons`` maps each failed name to the robot's reason (rcl's
+        ``SetParametersResult.reason`` over Zenoh and rosbridge; over
+        Foxglove, whose protocol has none, the value the robot kept), and
+        ``exc.values`` holds what the robot reports afterwards. A call never
+        returns with a value not taken. ``NotSupportedError`` when the server
+        offers no parameters, ``ServiceTimeout`` past ``timeout``."""
         if not isinstance(values, Mapping) or not all(isinstance(k, str) for k in values):
             raise TypeError("values must be a mapping of parameter name to value")
         values = dict(values)
-        return await self._request(
-            "setParameters", lambda _limit: self._conn.adapter.set_parameters(values), timeout
-        )
+        reasons: dict[str, str] = {}
+        try:
+            after = await self._request(
+                "setParameters", lambda _limit: self._conn.adapter.set_parameters(values), timeout
+            )
+        except ParameterError as exc:
+            after, reasons = exc.values, exc.reasons
+        missing = [
+            n for n, v in values.items() if n not in after and n not in reasons and v is not None
+        ]
+        if missing:
+            reasons.update(await self._not_found(missing, timeout))
+        if reasons:
+            raise ParameterError(reasons, after)
+        return after
 
     @asynccontextmanager
     async def watch_parameters(
@@ -511,7 +636,10 @@ class Client:
         Leaving the block before the goal ended cancels it (shielded, within
         ``options.teardown_timeout``). A lost connection fails the goal with
         reason ``"disconnected"``. ``NotSupportedError`` over Foxglove, whose
-        protocol has no actions."""
+        protocol has no actions; :class:`~ros_mobile_bridge.MessageError`
+        naming the field, before anything is sent, when ``goal`` does not
+        fit the goal type; ``ActionGoalError`` when no server offers the
+        action or it refuses the goal."""
         check_name("action", action)
         check_schema(action_type)
         if not isinstance(goal, Mapping):
@@ -526,7 +654,10 @@ class Client:
                 await adapter.cancel_action_goal(action, goal_id[0])
 
         handle = ActionGoal(action, cancel)
-        goal_id.append(await adapter.send_action_goal(action, action_type, dict(goal), handle))
+        try:
+            goal_id.append(await adapter.send_action_goal(action, action_type, dict(goal), handle))
+        except MessageError as exc:
+            raise exc.in_call(f"send_action_goal {action}") from None
         try:
             yield handle
         finally:
@@ -551,3 +682,15 @@ class _SubscriptionContext:
 
     async def __aexit__(self, *exc_info: object) -> None:
         await self._routed.__aexit__(*exc_info)
+
+    def __aiter__(self) -> None:
+        raise TypeError(_SUBSCRIBE_HINT)
+
+    def __iter__(self) -> None:
+        raise TypeError(_SUBSCRIBE_HINT)
+
+
+_SUBSCRIBE_HINT = (
+    "subscribe() returns a context manager, not an iterator: "
+    "use `async with client.subscribe(...) as sub: async for m in sub`"
+)

@@ -1,15 +1,22 @@
 """The exception hierarchy. Everything the library raises to a caller is a
 :class:`RosBridgeError`, except bad arguments, which raise ``ValueError`` /
-``TypeError`` at once, and cancellation."""
+``TypeError`` at once, and cancellation. One kind of mistake or refusal is
+one class, whichever call and transport meets it (docs/errors.md holds the
+table)."""
 
 from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 
 __all__ = [
     "ActionGoalError",
     "ConnectError",
     "DecodeError",
+    "MessageError",
     "NotConnected",
     "NotSupportedError",
+    "ParameterError",
     "ProtocolMismatchError",
     "RosBridgeError",
     "SchemaError",
@@ -89,3 +96,52 @@ class DecodeError(RosBridgeError):
 
 class SchemaError(DecodeError):
     """A schema definition could not be parsed, or a type name is unknown."""
+
+
+class MessageError(DecodeError, ValueError):
+    """A message, service request, action goal or service reply does not
+    fit its type: an unknown field, a value of the wrong type, a number out
+    of its field's range. Raised before anything is sent, by ``publish``,
+    ``call_service``, ``send_action_goal`` and a served request's ``reply``,
+    on every transport.
+
+    ``type_name`` is the ROS type, ``field`` the dotted path of the field
+    (``"linear.x"``; ``None`` when the whole value is wrong), ``reason``
+    what is wrong, ``call`` the call that met it (``"publish /cmd_vel"``;
+    empty where the codec raised it outside a call). A :class:`DecodeError`
+    and a ``ValueError``, so both older ``except`` clauses still catch it."""
+
+    def __init__(
+        self, type_name: str, reason: str, field: str | None = None, call: str = ""
+    ) -> None:
+        self.type_name = type_name
+        self.reason = reason
+        self.field = field
+        self.call = call
+        text = f"cannot encode {type_name}: "
+        text += f"field {field!r}: {reason}" if field else reason
+        super().__init__(f"{call}: {text}" if call else text)
+
+    def in_call(self, call: str) -> MessageError:
+        """The same error, naming ``call`` (the front adds it)."""
+        return MessageError(self.type_name, self.reason, self.field, call)
+
+
+class ParameterError(RosBridgeError):
+    """The robot refused to set some parameters, or does not have them.
+
+    ``reasons`` maps each failed name to why: the robot's own text where the
+    transport gives one (rcl's ``SetParametersResult.reason`` over Zenoh and
+    rosbridge), ``"not found"`` (with the nearest names the robot has) for
+    a name it does not have, and over Foxglove, whose protocol carries no
+    reason, what the robot kept. ``values`` holds what the robot reports
+    for the names asked about after the call (for ``set_parameters``: the
+    names it accepted hold their new values: every accepted value is
+    applied, the refusals change nothing)."""
+
+    def __init__(self, reasons: Mapping[str, str], values: Mapping[str, Any] | None = None) -> None:
+        self.reasons = dict(reasons)
+        self.values = dict(values or {})
+        text = "; ".join(f"{name!r}: {why}" for name, why in self.reasons.items())
+        many = "parameters" if len(self.reasons) > 1 else "parameter"
+        super().__init__(f"{many} {text}")

@@ -320,6 +320,11 @@ class ClientOptions:
     """Called with the round-trip time in milliseconds of every correlated
     request/response (service calls, parameter requests) and of the idle
     probe (Foxglove: WebSocket ping; rosbridge: ``/rosapi/get_time``)."""
+    unknown_topic_warning: float | None = 3.0
+    """Seconds after which a subscription to a topic the robot does not
+    offer (and that delivered nothing) logs one WARNING naming the nearest
+    offered names; ``None`` never warns. The subscription keeps waiting:
+    the topic may still come."""
     discovery_interval: float = 2.0
     """rosbridge: seconds between polls of ``/rosapi/topics`` and
     ``/rosapi/services`` (the server announces nothing by itself)."""
@@ -413,6 +418,8 @@ class ClientOptions:
         _positive("teardown_timeout", self.teardown_timeout)
         _positive("advertise_settle", self.advertise_settle, allow_zero=True)
         _positive("discovery_interval", self.discovery_interval)
+        if self.unknown_topic_warning is not None:
+            _positive("unknown_topic_warning", self.unknown_topic_warning)
         _positive("latency_probe_interval", self.latency_probe_interval, allow_zero=True)
         _positive("fragment_timeout", self.fragment_timeout)
         if isinstance(self.max_frame_size, bool) or not isinstance(self.max_frame_size, int):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import time
 from collections.abc import AsyncIterator, Callable, Mapping
 from dataclasses import dataclass
 from functools import partial
@@ -17,6 +18,7 @@ from typing import Any, Final
 import anyio
 import anyio.lowlevel
 
+from ._checks import nearest_hint
 from ._errors import ConnectError
 from ._limits import truncate_for_log
 from ._options import ClientOptions
@@ -88,6 +90,7 @@ class Router:
         self.parameters: Watchable[dict[str, Any]] = Watchable({})
         self._rejections: dict[str, int] = {}
         self._routes: dict[str, list[Route]] = {}
+        self._unoffered: dict[Route, float] = {}  # route -> when to warn (unknown_topic_warning)
         self._offers: dict[str, list[Callable[[RawFrame], None]]] = {}  # the hot path's table
         self._watched_parameters: dict[str, int] = {}
         self._inbound = 0
@@ -268,12 +271,16 @@ class Router:
             raise
         if self.adapter.topic_active(route.sub.topic):
             route.queue.set_state("active")
+        grace = self._options.unknown_topic_warning
+        if grace is not None and not self._offered(route.sub.topic):
+            self._unoffered[route] = time.monotonic() + grace
 
     async def remove(self, route: Route) -> None:
         """Stop ``route``; the bridge stops sending once no local
         subscription wants the topic (shielded, within the teardown
         deadline)."""
         route.sub.close()
+        self._unoffered.pop(route, None)
         topic = route.sub.topic
         left = self._unlink(route)
         if left is None or not self._connected:
@@ -384,6 +391,28 @@ class Router:
         finally:
             monitor.remove_tick(key)
 
+    def _offered(self, topic: str) -> bool:
+        return any(info.name == topic for info in self.topics.value)
+
+    def _warn_unoffered(self) -> None:
+        """One WARNING per subscription still waiting, past
+        ``unknown_topic_warning``, for a topic the robot does not offer
+        (nothing once it is offered, active or has delivered)."""
+        now = time.monotonic()
+        for route, when in list(self._unoffered.items()):
+            topic = route.sub.topic
+            if route.queue.state == "active" or route.queue.received or self._offered(topic):
+                del self._unoffered[route]
+            elif now >= when:
+                del self._unoffered[route]
+                known = sorted(info.name for info in self.topics.value)
+                self._log.warning(
+                    "no message on %s after %g s: the robot does not offer it%s",
+                    topic,
+                    self._options.unknown_topic_warning,
+                    nearest_hint(topic, known),
+                )
+
     def _reliability_tick(self, monitor: LagMonitor) -> None:
         """Every 200 ms (see :meth:`run_reliability`): refresh each adaptive
         subscription's throttle, feed its breaker the lag, and note the
@@ -392,6 +421,8 @@ class Router:
         with an adaptive throttle (rosbridge's ``throttle_rate``)."""
         if not self._routes or not self._connected:
             return
+        if self._unoffered:
+            self._warn_unoffered()
         lag = monitor.recurring_lag_ms()  # the loop's monitor, not looked up per client
         policy = self._options.breaker
         for topic, routes in self._routes.items():

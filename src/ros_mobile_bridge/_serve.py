@@ -22,7 +22,7 @@ from typing import Any, Final, Literal
 
 import anyio
 
-from ._errors import ConnectError, DecodeError, NotConnected, RosBridgeError, ServiceError
+from ._errors import ConnectError, MessageError, NotConnected, RosBridgeError, ServiceError
 from .adapters import Adapter
 
 __all__ = ["ServeStats", "ServedServices", "ServiceRequest", "ServiceRequests", "Serving"]
@@ -121,7 +121,8 @@ class ServiceRequest:
     async def reply(self, values: Mapping[str, Any] | None = None) -> None:
         """Answer with the response ``values`` (a dict; missing fields are
         zero when the type is known). Raises ``TypeError`` for a value that
-        is not a mapping, ``ValueError`` when it does not fit the response
+        is not a mapping, :class:`~ros_mobile_bridge.MessageError` (a
+        ``ValueError``) naming the field when it does not fit the response
         type (the request stays unanswered then), ``ServiceError`` when the
         request was answered already (by the library at its deadline, for
         instance) and ``NotConnected`` when the connection that carried it
@@ -316,9 +317,9 @@ class Serving:
         # answer is out, whatever cancellation lands next
         try:
             await adapter.respond_service(self.name, call.id, values, result)
-        except DecodeError as exc:
+        except MessageError as exc:
             self._unclaim(call)  # still the caller's to answer
-            raise ValueError(f"{self.name}: {exc}") from exc
+            raise exc.in_call(f"reply to {self.name}") from exc
         except ConnectError as exc:
             self._settle(call, "lost")
             raise NotConnected(

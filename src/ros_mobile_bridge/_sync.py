@@ -174,7 +174,7 @@ class SyncClient:
       ``timeout`` given to :meth:`subscribe`, None unless given),
       :meth:`SyncActionGoal.accepted`, :meth:`SyncActionGoal.result`,
       :meth:`SyncActionGoal.next_feedback`, and :meth:`run` (as long as
-      ``fn`` runs). :meth:`wait_for_topic` needs a ``timeout``.
+      ``fn`` runs), :meth:`wait_for_topic` and :meth:`wait_for_service`.
 
     Once the worker thread has stopped, or after :meth:`close`, they raise
     ``NotConnected``.
@@ -341,18 +341,19 @@ class SyncClient:
         ``timeout`` this waits as long as ``fn`` runs."""
         return self._call(fn, self._client, timeout=timeout, what="run")
 
-    def wait_for_topic(self, topic: str, *, timeout: float) -> TopicInfo:
-        """Return the topic's info once the server offers ``topic``;
-        ``TimeoutError`` if it did not within ``timeout`` seconds."""
+    @_mirrors
+    def wait_for_topic(self, topic: str, *, timeout: float | None = None) -> TopicInfo:
+        """:meth:`Client.wait_for_topic`, blocking."""
+        return self._call(
+            _wait_for_topic, self._client, topic, timeout, timeout=None, what=f"wait for {topic}"
+        )
 
-        async def wait(client: Client) -> TopicInfo:
-            async for topics in client.watch_topics():
-                for info in topics:
-                    if info.name == topic:
-                        return info
-            raise NotConnected(f"the client closed before {topic} appeared")
-
-        return self._call(wait, self._client, timeout=timeout, what=f"wait_for_topic({topic})")
+    @_mirrors
+    def wait_for_service(self, name: str, *, timeout: float | None = None) -> ServiceInfo:
+        """:meth:`Client.wait_for_service`, blocking."""
+        return self._call(
+            _wait_for_service, self._client, name, timeout, timeout=None, what=f"wait for {name}"
+        )
 
     # -- publishing ---------------------------------------------------------
     @_mirrors
@@ -737,6 +738,14 @@ async def _publish(
 
 async def _advertise(client: Client, topic: str, schema: str, latch: bool) -> None:
     await client.advertise(topic, schema, latch=latch)
+
+
+async def _wait_for_topic(client: Client, topic: str, timeout: float | None) -> TopicInfo:
+    return await client.wait_for_topic(topic, timeout=timeout)
+
+
+async def _wait_for_service(client: Client, name: str, timeout: float | None) -> ServiceInfo:
+    return await client.wait_for_service(name, timeout=timeout)
 
 
 async def _call_service(

@@ -110,6 +110,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--count", type=int, default=0, help="0: until stopped")
     parser.add_argument("--name", default="/sdk_set_bool")
     parser.add_argument("--values", default="", help="talker: JSON field values")
+    parser.add_argument(
+        "--qos", default="", help="talker: its QoS, in rmw_zenoh's token form (default: the sdk's)"
+    )
     parser.add_argument("--node", default="", help="node name (default per role)")
     describe = parser.add_mutually_exclusive_group()
     describe.add_argument("--describe", action="store_true")
@@ -142,7 +145,12 @@ def main(argv: list[str]) -> int:
     if args.role == "talker":
         node = args.node or "sdk_talker"
         pub = sdk.ROS2Publisher(
-            args.topic, args.type, node_name=node, type_hash=official_hash(args), **where
+            args.topic,
+            args.type,
+            node_name=node,
+            type_hash=official_hash(args),
+            qos=args.qos or None,
+            **where,
         )
         closers.append(pub)
         if describing:

@@ -1,10 +1,10 @@
-"""What several ``rmb`` verbs share: opening the robot, output lines, and
+"""What several ``rmb`` verbs share: opening the robot, graph names as
+ros2 reads them, type names compared in either spelling, output lines, and
 the notice about a topic that has not appeared."""
 
 from __future__ import annotations
 
 import argparse
-import difflib
 import sys
 from collections.abc import Iterable
 from contextlib import AbstractAsyncContextManager
@@ -13,10 +13,21 @@ from typing import Any
 import anyio
 
 from .. import _connect
+from .._checks import nearest as nearest  # one nearest-names rule, the library's
 from .._client import Client
 from .._options import ClientOptions
 
-__all__ = ["NOTICE_AFTER_S", "nearest", "notice_if_missing", "open_robot", "out", "warn"]
+__all__ = [
+    "NOTICE_AFTER_S",
+    "check_type",
+    "graph_name",
+    "nearest",
+    "notice_if_missing",
+    "open_robot",
+    "out",
+    "same_type",
+    "warn",
+]
 
 NOTICE_AFTER_S = 3.0
 """Seconds without a message before ``echo``/``hz``/``bw`` say on stderr
@@ -30,6 +41,47 @@ def open_robot(ns: argparse.Namespace, **options: Any) -> AbstractAsyncContextMa
     )
 
 
+def graph_name(text: str, kind: str = "name") -> str:
+    """A topic, service, action or node name as ``ros2`` reads it from the
+    command line: a relative name (``odom``) is resolved against ``/``
+    (``/odom``), as for a node in the root namespace; an absolute one is
+    kept. Every verb's graph-name argument goes through here.
+    :class:`UsageError` for an empty name, one with spaces, or a private
+    (``~``) name, which needs a node."""
+    from ._format import UsageError
+
+    name = text.strip()
+    if not name or any(c.isspace() for c in name):
+        raise UsageError(f"{kind} {text!r} is not a ROS name")
+    if name.startswith("~"):
+        raise UsageError(f"{kind} {text!r} is private to a node: give its full name (/node/...)")
+    return name if name.startswith("/") else "/" + name
+
+
+def same_type(given: str, known: str) -> bool:
+    """Whether two spellings name one type: ``pkg/msg/T`` and ``pkg/T``
+    are the same (the short form leaves the kind out)."""
+    if given == known:
+        return True
+    a, b = given.split("/"), known.split("/")
+    if len(a) == len(b):
+        return False
+    return (a[0], a[-1]) == (b[0], b[-1])
+
+
+def check_type(kind: str, name: str, given: str, known: str | None) -> None:
+    """Refuse (:class:`UsageError`) a type the user gave that is not the one
+    the robot lists for ``name`` (ros2's ``echo /odom nav_msgs/msg/Odometry``
+    and ``service call /x pkg/srv/T`` forms); nothing to check when the robot
+    does not say (``known`` None or empty)."""
+    from ._format import UsageError
+
+    if given.count("/") not in (1, 2) or any(c.isspace() for c in given):
+        raise UsageError(f"{given!r} is not a ROS type (pkg/{kind}/Type)")
+    if known and not same_type(given, known):
+        raise UsageError(f"{name} is a {known}, not a {given}")
+
+
 def out(text: str) -> None:
     """One line on stdout, flushed (a closed pipe raises here, at once)."""
     print(text, flush=True)
@@ -38,11 +90,6 @@ def out(text: str) -> None:
 def warn(text: str) -> None:
     """One line on stderr."""
     print(f"rmb: {text}", file=sys.stderr, flush=True)
-
-
-def nearest(name: str, known: Iterable[str], n: int = 3) -> list[str]:
-    """The known names closest to ``name`` (difflib), best first."""
-    return difflib.get_close_matches(name, sorted(set(known)), n=n, cutoff=0.5)
 
 
 def missing_line(kind: str, name: str, known: Iterable[str]) -> str:

@@ -14,6 +14,7 @@ from typing import Any
 __all__ = [
     "UsageError",
     "check_fields",
+    "csv_line",
     "dump_flow",
     "dump_yaml",
     "finite_or_none",
@@ -184,29 +185,47 @@ def select_field(value: Any, path: str) -> Any:
     return current
 
 
-def check_fields(robot: Any, typename: str, data: Mapping[str, Any], what: str) -> None:
-    """Refuse (``UsageError``) a key of ``data`` that type ``typename`` has no
-    field for, naming the known ones, before anything is sent; types whose
-    definition this client does not know are not checked here (the server
-    or the encoder refuses then)."""
-    from .._errors import RosBridgeError
+def check_fields(
+    robot: Any, typename: str, data: Mapping[str, Any], call: str, *, _top: str = "", _at: str = ""
+) -> None:
+    """Refuse a key of ``data`` that type ``typename`` has no field for,
+    before anything is sent: the library's :class:`MessageError` (the same
+    class and words ``publish``, ``call_service`` and ``send_action_goal``
+    raise), naming ``call`` (``"publish /cmd_vel"``), the dotted field and
+    the known ones. Types whose definition this client does not know are not
+    checked here (the server or the encoder refuses then)."""
+    from .._errors import MessageError, RosBridgeError
 
     try:
         fields = robot.schema_definition(typename)
     except (RosBridgeError, ValueError, TypeError):
         return
+    top = _top or typename
     by_name = {f.name: f for f in fields}
     for key, item in data.items():
         spec = by_name.get(key)
+        path = f"{_at}.{key}" if _at else str(key)
         if spec is None:
             known = ", ".join(by_name) or "none"
-            raise UsageError(f"{what}: {typename} has no field {key!r} (its fields: {known})")
+            raise MessageError(top, f"unknown field (its fields: {known})", path, call)
         if "/" not in spec.type:
             continue
-        inner = f"{what}.{key}"
         if isinstance(item, Mapping) and not spec.array:
-            check_fields(robot, spec.type, item, inner)
+            check_fields(robot, spec.type, item, call, _top=top, _at=path)
         elif isinstance(item, list) and spec.array:
             for i, element in enumerate(item):
                 if isinstance(element, Mapping):
-                    check_fields(robot, spec.type, element, f"{inner}[{i}]")
+                    check_fields(robot, spec.type, element, call, _top=top, _at=f"{path}[{i}]")
+
+
+def csv_line(value: Any) -> str:
+    """``value`` (made by :func:`plain`) as ``ros2 topic echo --csv`` prints a
+    message: every leaf in field order, depth first, array items in order,
+    joined by commas (no quoting; an empty array adds nothing between its
+    commas); numbers and booleans as Python spells them, strings as they
+    are."""
+    if isinstance(value, Mapping):
+        return ",".join(csv_line(v) for v in value.values())
+    if isinstance(value, list):
+        return ",".join(csv_line(v) for v in value)
+    return str(value)

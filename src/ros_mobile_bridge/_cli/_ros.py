@@ -5,19 +5,21 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 from collections.abc import Mapping
 from typing import Any
 
 from .._action import ActionGoal
 from .._client import Client
-from .._errors import RosBridgeError
-from ._common import missing_line, open_robot, out, warn
+from .._errors import ParameterError, RosBridgeError
+from ._common import check_type, graph_name, missing_line, open_robot, out, warn
 from ._format import (
     UsageError,
     check_fields,
     dump_flow,
     dump_yaml,
     finite_or_none,
+    json_line,
     parse_yaml_mapping,
     parse_yaml_value,
     plain,
@@ -31,27 +33,65 @@ __all__ = ["VERBS"]
 
 
 async def _services(ns: argparse.Namespace) -> int:
+    """``services`` / ``service list``: names; ``-t`` with types; ``-c`` the
+    count; ``--json`` one ``{"name", "type"}`` object per service (or
+    ``{"count": N}``)."""
     async with open_robot(ns) as robot:
-        for svc in robot.services:
+        services = sorted(robot.services, key=lambda s: s.name)
+    if ns.count_services:
+        out(json_line({"count": len(services)}) if ns.json else str(len(services)))
+        return 0
+    for svc in services:
+        if ns.json:
+            out(json_line({"name": svc.name, "type": svc.type}))
+        else:
             out(f"{svc.name}  [{svc.type}]" if ns.show_types else svc.name)
     return 0
 
 
 def _build_services(p: argparse.ArgumentParser) -> None:
     p.add_argument("-t", "--show-types", action="store_true", help="print each service's type")
+    p.add_argument(
+        "-c", "--count-services", action="store_true", help="print the number of services only"
+    )
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
+
+
+_TYPE = re.compile(r"^[A-Za-z]\w*/(\w+/)?[A-Za-z]\w*$")
+
+
+def _type_and_request(ns: argparse.Namespace) -> tuple[str | None, str]:
+    """``call SERVICE [TYPE] [REQUEST]``: the second argument is ros2's
+    TYPE when it reads as one (``std_srvs/srv/SetBool``), else the request."""
+    second, third = ns.type, ns.request
+    if second is not None and third is None and not _TYPE.match(second):
+        return None, second
+    if second is not None and not _TYPE.match(second):
+        raise UsageError(f"{second!r} is not a service type (pkg/srv/Type)")
+    return second, third or ""
 
 
 async def _call(ns: argparse.Namespace) -> int:
-    request = parse_yaml_mapping(ns.request or "", "the request")
+    given, text = _type_and_request(ns)
+    request = parse_yaml_mapping(text, "the request")
     async with open_robot(ns) as robot:
         svc = next((s for s in robot.services if s.name == ns.service), None)
         if svc is None and robot.services:
             warn(missing_line("service", ns.service, [s.name for s in robot.services]))
             return 1
-        if svc is not None and svc.type:
-            check_fields(robot, _part(svc.type, "Request"), request, "the request")
+        if given is not None:
+            check_type("srv", ns.service, given, svc.type if svc else None)
+        service_type = svc.type if svc is not None and svc.type else given
+        if service_type:
+            check_fields(
+                robot, _part(service_type, "Request"), request, f"call_service {ns.service}"
+            )
         reply = await robot.call_service(ns.service, request, timeout=ns.call_timeout)
-    out(json.dumps(finite_or_none(plain(reply)), indent=2))
+    value = finite_or_none(plain(reply))
+    if ns.json:
+        out(json_line({"service": ns.service, "type": service_type, "response": value}))
+    else:
+        out(json.dumps(value, indent=2))
     return 0
 
 
@@ -63,20 +103,60 @@ def _build_call(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--call-timeout", type=float, default=10.0, metavar="S", help="seconds (default 10)"
     )
+    p.add_argument("--json", action="store_true", help='one line: {"service", "type", "response"}')
 
 
 # -- parameters ------------------------------------------------------------------------------
+#
+# rosbridge and Zenoh name a node's parameter ``/node:name``; a Foxglove
+# server's parameters belong to no node (the server stands for one), so a
+# NODE given there selects nothing and is not checked.
 
 
-def _print_values(values: Mapping[str, Any]) -> None:
-    out(dump_yaml(plain(dict(values))).rstrip("\n"))
+def _flat(robot: Client) -> bool:
+    return robot.protocol == "foxglove-ws"
+
+
+def _qualified(robot: Client, node: str | None, name: str) -> str:
+    """The name the transport knows ``node``'s parameter ``name`` by."""
+    return name if node is None or _flat(robot) or ":" in name else f"{node}:{name}"
+
+
+def _shown(node: str | None, name: str) -> str:
+    """A parameter's name as printed: without the node the user named."""
+    return name.removeprefix(f"{node}:") if node else name
+
+
+def _node_first(names: list[str]) -> tuple[str | None, list[str]]:
+    """ros2's ``NODE NAME ...`` form: a first argument that is an absolute
+    name (``/demo_robot``) before at least one parameter name is the node."""
+    if len(names) >= 2 and names[0].startswith("/") and ":" not in names[0]:
+        return graph_name(names[0], "node"), names[1:]
+    return None, names
+
+
+def _node_of(robot: Client, name: str) -> str:
+    """The node a listed parameter belongs to (``/node:name``); over
+    Foxglove the server's name made a node name."""
+    if ":" in name and name.startswith("/"):
+        return name.split(":", 1)[0]
+    return "/" + re.sub(r"\W", "_", robot.server_info.name or "server")
 
 
 async def _param_list(ns: argparse.Namespace) -> int:
     async with open_robot(ns) as robot:
         values = await robot.list_parameters()
+        flat = _flat(robot)
+    node = ns.node
+    if node is not None and not flat:
+        values = {k: v for k, v in values.items() if k.startswith(f"{node}:")}
     for name in sorted(values):
-        out(f"{name}: {_flow(values[name])}" if ns.values else name)
+        if ns.json:
+            record = {"node": node, "name": _shown(node, name), "value": plain(values[name])}
+            out(json_line(record))
+        else:
+            shown = _shown(node, name)
+            out(f"{shown}: {_flow(values[name])}" if ns.values else shown)
     return 0
 
 
@@ -85,41 +165,109 @@ def _flow(value: Any) -> str:
 
 
 async def _param_get(ns: argparse.Namespace) -> int:
+    node, names = _node_first(list(ns.name))
+    reasons: dict[str, str] = {}
     async with open_robot(ns) as robot:
-        values = await robot.get_parameters(ns.name)
-        known = list(await robot.list_parameters()) if len(values) < len(ns.name) else []
-    for name in ns.name:
+        if node is None and len(names) >= 2 and not _flat(robot) and ":" not in names[0]:
+            # a relative node (rmb_params speed): the first name when the robot has such a node
+            first = graph_name(names[0], "node")
+            if any(k.startswith(f"{first}:") for k in await robot.list_parameters()):
+                node, names = first, names[1:]
+        wanted = [_qualified(robot, node, n) for n in names]
+        try:
+            values = await robot.get_parameters(wanted)
+        except ParameterError as exc:  # the found ones are printed, each missing one said
+            values, reasons = exc.values, exc.reasons
+    for name in wanted:
         if name in values:
-            out(f"{name}: {_flow(values[name])}")
-    missing = [n for n in ns.name if n not in values]
-    for name in missing:
-        warn(missing_line("parameter", name, known))
-    return 1 if missing else 0
+            if ns.json:
+                record = {"node": node, "name": _shown(node, name), "value": plain(values[name])}
+                out(json_line(record))
+            else:
+                out(f"{_shown(node, name)}: {_flow(values[name])}")
+    for name, why in reasons.items():
+        warn(f"parameter {_shown(node, name)!r}: {why}")
+    return 1 if reasons else 0
 
 
-async def _set_and_check(robot: Client, wanted: Mapping[str, Any]) -> int:
+async def _set_and_check(
+    robot: Client, wanted: Mapping[str, Any], node: str | None = None, as_json: bool = False
+) -> int:
     """Set ``wanted``, print what the server reports, exit 1 unless every
     value was taken as given."""
-    result = await robot.set_parameters(wanted)
-    failed = 0
+    reasons: dict[str, str] = {}
+    try:
+        result = await robot.set_parameters(wanted)
+    except ParameterError as exc:
+        result, reasons = exc.values, exc.reasons
     for name, value in wanted.items():
         got = result.get(name, _ABSENT)
-        if got is _ABSENT or plain(got) != plain(value):
-            now = "it has no value" if got is _ABSENT else f"it stays {_flow(got)}"
-            warn(f"setting parameter {name} to {_flow(value)} failed: {now}")
-            failed += 1
-        else:
-            out(f"Set parameter successful: {name}: {_flow(got)}")
-    return 1 if failed else 0
+        ok = name not in reasons
+        if as_json:
+            now = None if got is _ABSENT else plain(got)
+            record = {"node": node, "name": _shown(node, name), "value": now, "set": ok}
+            if not ok:
+                record["reason"] = reasons[name]
+            out(json_line(record))
+        if not ok:
+            warn(
+                f"setting parameter {_shown(node, name)} to {_flow(value)} failed: {reasons[name]}"
+            )
+        elif not as_json:
+            out(f"Set parameter successful: {_shown(node, name)}: {_flow(got)}")
+    return 1 if reasons else 0
 
 
 _ABSENT: Any = object()
 
 
 async def _param_set(ns: argparse.Namespace) -> int:
-    value = parse_yaml_value(ns.value, f"the value of {ns.name}")
+    node, name, text = None, ns.name, ns.value
+    if ns.arg is not None:  # ros2's NODE NAME VALUE
+        node, name, text = graph_name(ns.name, "node"), ns.value, ns.arg
+    value = parse_yaml_value(text, f"the value of {name}")
     async with open_robot(ns) as robot:
-        return await _set_and_check(robot, {ns.name: value})
+        full = _qualified(robot, node, name)
+        return await _set_and_check(robot, {full: value}, node, ns.json)
+
+
+def _nest(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Dotted parameter names as nested mappings, as ``ros2 param dump``
+    writes them (``a.b: 1`` is ``a: {b: 1}``), keys sorted."""
+    tree: dict[str, Any] = {}
+    for name in sorted(values):
+        *path, last = name.split(".")
+        here = tree
+        for part in path:
+            nxt = here.setdefault(part, {})
+            if not isinstance(nxt, dict):  # a value and a prefix of the same name: keep both
+                nxt = here[part + "."] = {}
+            here = nxt
+        here[last] = plain(values[name])
+    return tree
+
+
+async def _param_dump(ns: argparse.Namespace) -> int:
+    """``ros2 param dump``'s YAML: ``/node:`` then ``ros__parameters:``
+    then the node's values; every node's when no NODE is named."""
+    async with open_robot(ns) as robot:
+        values = await robot.list_parameters()
+        by_node: dict[str, dict[str, Any]] = {}
+        for full, value in values.items():
+            node = _node_of(robot, full) if not (_flat(robot) and ns.node) else ns.node
+            by_node.setdefault(node, {})[full.split(":", 1)[1] if ":" in full else full] = value
+    if ns.node is not None:
+        if ns.node not in by_node:
+            warn(missing_line("node", ns.node, by_node))
+            return 1
+        by_node = {ns.node: by_node[ns.node]}
+    for node in sorted(by_node):
+        params = _nest(by_node[node])
+        if ns.json:
+            out(json_line({"node": node, "parameters": finite_or_none(params)}))
+        else:
+            out(dump_yaml({node: {"ros__parameters": params}}).rstrip("\n"))
+    return 0
 
 
 async def _params(ns: argparse.Namespace) -> int:
@@ -131,15 +279,16 @@ async def _params(ns: argparse.Namespace) -> int:
             raise UsageError(f"--set wants NAME=VALUE (a YAML value), got {item!r}")
         wanted[name] = parse_yaml_value(text, f"the value of {name}")
     async with open_robot(ns) as robot:
-        if wanted:
-            result = await robot.set_parameters(wanted)
-            bad = [n for n in wanted if n not in result or plain(result[n]) != plain(wanted[n])]
-        elif ns.name:
-            result = await robot.get_parameters(ns.name)
-            bad = [n for n in ns.name if n not in result]
-        else:
-            result = await robot.list_parameters()
-            bad = []
+        bad: list[str] = []
+        try:
+            if wanted:
+                result = await robot.set_parameters(wanted)
+            elif ns.name:
+                result = await robot.get_parameters(ns.name)
+            else:
+                result = await robot.list_parameters()
+        except ParameterError as exc:
+            result, bad = exc.values, list(exc.reasons)
     out(json.dumps(finite_or_none(plain(result)), indent=2, sort_keys=True))
     if bad:
         warn(f"{'not set' if wanted else 'not found'}: {', '.join(bad)}")
@@ -153,42 +302,60 @@ def _build_params(p: argparse.ArgumentParser) -> None:
 
 def _build_param_list(p: argparse.ArgumentParser) -> None:
     p.add_argument("--values", action="store_true", help="print each parameter's value too")
+    _json_option(p, '{"node", "name", "value"}')
+
+
+def _json_option(p: argparse.ArgumentParser, fields: str) -> None:
+    p.add_argument("--json", action="store_true", help=f"one JSON object per line: {fields}")
 
 
 # -- action send -----------------------------------------------------------------------------
 
 
 async def _action_send(ns: argparse.Namespace) -> int:
+    """``action send``: the goal is printed once sent (a transport without
+    actions refuses first, so nothing is printed before that error);
+    ``--json``: ``{"goal"}``, then ``{"feedback"}`` per feedback, then
+    ``{"status", "result"}``."""
     import anyio
 
     goal = parse_yaml_mapping(ns.goal or "", "the goal")
     async with open_robot(ns) as robot:
-        check_fields(robot, f"{ns.type}_Goal", goal, "the goal")
-        out(f"Sending goal:\n{_indented(goal)}")
+        check_fields(robot, f"{ns.type}_Goal", goal, f"send_action_goal {ns.action}")
         async with (
             robot.send_action_goal(ns.action, ns.type, goal) as handle,
             anyio.create_task_group() as tg,
         ):
+            if ns.json:
+                out(json_line({"action": ns.action, "type": ns.type, "goal": plain(goal)}))
+            else:
+                out(f"Sending goal:\n{_indented(goal)}")
 
             async def feedback() -> None:
                 async for values in handle.feedback:
-                    if ns.feedback:
+                    if ns.json:
+                        out(json_line({"feedback": finite_or_none(plain(values))}))
+                    elif ns.feedback:
                         out(f"Feedback:\n{_indented(values)}")
 
             tg.start_soon(feedback)
             try:
                 outcome = await handle.result()
             except anyio.get_cancelled_exc_class():
-                await _cancel_goal(handle)  # Ctrl-C (or another signal)
+                await _cancel_goal(handle, ns.json)  # Ctrl-C (or another signal)
                 raise
             finally:
                 tg.cancel_scope.cancel()
-    out(f"Result:\n{_indented(outcome.result)}")
-    out(f"Goal finished with status: {outcome.status.upper()}")
+    if ns.json:
+        result = finite_or_none(plain(outcome.result))
+        out(json_line({"status": outcome.status, "result": result}))
+    else:
+        out(f"Result:\n{_indented(outcome.result)}")
+        out(f"Goal finished with status: {outcome.status.upper()}")
     return 0 if outcome.status == "succeeded" else 1
 
 
-async def _cancel_goal(handle: ActionGoal) -> None:
+async def _cancel_goal(handle: ActionGoal, as_json: bool = False) -> None:
     """Cancel the goal and say how it ended, shielded, within 3 s."""
     import anyio
 
@@ -200,7 +367,10 @@ async def _cancel_goal(handle: ActionGoal) -> None:
         except RosBridgeError as exc:
             warn(f"the goal did not end cleanly: {exc}")
         else:
-            out(f"Goal finished with status: {outcome.status.upper()}")
+            if as_json:
+                out(json_line({"status": outcome.status, "result": None}))
+            else:
+                out(f"Goal finished with status: {outcome.status.upper()}")
 
 
 def _indented(value: Any) -> str:
@@ -215,37 +385,62 @@ def _build_action(p: argparse.ArgumentParser) -> None:
         action="store_false",
         help="do not print feedback (printed by default)",
     )
+    _json_option(p, '{"action", "type", "goal"}, {"feedback"} ..., {"status", "result"}')
 
+
+def _build_param_get(p: argparse.ArgumentParser) -> None:
+    _json_option(p, '{"node", "name", "value"}')
+
+
+def _build_param_set(p: argparse.ArgumentParser) -> None:
+    _json_option(p, '{"node", "name", "value", "set"}')
+
+
+def _build_param_dump(p: argparse.ArgumentParser) -> None:
+    _json_option(p, '{"node", "parameters"}')
+
+
+_SERVICES = "list services (-t types, -c count, --json)"
+_CALL = "call a service with a YAML request (ros2's SERVICE TYPE REQUEST form too)"
+_CALL_ARGS = ("SERVICE", "TYPE?", "REQUEST?")
 
 VERBS = [
-    Verb(("services",), "list services (-t: with types)", build=_build_services, run=_services),
-    Verb(("service", "list"), "list services", build=_build_services, run=_services, hidden=True),
+    Verb(("services",), _SERVICES, build=_build_services, run=_services),
+    Verb(("service", "list"), _SERVICES, build=_build_services, run=_services, hidden=True),
+    Verb(("call",), _CALL, _CALL_ARGS, _build_call, _call),
+    Verb(("service", "call"), _CALL, _CALL_ARGS, _build_call, _call, hidden=True),
     Verb(
-        ("call",), "call a service with a YAML request", ("SERVICE", "REQUEST?"), _build_call, _call
-    ),
-    Verb(
-        ("service", "call"),
-        "same as call",
-        ("SERVICE", "REQUEST?"),
-        _build_call,
-        _call,
-        hidden=True,
-    ),
-    Verb(("param", "list"), "list parameter names", (), _build_param_list, _param_list),
-    Verb(
-        ("param", "get"),
-        "print parameters' values",
-        ("NAME+",),
-        None,
-        _param_get,
+        ("param", "list"),
+        "list parameter names (--values, --json)",
+        ("NODE?",),
+        _build_param_list,
+        _param_list,
         graph_names=False,
     ),
     Verb(
+        ("param", "get"),
+        "print parameters' values ([NODE] NAME ...)",
+        ("NAME+",),
+        _build_param_get,
+        _param_get,
+        graph_names=False,
+        usage="[NODE] NAME [NAME ...]",
+    ),
+    Verb(
         ("param", "set"),
-        "set a parameter (YAML value)",
-        ("NAME", "VALUE"),
-        None,
+        "set a parameter (YAML value; [NODE] NAME VALUE)",
+        ("NAME", "VALUE", "ARG?"),
+        _build_param_set,
         _param_set,
+        graph_names=False,
+        usage="[NODE] NAME VALUE",
+    ),
+    Verb(
+        ("param", "dump"),
+        "print every parameter as ros2 param dump's YAML",
+        ("NODE?",),
+        _build_param_dump,
+        _param_dump,
         graph_names=False,
     ),
     Verb(

@@ -4,6 +4,7 @@ list``), ``echo``, ``hz``, ``bw``, ``info`` and ``pub``."""
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import statistics
 from collections import deque
@@ -11,14 +12,17 @@ from collections.abc import Mapping
 from typing import Any
 
 import anyio
+import anyio.abc
 
 from .._client import Client
 from .._errors import NotConnected
 from .._types import Message, Priority
-from ._common import missing_line, notice_if_missing, open_robot, out, warn
+from ..flow import Subscription
+from ._common import check_type, missing_line, notice_if_missing, open_robot, out, warn
 from ._format import (
     UsageError,
     check_fields,
+    csv_line,
     dump_flow,
     dump_yaml,
     json_line,
@@ -30,21 +34,91 @@ from ._verb import Verb
 
 __all__ = ["VERBS"]
 
+# the verbs' help lines, as the index (_table) has them
+_TOPICS = "list topics (-t types, -v publishers/subscribers, -c count, --json)"
+_ECHO = "print a topic's messages as YAML (--json, --csv, --flow-style)"
+_HZ = "print a topic's message rate every second"
+_BW = "print a topic's bandwidth every second"
+_PUB = "publish a message (YAML) at 1 Hz until stopped (-r, --once, -t)"
+
 _VELOCITY_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 
 
 # -- list --------------------------------------------------------------------------------
 
 
+async def _graph_counts(robot: Client, topic: str) -> tuple[int | None, int | None]:
+    """A topic's publisher and subscriber counts where the transport reports
+    them (rosbridge, through /rosapi); ``None`` where it does not."""
+    if robot.protocol != "rosbridge":
+        return None, None
+    pubs = await _count(robot, "/rosapi/publishers", topic, "publishers")
+    subs = await _count(robot, "/rosapi/subscribers", topic, "subscribers")
+    return (int(pubs) if pubs.isdigit() else None), (int(subs) if subs.isdigit() else None)
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 async def _topics(ns: argparse.Namespace) -> int:
+    """``topics`` / ``topic list`` as ``ros2 topic list``: names; ``-t``
+    with types; ``-c`` the count; ``-v`` published and subscribed topics with
+    their counts (where the transport knows them); ``--json`` one object per
+    topic (``name``, ``type``, ``encoding``; with ``-v`` also ``publishers``
+    and ``subscribers``, null when unknown) or ``{"count": N}``."""
     async with open_robot(ns) as robot:
-        for topic in robot.topics:
-            out(f"{topic.name}  [{topic.schema_name}]" if ns.show_types else topic.name)
+        topics = sorted(robot.topics, key=lambda t: t.name)
+        if ns.count_topics:
+            out(json_line({"count": len(topics)}) if ns.json else str(len(topics)))
+            return 0
+        if not ns.verbose_listing:
+            for t in topics:
+                if ns.json:
+                    out(json_line({"name": t.name, "type": t.schema_name, "encoding": t.encoding}))
+                else:
+                    out(f"{t.name}  [{t.schema_name}]" if ns.show_types else t.name)
+            return 0
+        counts = {t.name: await _graph_counts(robot, t.name) for t in topics}
+    if ns.json:
+        for t in topics:
+            pubs, subs = counts[t.name]
+            record = {"name": t.name, "type": t.schema_name, "encoding": t.encoding}
+            out(json_line({**record, "publishers": pubs, "subscribers": subs}))
+        return 0
+    known = robot.protocol == "rosbridge"
+    out("Published topics:")
+    for t in topics:
+        pubs = counts[t.name][0]
+        if pubs is None:  # the transport lists the topics that have a publisher
+            out(f" * {t.name} [{t.schema_name}]")
+        elif pubs:
+            out(f" * {t.name} [{t.schema_name}] {_plural(pubs, 'publisher')}")
+    out("")
+    out("Subscribed topics:")
+    if not known:
+        out(f" (not reported over {robot.protocol})")
+    for t in topics:
+        subs = counts[t.name][1]
+        if subs:
+            out(f" * {t.name} [{t.schema_name}] {_plural(subs, 'subscriber')}")
+    out("")
     return 0
 
 
 def _build_topics(p: argparse.ArgumentParser) -> None:
     p.add_argument("-t", "--show-types", action="store_true", help="print each topic's type")
+    p.add_argument(
+        "-v",
+        "--verbose",
+        dest="verbose_listing",
+        action="store_true",
+        help="ros2's verbose listing: published and subscribed topics, with types and counts",
+    )
+    p.add_argument(
+        "-c", "--count-topics", action="store_true", help="print the number of topics only"
+    )
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
 
 
 # -- echo --------------------------------------------------------------------------------
@@ -77,7 +151,12 @@ def _print_message(msg: Message, ns: argparse.Namespace) -> None:
         return
     truncate = None if ns.full or ns.truncate_length <= 0 else ns.truncate_length
     data = plain(value, truncate=truncate, no_arr=ns.no_arr, no_str=ns.no_str)
-    out(dump_yaml(data) + "---")
+    if ns.csv:
+        out(csv_line(data))
+    elif ns.flow_style:
+        out(dump_flow(data) + "\n---")
+    else:
+        out(dump_yaml(data) + "---")
 
 
 async def _echo(ns: argparse.Namespace) -> int:
@@ -85,19 +164,46 @@ async def _echo(ns: argparse.Namespace) -> int:
     if limit < 0:
         raise UsageError(f"--count must be 0 (until stopped) or more, got {limit}")
     seen = [0]
-    async with (
-        open_robot(ns) as robot,
-        robot.subscribe(ns.topic, max_hz=ns.max_hz) as sub,
-        anyio.create_task_group() as tg,
-    ):
-        tg.start_soon(notice_if_missing, robot, ns.topic, seen)
-        async for msg in sub:
-            seen[0] += 1
-            _print_message(msg, ns)
-            if limit and seen[0] >= limit:
-                break
-        tg.cancel_scope.cancel()
+    async with open_robot(ns) as robot:
+        schema = await _echo_schema(robot, ns.topic, ns.type)
+        async with (
+            robot.subscribe(ns.topic, max_hz=ns.max_hz, schema=schema) as sub,
+            anyio.create_task_group() as tg,
+        ):
+            await _echo_loop(robot, ns, sub, tg, limit, seen)
     return 0
+
+
+async def _echo_schema(robot: Client, topic: str, given: str | None) -> str | None:
+    """ros2's ``echo TOPIC TYPE``: the type must be the one the robot lists
+    for the topic (checked once the robot lists it, giving discovery a
+    second); used as the schema when the robot does not say."""
+    if given is None:
+        return None
+    with anyio.move_on_after(1.0):
+        async for topics in robot.watch_topics():
+            if any(t.name == topic for t in topics):
+                break
+    known = next((t.schema_name for t in robot.topics if t.name == topic), None)
+    check_type("msg", topic, given, known)
+    return None if known else given
+
+
+async def _echo_loop(
+    robot: Client,
+    ns: argparse.Namespace,
+    sub: Subscription,
+    tg: anyio.abc.TaskGroup,
+    limit: int,
+    seen: list[int],
+) -> None:
+    tg.start_soon(notice_if_missing, robot, ns.topic, seen)
+    async for msg in sub:
+        seen[0] += 1
+        _print_message(msg, ns)
+        if limit and seen[0] >= limit:
+            break
+    tg.cancel_scope.cancel()
 
 
 def _build_echo(p: argparse.ArgumentParser) -> None:
@@ -116,10 +222,17 @@ def _build_echo(p: argparse.ArgumentParser) -> None:
         help="cut arrays and strings after N items (default 128, 0: never)",
     )
     p.add_argument("--full", action="store_true", help="never cut (same as --truncate-length 0)")
-    p.add_argument(
+    style = p.add_mutually_exclusive_group()
+    style.add_argument(
         "--json",
         action="store_true",
         help="one JSON object per line (full arrays; NaN and infinities as null)",
+    )
+    style.add_argument(
+        "--csv", action="store_true", help="one line of comma-separated values per message"
+    )
+    style.add_argument(
+        "--flow-style", action="store_true", help="each message as one line of flow-style YAML"
     )
     p.add_argument("--max-hz", type=float, default=None, help="deliver at most this rate")
 
@@ -304,7 +417,7 @@ async def _pub(ns: argparse.Namespace) -> int:
     priority: Priority = "control" if ns.control else "data"
     shown = dump_flow(data)
     async with open_robot(ns) as robot:
-        check_fields(robot, ns.type, data, "the message")
+        check_fields(robot, ns.type, data, f"publish {ns.topic}")
         if velocity and ns.no_velocity_check and ns.type not in _VELOCITY_TYPES:
             # (without --no-velocity-check the library refuses such a publish)
             warn(
@@ -337,7 +450,9 @@ async def _pub(ns: argparse.Namespace) -> int:
                 # gives up ends the command (exit 1)
                 if robot.status != "reconnecting":
                     raise
-                warn(f"connection lost: waiting for it to come back ({robot.last_error})")
+                if not logging.getLogger("ros_mobile_bridge").isEnabledFor(logging.WARNING):
+                    # else the library's "connection lost" line already said it: one line
+                    warn(f"connection lost: waiting for it to come back ({robot.last_error})")
                 await _until_connected(robot)
                 warn("connected again: publishing")
                 next_at = anyio.current_time()
@@ -397,24 +512,16 @@ def _build_pub(p: argparse.ArgumentParser) -> None:
 
 
 VERBS = [
-    Verb(("topics",), "list topics (-t: with types)", build=_build_topics, run=_topics),
-    Verb(("topic", "list"), "list topics (-t: with types)", build=_build_topics, run=_topics),
-    Verb(("echo",), "print a topic's messages as YAML (or --json)", ("TOPIC",), _build_echo, _echo),
-    Verb(("topic", "echo"), "same as echo", ("TOPIC",), _build_echo, _echo, hidden=True),
-    Verb(("hz",), "print a topic's message rate every second", ("TOPIC",), _window(10000), _hz),
-    Verb(("topic", "hz"), "same as hz", ("TOPIC",), _window(10000), _hz, hidden=True),
-    Verb(("bw",), "print a topic's bandwidth every second", ("TOPIC",), _window(100), _bw),
-    Verb(("topic", "bw"), "same as bw", ("TOPIC",), _window(100), _bw, hidden=True),
+    Verb(("topics",), _TOPICS, build=_build_topics, run=_topics),
+    Verb(("topic", "list"), _TOPICS, build=_build_topics, run=_topics, hidden=True),
+    Verb(("echo",), _ECHO, ("TOPIC", "TYPE?"), _build_echo, _echo),
+    Verb(("topic", "echo"), _ECHO, ("TOPIC", "TYPE?"), _build_echo, _echo, hidden=True),
+    Verb(("hz",), _HZ, ("TOPIC",), _window(10000), _hz),
+    Verb(("topic", "hz"), _HZ, ("TOPIC",), _window(10000), _hz, hidden=True),
+    Verb(("bw",), _BW, ("TOPIC",), _window(100), _bw),
+    Verb(("topic", "bw"), _BW, ("TOPIC",), _window(100), _bw, hidden=True),
     Verb(("info",), "the server (protocol, capabilities), or a topic", ("TOPIC?",), None, _info),
     Verb(("topic", "info"), "a topic's type and counts", ("TOPIC",), None, _info, hidden=True),
-    Verb(
-        ("pub",),
-        "publish a message (YAML) at 1 Hz until stopped (-r, --once, -t)",
-        ("TOPIC", "TYPE", "DATA?"),
-        _build_pub,
-        _pub,
-    ),
-    Verb(
-        ("topic", "pub"), "same as pub", ("TOPIC", "TYPE", "DATA?"), _build_pub, _pub, hidden=True
-    ),
+    Verb(("pub",), _PUB, ("TOPIC", "TYPE", "DATA?"), _build_pub, _pub),
+    Verb(("topic", "pub"), _PUB, ("TOPIC", "TYPE", "DATA?"), _build_pub, _pub, hidden=True),
 ]

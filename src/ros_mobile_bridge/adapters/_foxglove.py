@@ -18,6 +18,7 @@ import anyio.to_thread
 from .._errors import (
     DecodeError,
     NotSupportedError,
+    ParameterError,
     ProtocolMismatchError,
     RosBridgeError,
     SchemaError,
@@ -574,9 +575,21 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         return await self._parameter_request(lambda rid: self._engine.get_parameters(names, rid))
 
     async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        """Set ``values``; the server answers with the values it holds
+        afterwards. The protocol carries no refusal, so a name whose reported
+        value is not the one sent was refused: ``ParameterError`` naming
+        what the robot kept, after every accepted value was applied."""
         self._require("parameters")
         params = [fx.Parameter(name, value) for name, value in values.items()]
-        return await self._parameter_request(lambda rid: self._engine.set_parameters(params, rid))
+        after = await self._parameter_request(lambda rid: self._engine.set_parameters(params, rid))
+        reasons = {
+            name: f"the robot kept {after[name]!r} (the Foxglove protocol gives no reason)"
+            for name, value in values.items()
+            if name in after and not _same_value(after[name], value)
+        }
+        if reasons:
+            raise ParameterError(reasons, after)
+        return after
 
     async def subscribe_parameters(self, names: Sequence[str]) -> None:
         self._require("parametersSubscribe")
@@ -615,3 +628,17 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
 
     async def aclose(self) -> None:
         await self._ws.aclose()
+
+
+def _same_value(held: Any, sent: Any) -> bool:
+    """Whether the value a server reports is the one sent (``2`` and
+    ``2.0`` are; ``True`` and ``1`` are not; sequences element by element)."""
+    held, sent = (v.tolist() if hasattr(v, "tolist") else v for v in (held, sent))
+    if isinstance(held, bool) or isinstance(sent, bool):
+        return type(held) is type(sent) and held == sent
+    if isinstance(held, (list, tuple, bytes)) and isinstance(sent, (list, tuple, bytes)):
+        return len(held) == len(sent) and all(map(_same_value, held, sent))
+    try:
+        return bool(held == sent)
+    except Exception:  # a numpy array or another odd value: not provably the same
+        return False

@@ -31,7 +31,7 @@ from .._errors import (
 from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo
-from ..codec import SchemaTooLarge, same_type_name
+from ..codec import CodecRegistry, SchemaTooLarge, same_type_name
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket
 from ..wire import foxglove as fx
@@ -49,6 +49,7 @@ from ._shared import (
     Advertisements,
     EventSource,
     Publishes,
+    check_fits,
     codec_registry,
     open_websocket,
     socket_frame,
@@ -636,7 +637,13 @@ class RosbridgeAdapter(
 
     # -- services ------------------------------------------------------------------
     async def call_service(self, name: str, request: Any, timeout: float) -> Any:
-        return await self._call(name, dict(request) if request is not None else {}, timeout)
+        args = dict(request) if request is not None else {}
+        service_type = self._services.get(name)
+        if service_type:
+            request_type = CodecRegistry.service_type_names(service_type)[0]
+            await self.fetch_part(request_type)  # once per type and connection
+            check_fits(self.codecs, request_type, args)
+        return await self._call(name, args, timeout)
 
     # -- actions ---------------------------------------------------------------------
     async def send_action_goal(
@@ -651,6 +658,10 @@ class RosbridgeAdapter(
         else:
             if action not in servers:
                 raise ActionGoalError(action, "no action server offers it")
+        parts = action_type.split("/")
+        goal_type = f"{parts[0]}/action/{parts[-1]}_Goal"
+        await self.fetch_part(goal_type)  # once per type and connection
+        check_fits(self.codecs, goal_type, goal)
         self._check_pending(action, ActionGoalError)
         goal_id = self._next_id(f"goal:{action}")
         frame = self._engine.send_action_goal(action, action_type, goal, id=goal_id)

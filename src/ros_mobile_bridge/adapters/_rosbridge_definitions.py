@@ -31,17 +31,24 @@ class RosbridgeDefinitions:
     _no_definition: set[str]
     _rosapi: Callable[..., Awaitable[Any]]
 
-    async def _fetch_definition(self, schema: str) -> None:
+    async def _fetch_definition(self, schema: str, *, quiet: bool = False) -> None:
         """Register ``schema`` from ``/rosapi/message_details`` (for cbor-raw
-        of a type the bundled definitions lack)."""
+        of a type the bundled definitions lack); an action's goal
+        (``pkg/action/X_Goal``) from ``/rosapi/action_goal_details`` and a
+        service's request (``pkg/srv/X_Request``) from
+        ``/rosapi/service_request_details``, to check what the caller sends.
+        A failure is logged (at debug level when ``quiet``) and remembered."""
+        service, args = _details_request(schema)
         try:
-            answer = await self._rosapi("/rosapi/message_details", {"type": schema})
+            answer = await self._rosapi(service, args)
             self.codecs.add_schema(schema, "ros2msg", _typedefs_to_msg(schema, answer))
         except (ServiceError, TimeoutError, SchemaError, ValueError) as exc:
             self._no_definition.add(schema)  # asked once per connection
-            self._log.warning(
-                "no definition of %s from /rosapi/message_details: %s",
+            self._log.log(
+                logging.DEBUG if quiet else logging.WARNING,
+                "no definition of %s from %s: %s",
                 schema,
+                service,
                 truncate_for_log(str(exc)),
             )
 
@@ -53,6 +60,23 @@ class RosbridgeDefinitions:
         if schema not in self._no_definition and not self.codecs.has_schema(schema):
             await self._fetch_definition(schema)
         return self.codecs.resolves(schema)
+
+    async def fetch_part(self, schema: str) -> None:
+        """Fetch the definition of a request or goal type ``schema`` once per
+        connection, unless it is known (quietly: a bridge without it only
+        means the bridge checks what is sent)."""
+        if schema not in self._no_definition and not self.codecs.has_schema(schema):
+            await self._fetch_definition(schema, quiet=True)
+
+
+def _details_request(schema: str) -> tuple[str, dict[str, str]]:
+    """Which ``/rosapi`` service describes ``schema``, and its request."""
+    parts = schema.split("/")
+    if len(parts) == 3 and parts[1] == "action" and parts[2].endswith("_Goal"):
+        return "/rosapi/action_goal_details", {"type": schema.removesuffix("_Goal")}
+    if len(parts) == 3 and parts[1] == "srv" and parts[2].endswith("_Request"):
+        return "/rosapi/service_request_details", {"type": schema.removesuffix("_Request")}
+    return "/rosapi/message_details", {"type": schema}
 
 
 def _typedefs_to_msg(schema: str, answer: Any) -> str:

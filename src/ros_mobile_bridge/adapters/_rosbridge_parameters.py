@@ -33,7 +33,7 @@ import json
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
-from .._errors import DecodeError, SchemaError, ServiceError
+from .._errors import DecodeError, ParameterError, SchemaError
 from .._options import ClientOptions
 from ..codec import CodecRegistry
 from ..flow import Decoder
@@ -92,7 +92,7 @@ class RosbridgeParameters:
         for name in names:
             answer = await self._param_call("/rosapi/get_param", {"name": name})
             if not isinstance(answer, dict) or answer.get("successful") is False:
-                continue  # "Parameter not found": absent from the result
+                continue  # "Parameter not found": the client raises ParameterError for it
             raw = answer.get("value")
             if isinstance(raw, str) and raw:
                 try:  # the value is a JSON document in a string
@@ -102,15 +102,19 @@ class RosbridgeParameters:
         return values
 
     async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        """Set each value through ``/rosapi/set_param``; ``ParameterError``
+        after all of them with each refused name and the bridge's reason."""
+        reasons: dict[str, str] = {}
         for name, value in values.items():
             answer = await self._param_call(
                 "/rosapi/set_param", {"name": name, "value": json.dumps(value)}
             )
             if isinstance(answer, dict) and answer.get("successful") is False:
-                raise ServiceError(
-                    "/rosapi/set_param", f"{name}: {answer.get('reason') or 'refused'}"
-                )
-        return await self.get_parameters(list(values))
+                reasons[name] = str(answer.get("reason") or "refused")
+        after = await self.get_parameters(list(values))
+        if reasons:
+            raise ParameterError(reasons, after)
+        return after
 
     async def _param_call(self, service: str, args: Any) -> Any:
         return await self._call(service, args, self._options.service_timeout)

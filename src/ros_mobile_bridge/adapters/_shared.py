@@ -25,6 +25,7 @@ __all__ = [
     "CannotServe",
     "EventSource",
     "Publishes",
+    "check_fits",
     "open_websocket",
     "socket_frame",
 ]
@@ -234,3 +235,14 @@ def codec_registry(options: ClientOptions) -> CodecRegistry:
             options.interface_paths, ament_prefix_path=options.ament_prefix_path
         ),
     )
+
+
+def check_fits(codecs: CodecRegistry, type_name: str, data: Mapping[str, Any]) -> None:
+    """Raise :class:`~ros_mobile_bridge.MessageError` naming the field when
+    ``data`` does not fit ``type_name``, where its definition is known; do
+    nothing when it is not. For a transport that sends the caller's dict as
+    it is (rosbridge's JSON): the bridge would answer a misfit with its own
+    words, or only log it, so the same mistake raises the same class as on
+    the transports that encode here."""
+    if codecs.has_schema(type_name):
+        codecs.encoder(type_name, "cdr")(data)

@@ -317,6 +317,15 @@ class ZenohAdapter(
     def topic_active(self, topic: str) -> bool:
         return topic in self._publishers_of
 
+    def offered_qos(self, topic: str) -> list[rz.Qos]:
+        """The QoS of each live publisher of ``topic``, from their liveliness
+        tokens (what a recording writes as ``offered_qos_profiles``)."""
+        return [
+            token.qos
+            for token in self._graph.values()
+            if token.kind is rz.EntityKind.PUBLISHER and token.name == topic and token.qos
+        ]
+
     def _topic_type(self, topic: str) -> str | None:
         for info in self._topic_infos:
             if info.name == topic:

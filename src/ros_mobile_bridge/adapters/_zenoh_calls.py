@@ -13,7 +13,7 @@ import uuid
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Final
 
-from .._errors import ActionGoalError, DecodeError, SchemaError, ServiceError
+from .._errors import ActionGoalError, DecodeError, ParameterError, SchemaError, ServiceError
 from .._options import ClientOptions
 from .._types import ServiceInfo
 from ..codec import CodecRegistry
@@ -335,7 +335,7 @@ class ZenohCalls:
         values: dict[str, Any] = {}
         for node, params in by_node(names).items():
             if self._service_type(f"{node}/get_parameters") is None:
-                continue  # no such node: its parameters are absent from the result
+                continue  # no such node: absent here, the client raises ParameterError for it
             answer = await self._node_call(node, "get_parameters", {"names": params})
             for param, value in zip(params, ros_field(answer, "values") or (), strict=False):
                 known, plain = parameter_from_ros(value)
@@ -344,7 +344,15 @@ class ZenohCalls:
         return values
 
     async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        """Set every value on its node (one ``set_parameters`` call per node;
+        rcl applies each parameter on its own); ``ParameterError`` after all
+        of them with each refused name and the node's reason, and a name on
+        a node that does not serve parameters as not found."""
+        reasons: dict[str, str] = {}
         for node, params in by_node(list(values)).items():
+            if self._service_type(f"{node}/set_parameters") is None:
+                reasons.update({f"{node}:{p}": f"not found (no node {node})" for p in params})
+                continue
             request = {
                 "parameters": [
                     {"name": param, "value": parameter_to_ros(values[f"{node}:{param}"])}
@@ -354,8 +362,10 @@ class ZenohCalls:
             answer = await self._node_call(node, "set_parameters", request)
             for param, result in zip(params, ros_field(answer, "results") or (), strict=False):
                 if not ros_field(result, "successful"):
-                    reason = ros_field(result, "reason") or "refused"
-                    raise ServiceError(f"{node}/set_parameters", f"{param}: {reason}")
-        return await self.get_parameters(list(values))
+                    reasons[f"{node}:{param}"] = ros_field(result, "reason") or "refused"
+        after = await self.get_parameters(list(values))
+        if reasons:
+            raise ParameterError(reasons, after)
+        return after
 
     # watching parameters: adapters/_zenoh_parameter_events.py

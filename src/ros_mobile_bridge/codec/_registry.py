@@ -14,7 +14,7 @@ from typing import Any, Final, cast
 import numpy as np
 from rosbags.typesys.store import Typestore
 
-from .._errors import DecodeError, SchemaError
+from .._errors import DecodeError, MessageError, SchemaError
 from ._bundled import bundled_definition, bundled_interface
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
 from ._lru import LruCache
@@ -140,10 +140,9 @@ def _merge(template: Any, data: Any, strict: bool, path: str) -> Any:
     return out
 
 
-def _invalid_message(action: str, typename: str, exc: Invalid) -> str:
-    if exc.path:
-        return f"cannot {action} {typename}: field {exc.path!r}: {exc.reason}"
-    return f"cannot {action} {typename}: {exc.reason}"
+def _misfit(typename: str, exc: Invalid) -> MessageError:
+    """The caller's value does not fit ``typename``: one error class for it."""
+    return MessageError(typename, exc.reason, exc.path or None)
 
 
 def _make_cdr_decoder(typename: str, store: Typestore, conv: Converter) -> Decoder:
@@ -208,12 +207,12 @@ def _make_cdr_encoder(typename: str, store: Typestore, build: Builder) -> Encode
 
     def encode(data: Mapping[str, Any]) -> bytes:
         """Encode a (partial) mapping as little-endian CDR with the 4-byte
-        encapsulation header. Raises :class:`DecodeError` naming the field for
+        encapsulation header. Raises :class:`MessageError` naming the field for
         an unknown field or a value of the wrong type."""
         try:
             message = build(data)
         except Invalid as exc:
-            raise DecodeError(_invalid_message("encode", typename, exc)) from None
+            raise _misfit(typename, exc) from None
         try:
             size = getsize(0, message, store)
             total = size + 4
@@ -235,9 +234,9 @@ def _make_cdr_encoder(typename: str, store: Typestore, build: Builder) -> Encode
                 end = serialize(memoryview(buffer)[4:], 0, message, store)
                 out = bytes(buffer)
         except Exception as exc:
-            raise DecodeError(f"cannot encode {typename}: {type(exc).__name__}: {exc}") from exc
+            raise MessageError(typename, f"{type(exc).__name__}: {exc}") from exc
         if end != size:
-            raise DecodeError(f"cannot encode {typename}: size mismatch ({end} != {size})")
+            raise MessageError(typename, f"size mismatch ({end} != {size})")
         return out
 
     return encode
@@ -616,7 +615,7 @@ class CodecRegistry:
         laid over the template when the schema is known (as given otherwise),
         numpy arrays and ``bytes`` becoming lists.
 
-        The returned function raises :class:`DecodeError` naming the field for
+        The returned function raises :class:`MessageError` (a ``DecodeError``) naming the field for
         an unknown field or a value of the wrong type or range. ``encoder``
         itself raises :class:`SchemaError` for a type without a definition
         (cdr) or an unsupported encoding.
@@ -660,11 +659,11 @@ class CodecRegistry:
             try:
                 merged = _merge(template, data, strict, "") if template is not None else data
             except Invalid as exc:
-                raise DecodeError(_invalid_message("encode", typename, exc)) from None
+                raise _misfit(typename, exc) from None
             try:
                 return _dumps(merged)
             except Exception as exc:
-                raise DecodeError(f"cannot encode {typename} as JSON: {exc}") from exc
+                raise MessageError(typename, f"not JSON: {exc}") from exc
 
         return encode
 
