@@ -17,8 +17,10 @@ The conventions (CONTRIBUTING.md, "Code blocks in the docs"):
   (a real robot, its network or files on it), ``<!-- needs: checkout -->``
   (a command run from a clone of the repository: its scripts, the test suite,
   benches, fuzzers), ``<!-- needs: install -->`` (a command that installs
-  something). Marked python blocks are at least compiled; marked shell blocks
-  are not run.
+  something), ``<!-- needs: recording -->`` (a shell block reading a recording
+  named ``run.mcap``: the harness records one from the demo robot first, then
+  runs the block). Marked python blocks are at least compiled; marked shell
+  blocks are not run, except ``needs: recording`` and those the peer tests run.
 - ``<!-- block: continues -->``: the block is the continuation of the page's
   previous python block; the two are run as one.
 - ``<!-- block: until-stopped -->``: the block (or a command of it) runs until
@@ -59,7 +61,10 @@ NEEDS = {
     "robot": ("robot",),
     "checkout": ("checkout", "clone", "repository", ".venv"),
     "install": ("install", "extra"),
+    "recording": ("recording", "recorder", ".mcap"),
 }
+RECORDING = "run.mcap"
+"""What a ``needs: recording`` block reads: the harness records it from the demo robot first."""
 FLAGS = frozenset({"continues", "until-stopped"})
 
 _FENCE = re.compile(r"^(?P<indent>\s*)(?P<fence>`{3,}|~{3,})\s*(?P<lang>[^\s`]*)(?P<rest>.*)$")

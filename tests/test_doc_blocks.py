@@ -28,6 +28,7 @@ from _doc_blocks import (
     EXEMPT,
     PAGES,
     PYTHON,
+    RECORDING,
     ROOT,
     SHELL,
     Block,
@@ -67,7 +68,7 @@ def robot() -> Iterator[DemoRobot]:
 
 
 def _runs_on_demo(block: Block) -> bool:
-    return block.needs is None and block.include is None and block.lang not in EXEMPT
+    return block.needs in (None, "recording") and block.include is None and block.lang not in EXEMPT
 
 
 def _awaits(block: Block) -> bool:
@@ -287,6 +288,17 @@ def run_shell(block: Block, url: str, tmp_path: Path) -> None:
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), *filter(None, [env.get("PYTHONPATH")])])
     until_stopped = "until-stopped" in block.flags
     background: list[tuple[subprocess.Popen[str], str]] = []
+    if block.needs == "recording":
+        made = subprocess.run(
+            _argv(("rmb", "record", "/odom", "/battery", "-o", RECORDING, "--duration", "2"), url),
+            cwd=tmp_path,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=BLOCK_S,
+            check=False,
+        )
+        assert made.returncode == 0, made.stderr
     try:
         for command in commands(block):
             if command.argv[0] == "export":
@@ -474,8 +486,8 @@ def test_the_extras_table_reader_sees_a_wrong_row() -> None:
 def test_every_example_is_run_by_a_test() -> None:
     tests = "".join(
         p.read_text(encoding="utf-8")
-        for p in (ROOT / "tests").glob("test_*.py")
-        if p.name != Path(__file__).name
+        for p in (ROOT / "tests").glob("*.py")  # the tests and their helpers (_recording.py)
+        if p.name not in (Path(__file__).name, "_doc_blocks.py")
     )
     for example in sorted((ROOT / "examples").iterdir()):
         if example.suffix in (".py", ".ipynb"):
