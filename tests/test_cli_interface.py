@@ -4,6 +4,7 @@ interface`` prints them (comments, constants, nested types indented)."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 from pathlib import Path
 
@@ -107,6 +108,27 @@ def test_proto_prints_a_yaml_prototype() -> None:
     lines = ok("proto", "geometry_msgs/msg/Twist")
     assert lines[0] == '"linear:'
     assert "  x: 0.0" in lines
+
+
+def test_every_interface_verb_prints_json_lines() -> None:
+    def objects(*args: str) -> list[dict[str, object]]:
+        result = rmb(*args, "--json")
+        assert result.returncode == 0, result.stderr
+        return [json.loads(line) for line in result.stdout.splitlines()]
+
+    listed = objects("list", "-s")
+    assert {"name": "std_srvs/srv/SetBool", "kind": "srv"} in listed
+    assert {o["kind"] for o in listed} == {"srv"}
+    assert {"package": "std_srvs"} in objects("packages")
+    assert {"name": "std_srvs/srv/Trigger", "kind": "srv"} in objects("package", "std_srvs")
+    (shown,) = objects("show", "std_srvs/srv/SetBool")
+    assert shown["type"] == "std_srvs/srv/SetBool" and shown["origin"] == "bundled"
+    assert shown["text"] == "\n".join(ok("show", "std_srvs/srv/SetBool"))
+    (proto,) = objects("proto", "geometry_msgs/msg/Twist")
+    assert proto["prototype"] == {
+        "linear": {"x": 0.0, "y": 0.0, "z": 0.0},
+        "angular": {"x": 0.0, "y": 0.0, "z": 0.0},
+    }
 
 
 def test_a_workspace_by_option_and_by_ament_prefix_path(workspace: Path) -> None:

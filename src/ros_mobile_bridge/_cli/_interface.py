@@ -23,7 +23,7 @@ from ..codec import (
     interface_paths_for,
 )
 from ._common import nearest, out, warn
-from ._format import dump_yaml
+from ._format import dump_yaml, json_line, plain
 from ._verb import Verb, run_signalled
 
 __all__ = ["VERBS", "render_interface"]
@@ -194,16 +194,17 @@ def _list(ns: argparse.Namespace) -> int:
     kinds = wanted or list(_KINDS)
     names = interface_names(paths=_paths(ns))
     for kind in kinds:
-        out(f"{_KINDS[kind]}:")
+        if not ns.json:
+            out(f"{_KINDS[kind]}:")
         for name in names:
             if name.split("/")[1] == kind:
-                out(f"    {name}")
+                out(json_line({"name": name, "kind": kind}) if ns.json else f"    {name}")
     return 0
 
 
 def _packages(ns: argparse.Namespace) -> int:
     for package in sorted({n.split("/", 1)[0] for n in interface_names(paths=_paths(ns))}):
-        out(package)
+        out(json_line({"package": package}) if ns.json else package)
     return 0
 
 
@@ -216,7 +217,7 @@ def _package(ns: argparse.Namespace) -> int:
         warn(f"unknown package {ns.package!r}{hint}")
         return 1
     for name in names:
-        out(name)
+        out(json_line({"name": name, "kind": name.split("/")[1]}) if ns.json else name)
     return 0
 
 
@@ -233,6 +234,10 @@ def _show(ns: argparse.Namespace) -> int:
         comments=not ns.no_comments,
         nested_comments=ns.all_comments and not ns.no_comments,
     )
+    if ns.json:
+        record = {"type": found.name, "kind": found.kind, "origin": found.origin}
+        out(json_line({**record, "text": "\n".join(lines)}))
+        return 0
     for line in lines:
         out(line)
     return 0
@@ -254,7 +259,8 @@ async def _show_robot(ns: argparse.Namespace) -> int:
             except SchemaError:
                 warn(f"unknown type {ns.type!r}: the robot does not know it and it is not local")
                 return 1
-        out("\n---\n".join("\n".join(s) for s in sections))
+        text = "\n---\n".join("\n".join(s) for s in sections)
+        out(json_line({"type": ns.type, "origin": "robot", "text": text}) if ns.json else text)
         local = CodecRegistry(interfaces=interface_paths_for(_paths(ns)))
         for part in _parts(ns.type):
             try:
@@ -278,7 +284,11 @@ def _proto(ns: argparse.Namespace) -> int:
     if find_interface(ns.type, paths=_paths(ns)) is None:
         return _unknown(ns.type, ns)
     registry = CodecRegistry(interfaces=interface_paths_for(_paths(ns)))
-    out(f'"{dump_yaml(registry.template(_parts(ns.type)[0])).rstrip()}"')
+    template = registry.template(_parts(ns.type)[0])
+    if ns.json:
+        out(json_line({"type": ns.type, "prototype": plain(template)}))
+        return 0
+    out(f'"{dump_yaml(template).rstrip()}"')
     return 0
 
 
@@ -290,6 +300,7 @@ def _build_common(p: argparse.ArgumentParser) -> None:
         help="a colcon install prefix, share directory or package to read (repeatable; "
         "$AMENT_PREFIX_PATH is read too)",
     )
+    p.add_argument("--json", action="store_true", help="one JSON object per line")
 
 
 def _build_list(p: argparse.ArgumentParser) -> None:
