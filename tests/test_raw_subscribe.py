@@ -10,12 +10,11 @@ import json
 from collections.abc import Callable, Iterator
 from typing import Any
 
-import anyio
 import pytest
 from foxglove import Schema
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import take, wait_until
 from peers.foxglove_sdk import SdkServer, string_msg
 from peers.rosbridge import RosBridge
 from peers.zenoh_sdk_node import SdkNode
@@ -39,16 +38,6 @@ def decodes(monkeypatch: pytest.MonkeyPatch) -> list[str]:
 
     monkeypatch.setattr(_subscription.Subscription, "_decode", spy)
     return seen
-
-
-async def take(sub: rmb.Subscription, n: int, timeout: float = 15.0) -> list[rmb.Message]:
-    got: list[rmb.Message] = []
-    with anyio.fail_after(timeout):
-        async for msg in sub:
-            got.append(msg)
-            if len(got) == n:
-                break
-    return got
 
 
 def check_raw(got: list[rmb.Message], sub: rmb.Subscription) -> None:

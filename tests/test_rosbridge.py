@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import take, wait_until
 from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph, random_domain_id
 
@@ -47,16 +47,6 @@ def options(**kw: Any) -> rmb.ClientOptions:
     }
     base.update(kw)
     return rmb.ClientOptions(**base)
-
-
-async def take(sub: rmb.Subscription, n: int, timeout: float = 10.0) -> list[rmb.Message]:
-    got: list[rmb.Message] = []
-    with anyio.fail_after(timeout):
-        async for msg in sub:
-            got.append(msg)
-            if len(got) == n:
-                break
-    return got
 
 
 @dataclass

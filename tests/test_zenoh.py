@@ -23,6 +23,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import take
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 
@@ -56,16 +57,6 @@ async def until(predicate: Any, what: str, timeout: float = 10.0) -> None:
             await anyio.sleep(0.02)
 
 
-async def collect(sub: rmb.Subscription, count: int, timeout: float = 10.0) -> list[rmb.Message]:
-    got: list[rmb.Message] = []
-    with anyio.fail_after(timeout):
-        async for message in sub:
-            got.append(message)
-            if len(got) == count:
-                break
-    return got
-
-
 # -- publish and subscribe ------------------------------------------------------------------
 async def test_publish_reaches_subscription_in_order(zenoh_router: Any, zenoh_domain: int) -> None:
     opts = options(zenoh_domain)
@@ -78,7 +69,7 @@ async def test_publish_reaches_subscription_in_order(zenoh_router: Any, zenoh_do
         await until(lambda: any(t.name == "/chatter" for t in a.topics), "a sees b's subscription")
         for i in range(100):
             await a.publish("/chatter", STRING, {"data": f"m{i}"})
-        got = await collect(sub, 100)
+        got = await take(sub, 100)
         assert [m.data["data"] for m in got] == [f"m{i}" for i in range(100)]
         assert {m.schema_name for m in got} == {STRING}
         assert all(m.log_time_ns is not None for m in got)
@@ -159,7 +150,7 @@ async def test_another_domain_is_invisible(zenoh_router: Any, zenoh_domain: int,
             cdr(STRING, {"data": "near"}),
             attachment=attachment(2),
         )
-        got = await collect(sub, 1)
+        got = await take(sub, 1)
         assert got[0].data["data"] == "near"
         assert all(t.name != "/far_only" for t in near.topics)
         assert sub.stats.received == 1
@@ -193,7 +184,7 @@ async def test_hostile_samples_are_skipped_and_counted(
         )
         raw.put(key, b"\xff" * 7, attachment=attachment(4))  # garbage CDR
         raw.put(key, good, attachment=attachment(5))  # and then a good one
-        got = await collect(sub, 3)
+        got = await take(sub, 3)
         # a sample whose hash is not our definition's: another definition of
         # the same name, delivered raw (bytes), never decoded with ours
         assert isinstance(got[0].data, memoryview | bytes)
@@ -222,7 +213,7 @@ async def test_the_keyed_attachments_of_early_rmw_zenoh_releases_are_read(
         broken = keyed[:50] + b"X" + keyed[51:]  # "source_gid" misspelt
         raw.put(key, cdr(STRING, {"data": "broken"}), attachment=broken)
         raw.put(key, cdr(STRING, {"data": "fixed"}), attachment=attachment(2))
-        got = await collect(sub, 2)
+        got = await take(sub, 2)
         assert [m.data["data"] for m in got] == ["keyed", "fixed"]
         assert got[0].log_time_ns == 1_700_000_000_000_000_001
         assert client.rejections == {"attachment": 1}
