@@ -247,21 +247,25 @@ async def test_rosbridge_misfits_are_one_class(rosbridge: RosBridge, ros_graph: 
         assert answer["success"] is True
 
 
+async def answer_a_typo_first(
+    requests: rmb.ServiceRequests, caught: list[rmb.MessageError]
+) -> None:
+    """Reply to each request with a misspelt field (kept in ``caught``), then
+    with the right one."""
+    async for req in requests:
+        with pytest.raises(rmb.MessageError) as bad:
+            await req.reply({"success": True, "mesage": "typo"})
+        caught.append(bad.value)
+        await req.reply({"success": True, "message": "fixed"})
+
+
 @pytest.mark.peer
 async def test_rosbridge_serve_reply_misfit(rosbridge: RosBridge, ros_graph: RosGraph) -> None:
     name = "/rmb_contract_served"
     caught: list[rmb.MessageError] = []
     async with rmb.connect(rosbridge.url, protocol="rosbridge", options=rb_options()) as client:
         async with client.serve(name, SET_BOOL) as requests, anyio.create_task_group() as tg:
-
-            async def answer() -> None:
-                async for req in requests:
-                    with pytest.raises(rmb.MessageError) as bad:
-                        await req.reply({"success": True, "mesage": "typo"})
-                    caught.append(bad.value)
-                    await req.reply({"success": True, "message": "fixed"})
-
-            tg.start_soon(answer)
+            tg.start_soon(answer_a_typo_first, requests, caught)
             request = {"cmd": "call", "service": name, "type": SET_BOOL, "args": {"data": True}}
             request["timeout"] = 10.0
             result = await anyio.to_thread.run_sync(lambda: ros_graph.command(request, timeout=30))
@@ -342,15 +346,7 @@ async def test_zenoh_serve_reply_misfit(
         client.serve(name, SET_BOOL) as requests,
         anyio.create_task_group() as tg,
     ):
-
-        async def answer() -> None:
-            async for req in requests:
-                with pytest.raises(rmb.MessageError) as bad:
-                    await req.reply({"success": True, "mesage": "typo"})
-                caught.append(bad.value)
-                await req.reply({"success": True, "message": "fixed"})
-
-        tg.start_soon(answer)
+        tg.start_soon(answer_a_typo_first, requests, caught)
         caller = await anyio.to_thread.run_sync(
             lambda: sdk(
                 "client",
