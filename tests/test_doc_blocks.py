@@ -405,12 +405,35 @@ def test_python_block_runs_against_zenoh(
         adder.stop()
 
 
+@pytest.mark.parametrize(
+    "block",
+    [pytest.param(b, id=b.id) for b in BLOCKS if b.lang in SHELL and b.needs == "zenoh"],
+)
+def test_shell_block_runs_against_zenoh(
+    sdk: Callable[..., Any], zenoh_router: Any, block: Block, tmp_path: Path
+) -> None:
+    """The docs' Zenoh talker: ``/chatter`` Strings on domain 0 (a zenoh-ros2-sdk node)."""
+    sdk(
+        "talker",
+        "--topic",
+        "/chatter",
+        "--type",
+        "std_msgs/msg/String",
+        "--values",
+        '{"data": "hello"}',
+        "--rate",
+        "20",
+        domain=0,
+    )
+    run_shell(block, zenoh_router.locator, tmp_path)
+
+
 def test_every_transport_block_is_run_by_a_peer_test() -> None:
     """A block marked for another transport is python or shell, and one of the tests above
-    runs it (python against rosbridge or Zenoh, shell against rosbridge)."""
+    runs it (python or shell, against rosbridge or Zenoh)."""
     for block in BLOCKS:
         if block.needs in ("rosbridge", "zenoh"):
-            assert block.lang in PYTHON or (block.lang in SHELL and block.needs == "rosbridge")
+            assert block.lang in PYTHON or block.lang in SHELL, block.id
 
 
 # -- the extras table -------------------------------------------------------------------------
