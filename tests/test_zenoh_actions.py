@@ -10,7 +10,7 @@ goal whose router goes away fails with a reason instead of waiting."""
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -44,22 +44,13 @@ def fibonacci(order: int) -> list[int]:
 
 
 @pytest.fixture
-def action_server(
-    zenoh_router: ZenohRouter, zenoh_domain: int, ros_share: Path
-) -> Iterator[Callable[..., SdkNode]]:
-    nodes: list[SdkNode] = []
+def action_server(sdk: Callable[..., SdkNode]) -> Callable[..., SdkNode]:
+    """The Fibonacci action server on ``/fibonacci`` (an sdk node, stopped with the test)."""
 
     def start(*args: str, router: ZenohRouter | None = None) -> SdkNode:
-        where = (router or zenoh_router).locator
-        node = SdkNode(where, zenoh_domain, ros_share, "action", "--name", "/fibonacci", *args)
-        nodes.append(node)
-        return node
+        return sdk("action", "--name", "/fibonacci", *args, router=router)
 
-    try:
-        yield start
-    finally:
-        for node in nodes:
-            node.stop()
+    return start
 
 
 def official_hash(ros_share: Path, type_name: str) -> str:

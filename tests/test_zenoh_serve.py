@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -85,8 +85,8 @@ ADD_TWO_INTS_SRV = "int64 a\nint64 b\n---\nint64 sum\n"
 
 @pytest.fixture
 def sdk_with_add_two_ints(
-    zenoh_router: Any, zenoh_domain: int, ros_share: Path, tmp_path: Path
-) -> Iterator[Callable[..., SdkNode]]:
+    sdk: Callable[..., SdkNode], ros_share: Path, tmp_path: Path
+) -> Callable[..., SdkNode]:
     """sdk nodes whose definitions directory is the official one plus
     ``example_interfaces/srv/AddTwoInts.srv`` (not in the peer environment)."""
     tree = tmp_path / "share"
@@ -96,18 +96,11 @@ def sdk_with_add_two_ints(
     srv_dir = tree / "example_interfaces" / "srv"
     srv_dir.mkdir(parents=True)
     (srv_dir / "AddTwoInts.srv").write_text(ADD_TWO_INTS_SRV)
-    nodes: list[SdkNode] = []
 
     def start(role: str, *args: str) -> SdkNode:
-        node = SdkNode(zenoh_router.locator, zenoh_domain, tree, role, *args)
-        nodes.append(node)
-        return node
+        return sdk(role, *args, share=tree)
 
-    try:
-        yield start
-    finally:
-        for node in nodes:
-            node.stop()
+    return start
 
 
 async def test_a_registered_service_type_is_served_to_the_sdk(

@@ -118,12 +118,19 @@ def ros_share(ros_peer_env: PeerEnv) -> Path:
 def sdk(zenoh_router: Any, zenoh_domain: int, ros_share: Path) -> Iterator[Callable[..., SdkNode]]:
     nodes: list[SdkNode] = []
 
-    def start(role: str, *args: str, domain: int | None = None, router: Any = None) -> SdkNode:
-        """One sdk node in the given role (see tests/peers/zenoh_sdk_node.py)."""
+    def start(
+        role: str,
+        *args: str,
+        domain: int | None = None,
+        router: Any = None,
+        share: Path | None = None,
+    ) -> SdkNode:
+        """One sdk node in the given role (see tests/peers/zenoh_sdk_node.py),
+        reading its definitions from ``share`` (default: the peer env's)."""
         node = SdkNode(
             (router or zenoh_router).locator,
             zenoh_domain if domain is None else domain,
-            ros_share,
+            share or ros_share,
             role,
             *args,
         )
