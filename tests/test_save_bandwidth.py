@@ -125,12 +125,15 @@ async def test_the_mode_needs_a_rate_and_is_checked_at_once(server: SdkServer) -
 # -- the mode on the wire -------------------------------------------------------
 
 
+@pytest.mark.parametrize("mode", [True, "adaptive"])
 async def test_the_stream_pauses_after_each_message_and_resumes_on_the_max_hz_schedule(
-    server: SdkServer,
+    server: SdkServer, mode: rmb.SaveBandwidth
 ) -> None:
+    """``"adaptive"`` pauses on the cap as well while the loop does not lag
+    (the adaptive interval is then 0)."""
     chatter = server.channel("/p", STRING)
     async with rmb.connect(server.url, options=options()) as robot:
-        async with robot.subscribe("/p", max_hz=20, save_bandwidth=True, adaptive=False) as sub:
+        async with robot.subscribe("/p", max_hz=20, save_bandwidth=mode) as sub:
             await wait_until(lambda: subscribes(server, "/p") == 1)
             got: list[str] = []
             for round_ in range(3):
@@ -257,6 +260,24 @@ async def test_unsubscribing_while_paused_leaves_no_server_subscription(server: 
         assert unsubscribes(server, "/gone") == 1
         assert not chatter.has_sinks()
     assert robot.status == "closed"
+
+
+async def test_closing_the_client_while_paused_ends_the_iteration(server: SdkServer) -> None:
+    chatter = server.channel("/close", STRING)
+    got: list[str] = []
+    async with rmb.connect(server.url, options=options()) as robot:
+        sub = await robot.subscribe("/close", max_hz=1, save_bandwidth=True).__aenter__()
+        await wait_until(lambda: subscribes(server, "/close") == 1)
+        chatter.log(string_msg("only"))
+        with anyio.fail_after(5):
+            got.append((await sub.__anext__()).data["data"])
+        await wait_until(lambda: unsubscribes(server, "/close") == 1, what="paused")
+    # the client closed with the subscription paused (resumption due in 1 s)
+    with anyio.fail_after(5):
+        rest = [msg async for msg in sub]
+    assert got == ["only"] and rest == []
+    assert robot.status == "closed"
+    assert subscribes(server, "/close") == 1
 
 
 async def test_a_paused_subscription_resumes_after_a_reconnect() -> None:
