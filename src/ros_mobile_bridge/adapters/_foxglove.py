@@ -162,11 +162,14 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         self._active: dict[str, int] = {}  # topic -> subscription id
         # save_bandwidth (SubscribeHints.pause_hz): the topics that pause after
         # each message and at what rate they resume; the paused ones (when to
-        # resume, on which channel); the resumed ones whose next message is
-        # checked against the last one delivered (a replay is skipped)
+        # resume, on which channel); the resumed ones (since when) whose next
+        # message is checked against the last one delivered (a replay is
+        # skipped); how long a resumed topic's next message took to come
+        # (smoothed: the next resumption is that much earlier)
         self._saving: dict[str, float] = {}
         self._paused: dict[str, tuple[float, fx.Channel]] = {}
-        self._resumed: set[str] = set()
+        self._resumed: dict[str, float] = {}
+        self._wait: dict[str, float] = {}
         self._last_payload: dict[str, memoryview] = {}
         self._pause_changed = anyio.Event()
         self._pubs: Advertisements[_ClientChannel] = Advertisements()
@@ -407,7 +410,7 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
                 paused = self._paused.get(ch.topic)
                 if paused is not None and paused[1] == ch:
                     del self._paused[ch.topic]  # resubscribed below if another carries it
-                    self._resumed.discard(ch.topic)
+                    self._resumed.pop(ch.topic, None)
                     self._last_payload.pop(ch.topic, None)
                     self._emit(TopicState(ch.topic, False))
                     other = self._channel_for(ch.topic)
@@ -472,18 +475,27 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         channel = event.channel
         topic = channel.topic
         payload = event.payload
-        if topic in self._resumed:
+        now = anyio.current_time()
+        interval = 1.0 / self._saving[topic]
+        resumed = self._resumed.pop(topic, None)
+        if resumed is not None:
             last = self._last_payload.get(topic)
             if last is not None and last.nbytes == payload.nbytes and last == payload:
+                self._resumed[topic] = resumed
                 self._emit(Replayed(topic, payload.nbytes))  # keep waiting for a new one
                 return
-            self._resumed.discard(topic)
+            waited = min(now - resumed, interval / 2)
+            before = self._wait.get(topic)
+            self._wait[topic] = waited if before is None else 0.75 * before + 0.25 * waited
         self._pending.append(self._frame(event, received_ns))
         self._last_payload[topic] = payload
         sub_id = self._active.pop(topic, None)
         if sub_id is None:  # a late frame after an unsubscribe: nothing to pause
             return
-        self._paused[topic] = (anyio.current_time() + 1.0 / self._saving[topic], channel)
+        # resume as much earlier as the next message took to come lately
+        # (at most half the interval): one arriving before it is due is held
+        # by the subscription's rate cap and delivered on time
+        self._paused[topic] = (now + interval - self._wait.get(topic, 0.0), channel)
         self._pause_changed.set()
         await self._ws.send(self._engine.unsubscribe([sub_id]))
 
@@ -526,7 +538,7 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
             return
         sub_id, message = self._engine.subscribe(channel.id)
         self._active[topic] = sub_id
-        self._resumed.add(topic)
+        self._resumed[topic] = anyio.current_time()
         await self._ws.send(message)
 
     # -- subscriptions ------------------------------------------------------
@@ -536,11 +548,11 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
             self._saving[topic] = hints.pause_hz
         else:
             self._saving.pop(topic, None)
-            self._resumed.discard(topic)
+            self._resumed.pop(topic, None)
             self._last_payload.pop(topic, None)
             if topic in self._paused:
                 await self._resume(topic)
-                self._resumed.discard(topic)
+                self._resumed.pop(topic, None)
         if topic in self._active or topic in self._paused:
             return
         channel = self._channel_for(topic)
@@ -552,7 +564,8 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         self._wanted.pop(topic, None)
         self._saving.pop(topic, None)
         self._paused.pop(topic, None)  # paused: no server subscription is left
-        self._resumed.discard(topic)
+        self._resumed.pop(topic, None)
+        self._wait.pop(topic, None)
         self._last_payload.pop(topic, None)
         sub_id = self._active.pop(topic, None)
         if sub_id is not None:
