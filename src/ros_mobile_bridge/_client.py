@@ -267,8 +267,9 @@ class Client:
         interval too, when it is longer; then ``max_hz`` may be None). The
         price: a message published while the stream is paused is never
         seen, so when a topic stops, its last message can be missed (the
-        default mode always delivers it), and each delivery waits for the
-        next message published after the resubscription. A message the
+        default mode always delivers it), and a delivery waits for the first
+        message published after the resubscription (which is made as much
+        ahead of time as that wait took lately). A message the
         server replays to the new subscription (a transient-local topic)
         that is byte for byte the one delivered last is skipped and
         counted in ``stats.dropped_replay``. rosbridge accepts the mode
