@@ -20,9 +20,8 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import FAST, wait_port_free, wait_until
 from peers.foxglove_sdk import SdkServer, _Listener, image_msg, string_msg
-from test_reconnect import FAST, wait_port_free
 
 STRING = "std_msgs/msg/String"
 
