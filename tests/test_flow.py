@@ -8,10 +8,12 @@ never with sleeps."""
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 
 import anyio
+import anyio.lowlevel
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -600,6 +602,48 @@ async def test_a_cancelled_consumer_of_a_steady_stream_stops_within_32_messages(
     assert got == list(range(len(got)))
     assert accounted(q) == q.received
     assert (await sub.__anext__()).data == len(got)  # the rest still waits, in order
+
+
+async def messages_between_yields(
+    monkeypatch: pytest.MonkeyPatch, payload_size: int, count: int
+) -> list[int]:
+    """Drain ``count`` queued frames of ``payload_size`` bytes with ``async
+    for``: how many messages the consumer delivered between two turns it
+    gave the loop (its ``anyio.lowlevel.checkpoint`` calls)."""
+    payload = memoryview(bytes(payload_size))
+    q = FrameQueue(clock=FakeClock(), buffer=count, max_bytes=1 << 40)
+    sub = Subscription("/t", q, logger=LOGGER)
+    for i in range(count):
+        q.offer(RawFrame("/t", "sensor_msgs/msg/Image", "cdr", payload, None, i, lambda v: None))
+    q.close()
+    yields: list[int] = []
+    checkpoint = anyio.lowlevel.checkpoint
+
+    async def counted_checkpoint() -> None:
+        yields.append(q.delivered)
+        await checkpoint()
+
+    monkeypatch.setattr(anyio.lowlevel, "checkpoint", counted_checkpoint)
+    got = [message async for message in sub]
+    assert len(got) == count
+    marks = [0, *yields, count]
+    return [b - a for a, b in itertools.pairwise(marks)]
+
+
+async def test_the_consumer_yields_every_32_small_messages(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # the first call after a wait counts as the first of 32
+    assert await messages_between_yields(monkeypatch, 100, 200) == [31] + [32] * 5 + [9]
+
+
+async def test_the_consumer_yields_after_about_4_mib_of_images(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A 921,652-byte image counts as 8 messages: 4 images between two
+    turns of the loop, not 1 (the reader then ran ahead with one fresh image
+    buffer per turn) nor 32 (120 MB decoded without a turn)."""
+    assert await messages_between_yields(monkeypatch, 921_652, 20) == [4] * 5 + [0]
 
 
 # -- FrameQueue: argument validation ------------------------------------------------------

@@ -43,6 +43,7 @@ __all__ = ["FrameQueue", "Subscription"]
 Clock = Callable[[], float]
 _YIELD_EVERY: Final = 32
 _LARGE_PAYLOAD: Final = 64 * 1024
+_LARGE_WEIGHT: Final = 17  # a large payload counts as one message more per 128 KiB
 _DUE_SLACK: Final = 1e-6
 
 
@@ -425,12 +426,16 @@ class Subscription:
         # A pending cancellation is taken before a frame leaves the queue, so
         # a cancelled ``__anext__`` raises and loses nothing. While frames are
         # waiting, the consumer yields to the loop (the reader and other tasks
-        # run, and a cancellation is taken) once every 32 messages or before
-        # a large decode: fair, without a task switch per message. The first
-        # call after a wait checks for cancellation alone; between yields,
-        # no check (anyio's costs about 1.4 us on asyncio, as much as the
-        # rest of a small message's delivery), so a cancelled consumer of a
-        # steady stream sees the cancellation within 32 messages.
+        # run, and a cancellation is taken) once every 32 messages, a payload
+        # of 64 KiB or more counting as one more per 128 KiB (a 921 KB image:
+        # 8, so about 4 MiB of images between two yields): fair, without a
+        # task switch per message, and a reader running ahead with images
+        # does not pile them up (each one a fresh buffer) while the consumer
+        # yields after each. The first call after a wait checks for
+        # cancellation alone; between yields, no check (anyio's costs about
+        # 1.4 us on asyncio, as much as the rest of a small message's
+        # delivery), so a cancelled consumer of a steady stream sees the
+        # cancellation within 32 messages.
         since = self._since_yield + 1
         if since >= _YIELD_EVERY:
             since = 0
@@ -441,8 +446,9 @@ class Subscription:
         if frame is None:
             frame = await self._wait()
             since = 0
-        if frame.payload.nbytes >= _LARGE_PAYLOAD:
-            since = _YIELD_EVERY - 1  # yield before the next big decode
+        size = frame.payload.nbytes
+        if size >= _LARGE_PAYLOAD:
+            since += size >> _LARGE_WEIGHT  # about 4 MiB between two yields
         self._since_yield = since
         return self._decode(frame)
 
