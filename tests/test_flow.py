@@ -8,10 +8,12 @@ never with sleeps."""
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 
 import anyio
+import anyio.lowlevel
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -580,13 +582,14 @@ async def test_a_cancelled_next_does_not_lose_a_waiting_frame() -> None:
     assert (await sub.__anext__()).data == 1
 
 
-async def test_a_cancelled_consumer_of_a_steady_stream_stops_within_8_messages() -> None:
-    """The cancellation check runs on the first call and every 8th while
-    frames wait; whatever was taken before it is delivered, none is lost."""
+async def test_a_cancelled_consumer_of_a_steady_stream_stops_within_32_messages() -> None:
+    """The cancellation check runs on the first call after a wait and at the
+    yield every 32nd while frames wait; whatever was taken before it is
+    delivered, none is lost."""
     decoder = CountingDecoder()
     q = FrameQueue(clock=FakeClock(), buffer=100)
     sub = Subscription("/t", q, logger=LOGGER)
-    for i in range(50):
+    for i in range(80):
         q.offer(frame(i, decoder))
     got: list[object] = []
     with anyio.CancelScope() as scope:
@@ -595,10 +598,52 @@ async def test_a_cancelled_consumer_of_a_steady_stream_stops_within_8_messages()
         while True:
             got.append((await sub.__anext__()).data)
     assert scope.cancelled_caught
-    assert 1 <= len(got) <= 8
+    assert 1 <= len(got) <= 32
     assert got == list(range(len(got)))
     assert accounted(q) == q.received
     assert (await sub.__anext__()).data == len(got)  # the rest still waits, in order
+
+
+async def messages_between_yields(
+    monkeypatch: pytest.MonkeyPatch, payload_size: int, count: int
+) -> list[int]:
+    """Drain ``count`` queued frames of ``payload_size`` bytes with ``async
+    for``: how many messages the consumer delivered between two turns it
+    gave the loop (its ``anyio.lowlevel.checkpoint`` calls)."""
+    payload = memoryview(bytes(payload_size))
+    q = FrameQueue(clock=FakeClock(), buffer=count, max_bytes=1 << 40)
+    sub = Subscription("/t", q, logger=LOGGER)
+    for i in range(count):
+        q.offer(RawFrame("/t", "sensor_msgs/msg/Image", "cdr", payload, None, i, lambda v: None))
+    q.close()
+    yields: list[int] = []
+    checkpoint = anyio.lowlevel.checkpoint
+
+    async def counted_checkpoint() -> None:
+        yields.append(q.delivered)
+        await checkpoint()
+
+    monkeypatch.setattr(anyio.lowlevel, "checkpoint", counted_checkpoint)
+    got = [message async for message in sub]
+    assert len(got) == count
+    marks = [0, *yields, count]
+    return [b - a for a, b in itertools.pairwise(marks)]
+
+
+async def test_the_consumer_yields_every_32_small_messages(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # the first call after a wait counts as the first of 32
+    assert await messages_between_yields(monkeypatch, 100, 200) == [31] + [32] * 5 + [9]
+
+
+async def test_the_consumer_yields_after_about_4_mib_of_images(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A 921,652-byte image counts as 8 messages: 4 images between two
+    turns of the loop, not 1 (the reader then ran ahead with one fresh image
+    buffer per turn) nor 32 (120 MB decoded without a turn)."""
+    assert await messages_between_yields(monkeypatch, 921_652, 20) == [4] * 5 + [0]
 
 
 # -- FrameQueue: argument validation ------------------------------------------------------

@@ -183,3 +183,51 @@ def test_a_huge_declared_length_is_not_buffered_by_the_fast_path() -> None:
     assert not ws._fast
     assert ws._closed_reason is not None
     assert "1009" in str(ws._closed_reason)
+
+
+@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow], deadline=None)
+@given(
+    frames=frame_lists,
+    cuts=st.lists(st.integers(0, 1 << 16), max_size=12),
+    tail=st.binary(max_size=12),
+    gather_from=st.integers(0, 200),
+)
+def test_large_frames_gathered_chunk_by_chunk_give_what_websockets_gives(
+    frames: list[tuple[bool, int, int, bool, bytes]], cuts: list[int], tail: bytes, gather_from: int
+) -> None:
+    """The same property with the gathering of large frames (normally from
+    64 KiB) lowered so that the generated frames take that path too."""
+    data = b"".join(frame_bytes(*f) for f in frames) + tail
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(_websocket, "_ASSEMBLE_FROM", gather_from)
+        fast = run(data, cuts, fast=True)
+    assert fast == run(data, cuts, fast=False)
+
+
+def test_a_large_frame_is_gathered_and_joined_once_into_bytes_of_its_size() -> None:
+    """A 921,652-byte frame (a 640x480 rgb8 image) arriving in 64 KiB reads,
+    with the header of a small frame and the start of the next large one in
+    its last read: each becomes one ``bytes`` of exactly its size (no
+    over-allocated buffer kept per frame), and nothing stays buffered."""
+    size = 640 * 480 * 3 + 52
+    first, second = os.urandom(size), os.urandom(size)
+    data = (
+        frame_bytes(True, 0, 2, False, first)
+        + frame_bytes(True, 0, 1, False, b"hi")
+        + frame_bytes(True, 0, 2, False, second)
+    )
+    proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=None)
+    ws = WebSocket(None, proto, None)  # type: ignore[arg-type]
+    step = 64 * 1024
+    for start in range(0, len(data), step):
+        ws._feed(data[start : start + step])
+        assert len(ws._buf) < 16  # at most a frame header waits in the buffer
+    assert [(text, type(payload)) for text, payload in ws._messages] == [
+        (False, bytes),
+        (True, bytes),
+        (False, bytes),
+    ]
+    assert [payload for _, payload in ws._messages] == [first, b"hi", second]
+    assert ws._parts is None
+    assert not ws._buf
+    assert ws._fast

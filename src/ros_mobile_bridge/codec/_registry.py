@@ -17,6 +17,7 @@ from rosbags.typesys.store import Typestore
 from .._errors import DecodeError, MessageError, SchemaError
 from ._bundled import bundled_definition, bundled_interface
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
+from ._flat import build_flat_decoder
 from ._lru import LruCache
 from ._model import DescribedTypes, FieldDef, MsgDef
 from ._names import (
@@ -532,6 +533,7 @@ class CodecRegistry:
             if decode is None:
                 conv = build_converter(key, gen.defs, gen.converters)
                 decode = _make_cdr_decoder(key, gen.store, conv)
+                decode = build_flat_decoder(key, gen.defs, decode) or decode
                 gen.decoders[key] = decode
             _SHARED.put(shared_key, decode)
             return decode

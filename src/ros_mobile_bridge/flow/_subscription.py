@@ -42,8 +42,8 @@ __all__ = ["FrameQueue", "Subscription"]
 
 Clock = Callable[[], float]
 _YIELD_EVERY: Final = 32
-_CANCEL_CHECK_EVERY: Final = 8  # a power of two
 _LARGE_PAYLOAD: Final = 64 * 1024
+_LARGE_WEIGHT: Final = 17  # a large payload counts as one message more per 128 KiB
 _DUE_SLACK: Final = 1e-6
 
 
@@ -359,6 +359,7 @@ class Subscription:
         # drained (the connection's error instead, when it was lost). Bound
         # here, not wrapped: no call layer on the consumer's path
         self._wait = queue.wait_frame
+        self._take = queue.take  # the next frame already waiting, or None
 
     @property
     def state(self) -> SubscriptionState:
@@ -438,59 +439,80 @@ class Subscription:
         return batch
 
     async def __anext__(self) -> Message:
-        queue = self._queue
         # A pending cancellation is taken before a frame leaves the queue, so
-        # a cancelled ``__anext__`` raises and loses nothing: on the first call
-        # after a wait, then every 8th while frames are waiting (anyio's check
-        # costs about 1.4 us on asyncio, as much as the rest of a small
-        # message's delivery), so a cancelled consumer of a steady stream sees
-        # the cancellation within 8 messages. It yields to the loop every 32
-        # messages or before a large decode: fair, without a task switch per
-        # message.
-        since = self._since_yield = self._since_yield + 1
+        # a cancelled ``__anext__`` raises and loses nothing. While frames are
+        # waiting, the consumer yields to the loop (the reader and other tasks
+        # run, and a cancellation is taken) once every 32 messages, a payload
+        # of 64 KiB or more counting as one more per 128 KiB (a 921 KB image:
+        # 8, so about 4 MiB of images between two yields): fair, without a
+        # task switch per message, and a reader running ahead with images
+        # does not pile them up (each one a fresh buffer) while the consumer
+        # yields after each. The first call after a wait checks for
+        # cancellation alone; between yields, no check (anyio's costs about
+        # 1.4 us on asyncio, as much as the rest of a small message's
+        # delivery), so a cancelled consumer of a steady stream sees the
+        # cancellation within 32 messages.
+        since = self._since_yield + 1
         if since >= _YIELD_EVERY:
-            self._since_yield = 0
+            since = 0
             await anyio.lowlevel.checkpoint()
-        elif since & (_CANCEL_CHECK_EVERY - 1) == 1:
+        elif since == 1:
             await anyio.lowlevel.checkpoint_if_cancelled()
-        frame = queue.take()
+        frame = self._take()
         if frame is None:
             frame = await self._wait()
-            self._since_yield = 0
-        message = self._decode(frame)
-        if frame.payload.nbytes >= _LARGE_PAYLOAD:
-            self._since_yield = _YIELD_EVERY  # yield before the next big decode
-        return message
+            since = 0
+        size = frame.payload.nbytes
+        if size >= _LARGE_PAYLOAD:
+            since += size >> _LARGE_WEIGHT  # about 4 MiB between two yields
+        self._since_yield = since
+        return self._decode(frame)
 
     def _decode(self, frame: RawFrame) -> Message:
-        queue = self._queue
-        queue.delivered += 1
+        self._queue.delivered += 1
         payload = frame.payload
-        error: str | None = None
-        data: object
-        if frame.decode is None:
-            data, error = payload, f"no decoder for {frame.schema_name!r} ({frame.encoding})"
-        else:
+        decode = frame.decode
+        if decode is not None:
             try:
-                data = frame.decode(payload)
-            except DecodeError as exc:
-                data, error = payload, str(exc)
+                data = decode(payload)
             except Exception as exc:  # a codec bug must not end the subscription
-                data, error = payload, f"{type(exc).__name__}: {exc}"
-        if error is not None:
-            queue.decode_failures += 1
-            self._logger.warning(
-                "could not decode a %s message on %s (%d bytes), delivering it raw: %s",
-                frame.schema_name or "schemaless",
+                return self._undecoded(frame, exc)
+            return new_message(
                 frame.topic,
+                frame.schema_name,
+                frame.encoding,
+                data,
+                frame.receive_time_ns,
+                frame.log_time_ns,
                 payload.nbytes,
-                error,
+                None,
+                frame.sequence,
             )
+        return self._undecoded(frame, None)
+
+    def _undecoded(self, frame: RawFrame, exc: Exception | None) -> Message:
+        """A delivered frame whose payload did not decode (``exc``; None: no
+        decoder): logged, counted, delivered raw."""
+        payload = frame.payload
+        if exc is None:
+            error = f"no decoder for {frame.schema_name!r} ({frame.encoding})"
+        elif isinstance(exc, DecodeError):
+            error = str(exc)
+        else:
+            error = f"{type(exc).__name__}: {exc}"
+        self._queue.decode_failures += 1
+        self._logger.warning(
+            "could not decode a %s message on %s (%d bytes), delivering it raw: %s",
+            frame.schema_name or "schemaless",
+            frame.topic,
+            payload.nbytes,
+            error,
+        )
         return new_message(
             frame.topic,
             frame.schema_name,
             frame.encoding,
-            data,
+            payload,
             frame.receive_time_ns,
             frame.log_time_ns,
             payload.nbytes,

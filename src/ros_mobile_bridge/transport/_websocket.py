@@ -49,6 +49,13 @@ read of empty frames is parsed 1024 at a time, never 500,000 at once."""
 _COALESCE_BELOW: Final = 64 * 1024
 """A read of this many bytes or more ends read coalescing until the next
 small read: the stream is saturated, and waiting could only slow it."""
+_ASSEMBLE_FROM: Final = 64 * 1024
+"""A data frame of this many bytes or more that is not complete in the bytes
+at hand is gathered as the chunks that carry it (kept as they came, no copy)
+and joined once, when its last byte arrives, into one ``bytes`` of its exact
+size: one copy and one buffer of the frame's size per frame, where growing the
+unparsed-bytes buffer and cutting the frame out of it cost two copies, a
+buffer regrown to the frame's size and shrunk again, per camera image."""
 _OP_TEXT: Final = 0x1
 _OP_BINARY: Final = 0x2
 _CONTROL_OPCODES: Final = (0x8, 0x9, 0xA)
@@ -111,6 +118,11 @@ class WebSocket:
         self._fast = True  # False once websockets' parser holds part of a frame
         self._buf = bytearray()  # the fast path's unparsed bytes
         self._more = False  # the fast path stopped at _FAST_FRAMES with bytes left
+        # a large data frame being gathered (see _ASSEMBLE_FROM): its chunks,
+        # the bytes still missing, and whether it is text
+        self._parts: list[bytes | bytearray | memoryview] | None = None
+        self._missing = 0
+        self._parts_text = False
         self._pongs: dict[bytes, anyio.Event] = {}
         self._closed_reason: ConnectionLost | None = None
         self.subprotocol: str | None = protocol.subprotocol
@@ -264,23 +276,28 @@ class WebSocket:
         A frame with FIN, no RSV bit, not masked, opcode text or binary, within
         ``max_size``, outside a fragmented message and while the connection is
         open, is cut out of the bytes here and queued as a message: what
-        websockets would do with it, without its generator-based parser. A
-        whole control frame (ping, pong, close: at most 125 bytes) is handed
-        to websockets on its own, so it answers pings and runs the closing
-        handshake. Anything else (a fragment, a masked frame, a reserved
+        websockets would do with it, without its generator-based parser (one
+        of :data:`_ASSEMBLE_FROM` bytes or more that is not all there yet is
+        gathered by :meth:`_gather` as its chunks arrive). A whole control
+        frame (ping, pong, close: at most 125 bytes) is handed to websockets
+        on its own, so it answers pings and runs the closing handshake. Anything else (a fragment, a masked frame, a reserved
         opcode or bit, a frame over ``max_size``, any byte after the
         connection left OPEN) ends the fast path for this connection: from
         that frame on, websockets parses everything, and fails the
         connection where it must."""
         buf = self._buf
         view: bytes | bytearray
+        pos = 0
+        if self._parts is not None:  # the rest of a large frame (buf is empty)
+            pos = self._gather(data)
+            if self._parts is not None:
+                return b""
         if buf:
             buf += data
             view = buf
         else:
             view = data
         end = len(view)
-        pos = 0
         frames = 0
         messages = self._messages
         proto = self._proto
@@ -315,8 +332,16 @@ class WebSocket:
                     start = pos + 10
                 if max_size is None or length <= max_size:
                     stop = start + length
-                    if stop > end:
-                        break  # the rest of the frame is still on its way
+                    if stop > end:  # the rest of the frame is still on its way
+                        if length < _ASSEMBLE_FROM:
+                            break
+                        # gathered chunk by chunk from here (see _ASSEMBLE_FROM)
+                        first = view[start:] if view is buf else memoryview(view)[start:]
+                        self._parts = [first]
+                        self._missing = stop - end
+                        self._parts_text = opcode == _OP_TEXT
+                        buf.clear()
+                        return b""
                     messages.append((opcode == _OP_TEXT, view[start:stop]))
                     pos = stop
                     frames += 1
@@ -343,6 +368,24 @@ class WebSocket:
         else:
             buf += view[pos:]
         return b""
+
+    def _gather(self, data: bytes) -> int:
+        """Add ``data`` to the large frame being gathered; once it is whole,
+        queue it as one ``bytes``. Returns how many bytes of ``data`` the
+        frame took (the rest is the next frame's)."""
+        parts = self._parts
+        assert parts is not None
+        missing = self._missing
+        size = len(data)
+        if size < missing:
+            if size:
+                parts.append(data)
+                self._missing = missing - size
+            return size
+        parts.append(memoryview(data)[:missing] if size > missing else data)
+        self._parts = None
+        self._messages.append((self._parts_text, b"".join(parts)))  # its one copy
+        return missing
 
     def _take_events(self) -> None:
         for event in self._proto.events_received():

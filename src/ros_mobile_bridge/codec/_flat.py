@@ -1,0 +1,152 @@
+"""A direct CDR -> dict decoder for the commonest message shapes.
+
+The general decoder (``_registry._make_cdr_decoder``) lets rosbags build a
+message object and converts that to a dict: two passes and a check call per
+string. For a type whose fields are, all the way down, scalar numbers,
+``bool``, ``byte``, ``char``, ``string`` and nested messages of the same
+kind (``std_msgs/String``, ``Header``, ``Twist``, ``Pose``, ``Imu``
+without its covariances, ...), :func:`build_flat_decoder` generates one
+function that reads the little-endian payload straight into the dict, about
+three times faster for a ``std_msgs/String``.
+
+It gives exactly the dict the general decoder gives, and never an error of
+its own: any payload it cannot read as plainly valid (big-endian, too short,
+a string without its terminator or not UTF-8, bytes left over, not a
+byte-formatted memoryview) is handed to the general decoder, which decodes
+it or raises its :class:`DecodeError` as it always did. Arrays and
+sequences, ``wstring`` and ``wchar`` are not covered: such a type keeps the
+general decoder."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from ._model import DUMMY_FIELD, SCALAR, MsgDef
+
+__all__ = ["build_flat_decoder"]
+
+_FORMATS: dict[str, tuple[str, int]] = {
+    # (struct format, size = CDR alignment)
+    "bool": ("?", 1),
+    "byte": ("B", 1),  # the ROS 2 octet, 0..255 (the general path masks rosbags' int8)
+    "char": ("B", 1),
+    "int8": ("b", 1),
+    "uint8": ("B", 1),
+    "int16": ("h", 2),
+    "uint16": ("H", 2),
+    "int32": ("i", 4),
+    "uint32": ("I", 4),
+    "int64": ("q", 8),
+    "uint64": ("Q", 8),
+    "float32": ("f", 4),
+    "float64": ("d", 8),
+}
+
+
+class _Fallback(Exception):
+    """The payload is not one the generated decoder reads itself."""
+
+
+def _flat(key: str, defs: Mapping[str, MsgDef], depth: int = 0) -> bool:
+    """Whether ``key`` is made only of what the generated decoder reads."""
+    msgdef = defs.get(key)
+    if msgdef is None or depth > 32:
+        return False
+    for field in msgdef.fields:
+        if field.cardinality != SCALAR:
+            return False
+        if field.ref is not None:
+            if not _flat(field.ref, defs, depth + 1):
+                return False
+        elif field.base == "string":
+            if field.string_bound:  # the general path may check the bound
+                return False
+        elif field.base not in _FORMATS:
+            return False
+    return True
+
+
+class _Writer:
+    """Generates the statements reading one type's fields, nested types
+    inline; ``b`` is the offset in the CDR body (alignment counts from it)."""
+
+    def __init__(self, defs: Mapping[str, MsgDef]) -> None:
+        self.defs = defs
+        self.lines: list[str] = []
+        self.names = 0
+        self.structs: dict[str, str] = {}
+
+    def _local(self) -> str:
+        self.names += 1
+        return f"x{self.names}"
+
+    def _unpack(self, fmt: str) -> str:
+        name = self.structs.get(fmt)
+        if name is None:
+            name = self.structs[fmt] = f"_s{len(self.structs)}"
+        return name
+
+    def message(self, key: str) -> str:
+        """Emit the reads of ``key``'s fields; return its dict expression."""
+        msgdef = self.defs[key]
+        visible = msgdef.visible_fields
+        items: list[str] = []
+        for field in msgdef.fields:
+            if field.ref is not None:
+                items.append(f"{field.name!r}: {self.message(field.ref)}")
+                continue
+            assert field.base is not None
+            target = self._local()
+            if field.base == "string":
+                self.lines += [
+                    "b = (b + 3) & -4",
+                    f"n = {self._unpack('<I')}(p, b + 4)[0]",
+                    "e = b + 8 + n",
+                    "if n < 1 or e > size or p[e - 1] != 0: raise _Fallback",
+                    f"{target} = str(p[b + 8 : e - 1], 'utf-8')",
+                    "b = e - 4",
+                ]
+            else:
+                fmt, align = _FORMATS[field.base]
+                if align > 1:
+                    self.lines.append(f"b = (b + {align - 1}) & -{align}")
+                self.lines += [
+                    f"{target} = {self._unpack('<' + fmt)}(p, b + 4)[0]",
+                    f"b += {align}",
+                ]
+            if field.name != DUMMY_FIELD or visible:
+                items.append(f"{field.name!r}: {target}")
+        return "{" + ", ".join(items) + "}"
+
+
+def build_flat_decoder(
+    key: str, defs: Mapping[str, MsgDef], general: Callable[[memoryview], Any]
+) -> Callable[[memoryview], Any] | None:
+    """The direct decoder of type ``key`` (see the module docstring), handing
+    every payload it does not read itself to ``general``; None when the type
+    has a field it does not cover."""
+    if not _flat(key, defs):
+        return None
+    writer = _Writer(defs)
+    result = writer.message(key)
+    body = "\n".join("        " + line for line in writer.lines)
+    source = (
+        "def decode(p):\n"
+        "    try:\n"
+        "        if p.itemsize != 1 or p[0] != 0 or p[1] != 1: raise _Fallback\n"
+        "        size = len(p)\n"
+        "        b = 0\n"
+        f"{body}\n"
+        "        if b + 7 < size: raise _Fallback\n"
+        f"        return {result}\n"
+        "    except Exception:\n"
+        "        return _general(p)\n"
+    )
+    namespace: dict[str, Any] = {"_Fallback": _Fallback, "_general": general}
+    for fmt, name in writer.structs.items():
+        namespace[name] = struct.Struct(fmt).unpack_from
+    exec(compile(source, f"<ros_mobile_bridge.codec flat decoder for {key}>", "exec"), namespace)
+    decode: Callable[[memoryview], Any] = namespace["decode"]
+    return decode
