@@ -194,6 +194,18 @@ class WebSocket:
             await self._flush()  # pongs, close replies: usually nothing, and then no lock
         return messages.popleft()
 
+    def receive_ready(self) -> list[tuple[bool, bytes | bytearray]]:
+        """Every message already received, oldest first, as :meth:`receive_raw`
+        returns each (an empty list when none): never reads, never waits. A
+        reader takes what one read brought this way and handles it as one
+        batch."""
+        messages = self._messages
+        if not messages:
+            return []
+        ready = list(messages)
+        messages.clear()
+        return ready
+
     async def _coalesce(self) -> bool:
         """Under a steady stream, wait until :attr:`read_coalesce` seconds
         after the last read returned before reading again (not at all when
