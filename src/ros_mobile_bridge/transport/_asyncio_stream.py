@@ -36,8 +36,10 @@ _HIGH_WATER: Final = 4 * 1024 * 1024
 """Unread bytes at which reading from the socket pauses."""
 _LOW_WATER: Final = 1024 * 1024
 """Unread bytes below which it resumes."""
-_HOLD_READ: Final = 256 * 1024
-"""Bytes one :meth:`ProtocolStream.hold` reads from the socket at most."""
+_HOLD_READ: Final = 64 * 1024
+"""Bytes one :meth:`ProtocolStream.hold` reads from the socket at most
+(the read coalescing's size; a larger buffer is a fresh mapping of memory,
+three more system calls, per read)."""
 
 
 class _Protocol(asyncio.Protocol):
@@ -107,6 +109,11 @@ class _Protocol(asyncio.Protocol):
         for fut in drainers:
             if not fut.done():
                 fut.set_result(None)
+
+
+def _set_done(fut: asyncio.Future[None]) -> None:
+    if not fut.done():
+        fut.set_result(None)
 
 
 class ProtocolStream(anyio.abc.ByteStream):
@@ -181,9 +188,12 @@ class ProtocolStream(anyio.abc.ByteStream):
         if not p.read_paused and not self._transport.is_closing():
             p.read_paused = p.held = True
             self._transport.pause_reading()
+        waiter = p.loop.create_future()  # (asyncio.sleep without its loop lookup)
+        timer = p.loop.call_later(seconds, _set_done, waiter)
         try:
-            await asyncio.sleep(seconds)
+            await waiter
         except BaseException:
+            timer.cancel()
             if p.held:
                 self._resume_held()
             raise

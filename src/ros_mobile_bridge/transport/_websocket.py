@@ -246,7 +246,7 @@ class WebSocket:
         then waits or reports it). Other errors raise ``OSError``."""
         assert self._held_sock is not None
         try:
-            data = self._held_sock.recv(_READ_CHUNK)
+            data = self._held_sock.recv(_COALESCE_BELOW)  # (no fresh memory mapping per read)
         except (BlockingIOError, InterruptedError):
             return b""
         self._held_reads += bool(data)
