@@ -361,6 +361,14 @@ def test_publish_full_parse_msg_may_be_any_json() -> None:
 # decode_json_msg
 
 
+@pytest.mark.parametrize(
+    "payload",
+    [b'{"msg":{"a":1}}', b' {"msg":{"a":1}}', b'{"msg":{"a":1}}\n', b'\t{"msg":{"a":1}} '],
+)
+def test_decode_json_msg_with_and_without_whitespace_around(payload: bytes) -> None:
+    assert decode_json_msg(memoryview(payload)) == {"a": 1}
+
+
 def test_decode_json_msg_of_a_slice_and_of_bytearray() -> None:
     buf = b'xx{"op":"publish","msg":{"a":[1,2]}}yy'
     assert decode_json_msg(memoryview(buf)[2:-2]) == {"a": [1, 2]}
@@ -378,6 +386,10 @@ def test_decode_json_msg_of_a_slice_and_of_bytearray() -> None:
         (b"[1,2]", "no 'msg'"),
         (b'{"op":"publish"}', "no 'msg'"),
         (b'"msg"', "no 'msg'"),
+        (b'{"msg":1} x', "Extra data"),
+        (b'{"msg":1}{"msg":2}', "Extra data"),
+        (b'{"msg":1', "Expecting ',' delimiter"),
+        (b'{"msg":"\xff"}', "can't decode"),
     ],
 )
 def test_decode_json_msg_rejects(payload: bytes, words: str) -> None:
