@@ -239,6 +239,32 @@ async def test_what_arrives_during_a_hold_is_read_in_one_go(peer: RawPeer) -> No
 
 
 @asyncio_only
+async def test_a_hold_that_meets_the_end_of_the_stream_resumes_reading(peer: RawPeer) -> None:
+    """Bytes and then the peer's EOF during a hold: the hold reads the
+    bytes; the next hold finds the end, resumes reading, and ``receive``
+    reports the end (the transport saw it itself)."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+
+    def send_late() -> None:
+        time.sleep(0.02)  # after the hold paused reading
+        conn.sendall(b"last")
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(anyio.to_thread.run_sync, send_late)
+        await stream.hold(0.3)
+    assert stream.held_reads == 1
+    assert await stream.receive() == b"last"
+    conn.shutdown(socket.SHUT_WR)
+    await stream.hold(0.05)
+    assert stream.held_reads == 1
+    assert not stream._protocol.read_paused
+    with anyio.fail_after(5), pytest.raises(anyio.EndOfStream):
+        await stream.receive()
+    await stream.aclose()
+
+
+@asyncio_only
 async def test_a_cancelled_hold_resumes_reading(peer: RawPeer) -> None:
     stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
     conn = await anyio.to_thread.run_sync(peer.wait)
