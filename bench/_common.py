@@ -18,8 +18,15 @@ __all__ = [
     "versions",
 ]
 
-DROP_REASONS = ("dropped_throttle", "dropped_conflated", "dropped_overflow", "dropped_breaker")
-"""Every way a received frame can leave a subscription without being delivered."""
+DROP_REASONS = (
+    "dropped_throttle",
+    "dropped_conflated",
+    "dropped_overflow",
+    "dropped_breaker",
+    "dropped_replay",
+)
+"""Every way a received frame can leave a subscription without being delivered
+(a version without one of them counts 0 for it)."""
 
 
 def versions(names: Sequence[str]) -> str:
@@ -37,7 +44,7 @@ def subscription_counts(sub: rmb.Subscription) -> dict[str, int]:
     (delivered raw)."""
     stats = sub.stats
     counts = {"received": stats.received, "delivered": stats.delivered}
-    counts.update({reason: getattr(stats, reason) for reason in DROP_REASONS})
+    counts.update({reason: getattr(stats, reason, 0) for reason in DROP_REASONS})
     counts["queued"] = len(sub._queue)
     counts["decode_failures"] = stats.decode_failures
     return counts

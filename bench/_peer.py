@@ -16,6 +16,10 @@ Prints ``port PORT`` when ready, then serves commands on stdin, one a line:
 ``pace TOPIC COUNT RATE``
     The same wait, then answer ``started`` and publish COUNT messages at RATE
     per second (on a fixed schedule), then answer ``done COUNT SECONDS``.
+``stamped TOPIC COUNT RATE``
+    As ``pace``, but each message carries its sequence number (from 1), so
+    that no two are byte for byte the same (as a camera's stamps make them):
+    see :func:`stamp_into` (``bench_bandwidth.py``).
 ``quit``
     Stop the server and exit (so does end of input).
 
@@ -83,6 +87,24 @@ def payloads() -> dict[str, bytes]:
     }
 
 
+def stamp_into(topic: str, payload: bytearray, seq: int) -> None:
+    """Write ``seq`` into a copy of a payload of :func:`payloads`: the image's
+    ``header.stamp.sec`` (int32 at offset 4, after the CDR header); the
+    string's first 8 characters, as decimal digits (offset 8, after the
+    header and the length)."""
+    if topic == IMAGE_TOPIC:
+        struct.pack_into("<i", payload, 4, seq)
+    else:
+        payload[8:16] = b"%08d" % seq
+
+
+def stamp_of(topic: str, payload: bytes | memoryview) -> int:
+    """The sequence number :func:`stamp_into` wrote."""
+    if topic == IMAGE_TOPIC:
+        return int(struct.unpack_from("<i", payload, 4)[0])
+    return int(bytes(payload[8:16]))
+
+
 class _Listener(ServerListener):
     """Counts subscriptions per topic (called from the server's threads)."""
 
@@ -137,7 +159,8 @@ def main() -> None:
             if words[0] == "quit":
                 break
             command = words[0]
-            if (command, len(words)) not in (("burst", 3), ("pace", 4)) or words[1] not in channels:
+            known = (("burst", 3), ("pace", 4), ("stamped", 4))
+            if (command, len(words)) not in known or words[1] not in channels:
                 print(f"error bad command {line.strip()!r}", flush=True)
                 continue
             topic, count = words[1], int(words[2])
@@ -156,11 +179,16 @@ def main() -> None:
             else:
                 print("started", flush=True)
                 period = 1.0 / float(words[3])
+                stamped = bytearray(payload) if command == "stamped" else None
                 for i in range(count):
                     delay = start + i * period - time.perf_counter()
                     if delay > 0:
                         time.sleep(delay)
-                    log(payload)
+                    if stamped is None:
+                        log(payload)
+                    else:
+                        stamp_into(topic, stamped, i + 1)
+                        log(bytes(stamped))
             print(f"done {count} {time.perf_counter() - start:.6f}", flush=True)
     finally:
         for ch in channels.values():

@@ -553,7 +553,7 @@ def report(backend: Backend, result: Result) -> dict[str, dict[str, dict[str, fl
     print("  fate of every frame the library received (sums over the repetitions):")
     print(
         f"  {'case':<22} {'client':<18} {'sent':>8} {'delivered':>9} {'throttle':>8}"
-        f" {'conflated':>9} {'overflow':>8} {'breaker':>7} {'queued':>6}  verdict"
+        f" {'conflated':>9} {'overflow':>8} {'breaker':>7} {'replay':>6} {'queued':>6}  verdict"
     )
     for case in result.cases:
         sent = counts["paced"] if case.pace else counts[case.topic]
@@ -571,7 +571,7 @@ def report(backend: Backend, result: Result) -> dict[str, dict[str, dict[str, fl
             print(
                 f"  {case.label:<22} {name:<18} {sent * len(samples):8d} {total['delivered']:9d}"
                 + "".join(
-                    f" {total[r]:{w}d}" for r, w in zip(DROP_REASONS, (8, 9, 8, 7), strict=True)
+                    f" {total[r]:{w}d}" for r, w in zip(DROP_REASONS, (8, 9, 8, 7, 6), strict=True)
                 )
                 + f" {total['queued']:6d}  {'FAIL' if problems else 'ok'}"
             )

@@ -399,7 +399,7 @@ async def library(env: Env, kind: Kind, count: int) -> AsyncIterator[Receiver]:
             stats = sub.stats
             return (
                 stats.delivered
-                + sum(int(getattr(stats, r)) for r in DROP_REASONS)
+                + sum(int(getattr(stats, r, 0)) for r in DROP_REASONS)
                 + dropped_before()
             )
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import socket
+import time
 from collections.abc import Callable
 
 import anyio
@@ -27,3 +29,22 @@ async def take(sub: rmb.Subscription, n: int, timeout: float = 15.0) -> list[rmb
             if len(got) == n:
                 break
     return got
+
+
+# A reconnect policy for tests: retries within 0.2 s.
+FAST = rmb.ReconnectPolicy(initial_delay=0.05, max_delay=0.2, jitter=0.1)
+
+
+async def wait_port_free(port: int, timeout: float = 5.0) -> None:
+    """The SDK's stop() returns before its listener is closed."""
+    deadline = time.monotonic() + timeout
+    while True:
+        with socket.socket() as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            try:
+                s.bind(("127.0.0.1", port))
+                return
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+        await anyio.sleep(0.02)

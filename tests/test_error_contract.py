@@ -28,6 +28,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.rosbridge import RosBridge, RosGraph
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.demo import DemoRobot
@@ -54,13 +55,6 @@ def rb_options(**kw: Any) -> rmb.ClientOptions:
     base: dict[str, Any] = {"discovery_interval": 0.25, "teardown_timeout": 3.0, "reconnect": None}
     base.update(kw)
     return rmb.ClientOptions(**base)
-
-
-async def until(predicate: Callable[[], bool], what: str, timeout: float = 20.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.05)
-    assert predicate(), what
 
 
 def assert_misfit(exc: rmb.MessageError, call: str, type_name: str, field: str) -> None:
@@ -177,8 +171,10 @@ async def test_a_subscription_to_a_name_not_offered_warns_once_with_the_nearest(
         async with client.subscribe("/odm") as missing, client.subscribe("/odom") as offered:
             with anyio.fail_after(10):
                 await offered.__anext__()
-            await until(
-                lambda: any("/odm" in r.getMessage() for r in caplog.records), "the warning"
+            await wait_until(
+                lambda: any("/odm" in r.getMessage() for r in caplog.records),
+                timeout=20.0,
+                what="the warning",
             )
             await anyio.sleep(0.6)  # two more grace periods: still one warning
             assert missing.state == "pending"
@@ -235,7 +231,11 @@ async def test_rosbridge_misfits_are_one_class(rosbridge: RosBridge, ros_graph: 
             await client.publish("/rmb_contract_twist", TWIST, {"angular": {"w": 1}})
         assert_misfit(pub.value, "publish /rmb_contract_twist", "Twist", "angular.w")
         await client.wait_for_service("/set_flag", timeout=20)
-        await until(lambda: {s.name: s.type for s in client.services}["/set_flag"] != "", "type")
+        await wait_until(
+            lambda: {s.name: s.type for s in client.services}["/set_flag"] != "",
+            timeout=20.0,
+            what="type",
+        )
         with pytest.raises(rmb.MessageError) as call:
             await client.call_service("/set_flag", {"data": "yes please"})
         assert_misfit(call.value, "call_service /set_flag", "SetBool_Request", "data")
@@ -358,7 +358,7 @@ async def test_zenoh_serve_reply_misfit(
                 json.dumps([{"data": True}]),
             )
         )
-        await until(lambda: caller.done, "the sdk's call", timeout=40)
+        await wait_until(lambda: caller.done, timeout=40, what="the sdk's call")
         assert caller.records() == [{"response": {"success": True, "message": "fixed"}}]
         tg.cancel_scope.cancel()
     assert len(caught) == 1

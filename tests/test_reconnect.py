@@ -14,10 +14,8 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import FAST, wait_port_free, wait_until
 from peers.foxglove_sdk import SdkServer, ros2_service, string_msg
-
-FAST = rmb.ReconnectPolicy(initial_delay=0.05, max_delay=0.2, jitter=0.1)
 
 
 def options(**kw: Any) -> rmb.ClientOptions:
@@ -27,21 +25,6 @@ def options(**kw: Any) -> rmb.ClientOptions:
     kw.setdefault("keepalive_interval", 0.5)
     kw.setdefault("keepalive_timeout", 1.0)
     return rmb.ClientOptions(**kw)
-
-
-async def wait_port_free(port: int, timeout: float = 5.0) -> None:
-    """The SDK's stop() returns before its listener is closed."""
-    deadline = time.monotonic() + timeout
-    while True:
-        with socket.socket() as s:
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            try:
-                s.bind(("127.0.0.1", port))
-                return
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-        await anyio.sleep(0.02)
 
 
 def open_fds() -> int:

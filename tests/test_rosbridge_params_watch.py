@@ -12,13 +12,14 @@ messages while a watch lives and after it ends; events that are not
 from __future__ import annotations
 
 import itertools
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Iterator
 from typing import Any
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.ros_env import PeerEnv
 from peers.rosbridge import RosBridge, RosGraph
 
@@ -44,12 +45,6 @@ def options(**kw: Any) -> rmb.ClientOptions:
 def fresh() -> float:
     """A speed no earlier set made (the session's graph is shared)."""
     return 100.0 + next(_values) / 4
-
-
-async def until(predicate: Callable[[], bool], timeout: float = 15.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.05)
 
 
 async def next_update(updates: AsyncIterator[dict[str, Any]]) -> dict[str, Any]:
@@ -339,9 +334,9 @@ async def test_the_watch_is_restored_after_a_reconnect(
             await set_until_seen(1)
             first = watcher._conn.adapter
             await anyio.to_thread.run_sync(bridge.stop)
-            await until(lambda: watcher.status == "reconnecting")
+            await wait_until(lambda: watcher.status == "reconnecting", timeout=15.0)
             bridge = await anyio.to_thread.run_sync(lambda: start_bridge(port))
-            await until(lambda: watcher.status == "connected", 30)
+            await wait_until(lambda: watcher.status == "connected", timeout=30)
             assert watcher._conn.adapter is not first  # a new connection ...
             assert subscribed(watcher)  # ... with the watch restored
             count = len(seen)

@@ -23,7 +23,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import take
+from _util import take, wait_until
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 
@@ -51,12 +51,6 @@ def cdr(type_name: str, value: dict[str, Any]) -> bytes:
     return bytes(CodecRegistry().encoder(type_name, "cdr")(value))
 
 
-async def until(predicate: Any, what: str, timeout: float = 10.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.02)
-
-
 # -- publish and subscribe ------------------------------------------------------------------
 async def test_publish_reaches_subscription_in_order(zenoh_router: Any, zenoh_domain: int) -> None:
     opts = options(zenoh_domain)
@@ -66,7 +60,11 @@ async def test_publish_reaches_subscription_in_order(zenoh_router: Any, zenoh_do
         b.subscribe("/chatter", schema=STRING, buffer=200) as sub,
     ):
         assert a.protocol == "zenoh"
-        await until(lambda: any(t.name == "/chatter" for t in a.topics), "a sees b's subscription")
+        await wait_until(
+            lambda: any(t.name == "/chatter" for t in a.topics),
+            timeout=10.0,
+            what="a sees b's subscription",
+        )
         for i in range(100):
             await a.publish("/chatter", STRING, {"data": f"m{i}"})
         got = await take(sub, 100)
@@ -83,7 +81,11 @@ async def test_graph_shows_the_other_client_and_our_tokens(
     async with rmb.connect(zenoh_router.locator, options=opts) as a:
         await a.advertise("/status", STRING)
         async with rmb.connect(zenoh_router.locator, options=opts) as b:
-            await until(lambda: [t.name for t in b.topics] == ["/status"], "b sees /status")
+            await wait_until(
+                lambda: [t.name for t in b.topics] == ["/status"],
+                timeout=10.0,
+                what="b sees /status",
+            )
             assert b.topics[0].schema_name == STRING
         # what a ROS tool sees: our node and our publisher, as rmw_zenoh tokens
         replies = raw.liveliness().get(rz.liveliness_selector(zenoh_domain), timeout=5.0)
@@ -120,8 +122,12 @@ async def test_watch_topics_follows_publishers_coming_and_going(
             tg.start_soon(follow)
             async with rmb.connect(zenoh_router.locator, options=opts) as other:
                 await other.advertise("/a", STRING)
-                await until(lambda: bool(seen) and seen[-1] == ["/a"], "the new publisher")
-            await until(lambda: seen[-1] == [], "the publisher gone")
+                await wait_until(
+                    lambda: bool(seen) and seen[-1] == ["/a"],
+                    timeout=10.0,
+                    what="the new publisher",
+                )
+            await wait_until(lambda: seen[-1] == [], timeout=10.0, what="the publisher gone")
             tg.cancel_scope.cancel()
 
 
@@ -233,7 +239,11 @@ async def test_a_sample_of_another_definition_is_not_recorded_under_ours(
             raw.put(foreign, cdr(STRING, {"data": "theirs"}), attachment=attachment(1))
             key = data_key(zenoh_domain, "/chatter")
             raw.put(key, cdr(STRING, {"data": "ours"}), attachment=attachment(2))
-            await until(lambda: rec.stats.total + sum(rec.stats.skipped.values()) >= 2, "both")
+            await wait_until(
+                lambda: rec.stats.total + sum(rec.stats.skipped.values()) >= 2,
+                timeout=10.0,
+                what="both",
+            )
     assert rec.stats.messages == {"/chatter": 1}
     assert rec.stats.skipped == {"/chatter": 1}
     with path.open("rb") as f:
@@ -252,11 +262,15 @@ async def test_hostile_tokens_are_skipped_and_counted(
     tokens = [raw.liveliness().declare_token(k) for k in bad]
     try:
         async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-            await until(lambda: client.rejections.get("malformed_token", 0) >= 3, "counted", 10)
+            await wait_until(
+                lambda: client.rejections.get("malformed_token", 0) >= 3, timeout=10, what="counted"
+            )
             assert client.topics == []
             # and tokens arriving later, through the liveliness subscriber
             more = raw.liveliness().declare_token(f"@ros2_lv/{zenoh_domain}/ab/x/0/NN/%/%/n")
-            await until(lambda: client.rejections["malformed_token"] >= 4, "counted", 10)
+            await wait_until(
+                lambda: client.rejections["malformed_token"] >= 4, timeout=10, what="counted"
+            )
             more.undeclare()
     finally:
         for token in tokens:
@@ -339,7 +353,11 @@ async def test_a_server_that_never_answers_times_out(
     )
     try:
         async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-            await until(lambda: any(s.name == "/stuck" for s in client.services), "the service")
+            await wait_until(
+                lambda: any(s.name == "/stuck" for s in client.services),
+                timeout=10.0,
+                what="the service",
+            )
             with pytest.raises(rmb.ServiceError, match="no response"):
                 await client.call_service("/stuck", {}, timeout=0.5)
             assert len(held) == 1
@@ -370,7 +388,7 @@ async def test_zero_twist_is_the_last_message_on_exit_and_on_cancel(
                     if cancel:
                         scope.cancel()
                         await anyio.sleep(1)
-            await until(lambda: len(received) >= 11, "the zero Twist", 5)
+            await wait_until(lambda: len(received) >= 11, timeout=5, what="the zero Twist")
             last = decode(memoryview(received[-1]))
             assert last["linear"]["x"] == 0.0
             assert decode(memoryview(received[-2]))["linear"]["x"] == 0.5
@@ -446,18 +464,28 @@ async def test_a_router_restart_is_a_reconnect_and_the_subscription_resumes(
                         got.append(message.data["data"])
 
                 tg.start_soon(consume)
-                await until(lambda: any(t.name == "/chatter" for t in talker.topics), "sub seen")
+                await wait_until(
+                    lambda: any(t.name == "/chatter" for t in talker.topics),
+                    timeout=10.0,
+                    what="sub seen",
+                )
                 await talker.publish("/chatter", STRING, {"data": "before"})
-                await until(lambda: got == ["before"], "the first message")
+                await wait_until(lambda: got == ["before"], timeout=10.0, what="the first message")
 
                 router.stop()
-                await until(lambda: client.status == "reconnecting", "reconnecting")
+                await wait_until(
+                    lambda: client.status == "reconnecting", timeout=10.0, what="reconnecting"
+                )
                 router = ZenohRouter(port=router.port).start()
-                await until(lambda: client.status == "connected", "reconnected", 20)
+                await wait_until(
+                    lambda: client.status == "connected", timeout=20, what="reconnected"
+                )
                 # the talker's own zenoh session reconnects by itself; wait
                 # until it sees the restored subscription, then publish
-                await until(
-                    lambda: any(t.name == "/chatter" for t in talker.topics), "resubscribed", 20
+                await wait_until(
+                    lambda: any(t.name == "/chatter" for t in talker.topics),
+                    timeout=20,
+                    what="resubscribed",
                 )
 
                 async def publish_until_seen() -> None:

@@ -18,6 +18,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.zenoh_router import ZenohRouter
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
@@ -65,19 +66,14 @@ def options(domain: int, **kw: Any) -> rmb.ClientOptions:
     return rmb.ClientOptions(domain_id=domain, **kw)
 
 
-async def until(predicate: Callable[[], bool], what: str, timeout: float = 15.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.05)
-
-
 async def connected(client: rmb.Client, ros_share: Path) -> None:
     """The official Fibonacci.action registered (Zenoh carries no
     definitions), then wait for the server's services."""
     client.register_type(FIB, (ros_share / f"{FIB}.action").read_text(), encoding="ros2action")
-    await until(
+    await wait_until(
         lambda: any(s.name == "/fibonacci/_action/cancel_goal" for s in client.services),
-        "the action server's services",
+        timeout=15.0,
+        what="the action server's services",
     )
 
 
@@ -242,6 +238,8 @@ async def test_unanswered_result_queries_are_asked_again_then_the_goal_fails(
     def asked() -> list[str]:
         return [m["get_result"] for m in server.messages() if "get_result" in m]
 
-    await until(lambda: len(asked()) >= 4, "the server's lines")  # its stdout may lag
+    await wait_until(
+        lambda: len(asked()) >= 4, timeout=15.0, what="the server's lines"
+    )  # its stdout may lag
     assert len(asked()) == 4
     assert len(set(asked())) == 1

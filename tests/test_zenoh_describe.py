@@ -22,6 +22,7 @@ import pytest
 from mcap.reader import make_reader
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import DESCRIPTION_CACHE, CodecRegistry, description_hash
 
@@ -59,12 +60,6 @@ def options(domain: int, **kw: Any) -> rmb.ClientOptions:
     return rmb.ClientOptions(domain_id=domain, **kw)
 
 
-async def until(predicate: Callable[[], bool], what: str, timeout: float = 15.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.05)
-
-
 def talker(sdk: Callable[..., SdkNode], type_name: str, values: Any, *flags: str) -> SdkNode:
     return sdk(
         "talker",
@@ -81,7 +76,9 @@ def talker(sdk: Callable[..., SdkNode], type_name: str, values: Any, *flags: str
 
 
 async def first_messages(client: rmb.Client, count: int) -> list[rmb.Message]:
-    await until(lambda: any(t.name == "/described" for t in client.topics), "the talker")
+    await wait_until(
+        lambda: any(t.name == "/described" for t in client.topics), timeout=15.0, what="the talker"
+    )
     got: list[rmb.Message] = []
     async with client.subscribe("/described") as sub:
         with anyio.fail_after(20):
@@ -134,7 +131,11 @@ async def test_a_service_of_an_unknown_type_is_called_and_answered(
 ) -> None:
     node = sdk("service", "--type", BASIC_SRV, "--name", "/echo_basic", "--describe")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await until(lambda: any(s.name == "/echo_basic" for s in client.services), "the service")
+        await wait_until(
+            lambda: any(s.name == "/echo_basic" for s in client.services),
+            timeout=15.0,
+            what="the service",
+        )
         for value in (7, -8):
             answer = await client.call_service(
                 "/echo_basic", {"int32_value": value, "string_value": f"v{value}"}, timeout=10
@@ -165,7 +166,11 @@ async def test_a_silent_node_gives_a_schema_error_within_the_timeout(
     sdk("service", "--type", BASIC_SRV, "--name", "/silent_basic", "--describe-silent")
     opts = options(zenoh_domain, type_description_timeout=1.0)
     async with rmb.connect(zenoh_router.locator, options=opts) as client:
-        await until(lambda: any(s.name == "/silent_basic" for s in client.services), "the service")
+        await wait_until(
+            lambda: any(s.name == "/silent_basic" for s in client.services),
+            timeout=15.0,
+            what="the service",
+        )
         with anyio.fail_after(5), pytest.raises(rmb.SchemaError) as caught:
             await client.call_service("/silent_basic", {"int32_value": 1}, timeout=10)
         text = str(caught.value)
@@ -200,7 +205,11 @@ async def test_fetch_definition_schema_definition_and_recorder_text(
 ) -> None:
     talker(sdk, NESTED, NESTED_VALUES, "--describe")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await until(lambda: any(t.name == "/described" for t in client.topics), "the talker")
+        await wait_until(
+            lambda: any(t.name == "/described" for t in client.topics),
+            timeout=15.0,
+            what="the talker",
+        )
         with pytest.raises(rmb.SchemaError):
             client.schema_definition(NESTED)
         assert await client.fetch_definition(NESTED) is True
@@ -270,7 +279,7 @@ async def test_our_node_describes_the_types_it_publishes_to_an_sdk_client(
                 "client", "--name", service, "--type", DESCRIBE, "--requests", json.dumps(requests)
             )
         )
-        await until(lambda: caller.done, "the sdk's calls")
+        await wait_until(lambda: caller.done, timeout=15.0, what="the sdk's calls")
         answers = [record["response"] for record in caller.records()]
         await client.publish_zero_twist()
     assert len(answers) == 3

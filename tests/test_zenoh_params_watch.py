@@ -11,7 +11,7 @@ of the others, and nothing after it stops watching; garbage on
 from __future__ import annotations
 
 import time
-from collections.abc import AsyncIterator, Callable, Iterator
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +19,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
@@ -61,19 +62,15 @@ def cdr(type_name: str, value: dict[str, Any]) -> bytes:
     return bytes(CodecRegistry().encoder(type_name, "cdr")(value))
 
 
-async def until(predicate: Callable[[], bool], timeout: float = 15.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.05)
-
-
 async def next_update(updates: AsyncIterator[dict[str, Any]]) -> dict[str, Any]:
     with anyio.fail_after(10):
         return await updates.__anext__()
 
 
 async def services_seen(client: rmb.Client) -> None:
-    await until(lambda: sum(s.name.startswith("/sdk_params/") for s in client.services) == 3)
+    await wait_until(
+        lambda: sum(s.name.startswith("/sdk_params/") for s in client.services) == 3, timeout=15.0
+    )
 
 
 def subscribed(client: rmb.Client) -> bool:
@@ -201,12 +198,12 @@ async def test_the_watch_is_restored_after_a_router_restart(
                 await services_seen(setter)
                 await anyio.sleep(0.3)
                 await setter.set_parameters({SPEED: 1.0})
-                await until(lambda: seen == [{SPEED: 1.0}])
+                await wait_until(lambda: seen == [{SPEED: 1.0}], timeout=15.0)
             first = watcher._conn.adapter
             router.stop()
-            await until(lambda: watcher.status == "reconnecting")
+            await wait_until(lambda: watcher.status == "reconnecting", timeout=15.0)
             router = ZenohRouter(port=router.port).start()
-            await until(lambda: watcher.status == "connected", 20)
+            await wait_until(lambda: watcher.status == "connected", timeout=20)
             assert watcher._conn.adapter is not first  # a new session ...
             assert subscribed(watcher)  # ... with the watch restored
             async with rmb.connect(router.locator, options=options(zenoh_domain)) as setter:

@@ -13,6 +13,7 @@ from typing import Any
 import anyio
 import pytest
 
+from _util import wait_until
 from ros_mobile_bridge.transport._zenoh import DEFAULT_MAX_OPEN_QUERIES, ZenohSession
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 
@@ -65,12 +66,6 @@ class Caller:
             return len(self.done)
 
 
-async def until(predicate: Any, timeout: float = 10.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.02)
-
-
 async def requests(session: ZenohSession, count: int) -> list[rz.Request]:
     got: list[rz.Request] = []
     with anyio.fail_after(10):
@@ -99,7 +94,7 @@ async def test_each_query_is_a_request_answered_once_in_order(zenoh_router: Any,
         assert session.reply(got[2].query_id, KEY, b"a2", attachment)
         assert not session.reply(got[0].query_id, KEY, b"again", attachment)  # once only
         assert not session.reply_error(got[1].query_id, "again")
-        await until(lambda: caller.count() == 3)
+        await wait_until(lambda: caller.count() == 3, timeout=10.0)
         assert caller.done == {
             0: [("ok", b"a0", attachment)],
             1: [("err", b"refused: no", None)],
@@ -119,7 +114,9 @@ async def test_queries_past_the_bound_are_refused_and_counted(zenoh_router: Any,
         caller = Caller(raw)
         for n in range(5):
             caller.get(n, b"x")
-        await until(lambda: caller.count() == 3)  # the three over the bound, at once
+        await wait_until(
+            lambda: caller.count() == 3, timeout=10.0
+        )  # the three over the bound, at once
         got = await requests(session, 2)
         assert session.refused_queries == 3
         assert session.open_queries == 2
@@ -129,12 +126,12 @@ async def test_queries_past_the_bound_are_refused_and_counted(zenoh_router: Any,
         )
         for request in got:
             assert session.reply(request.query_id, KEY, b"ok", b"att")
-        await until(lambda: caller.count() == 5)
+        await wait_until(lambda: caller.count() == 5, timeout=10.0)
         caller.get(9, b"y")  # room again
         (late,) = await requests(session, 1)
         assert session.refused_queries == 3
         assert session.reply(late.query_id, KEY, b"ok9", b"att")
-        await until(lambda: 9 in caller.done)
+        await wait_until(lambda: 9 in caller.done, timeout=10.0)
         assert caller.done[9] == [("ok", b"ok9", b"att")]
     finally:
         await session.aclose()
@@ -156,7 +153,7 @@ async def test_undeclare_and_close_answer_the_open_queries(zenoh_router: Any, ra
         caller.get(1, b"b")
         got = await requests(session, 2)
         session.undeclare(handle)
-        await until(lambda: caller.count() == 2)
+        await wait_until(lambda: caller.count() == 2, timeout=10.0)
         assert caller.done == {
             0: [("err", b"the service is no longer served", None)],
             1: [("err", b"the service is no longer served", None)],
@@ -170,7 +167,7 @@ async def test_undeclare_and_close_answer_the_open_queries(zenoh_router: Any, ra
         assert open_.tag == 2
     finally:
         await session.aclose()
-    await until(lambda: caller.count() == 3)
+    await wait_until(lambda: caller.count() == 3, timeout=10.0)
     assert caller.done[2] == [("err", b"the server closed its session", None)]
 
 

@@ -30,6 +30,8 @@ pytest.importorskip("mcap_ros2")
 from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
+from _util import wait_until  # noqa: E402
+
 STRING = "std_msgs/msg/String"
 IMU_QOS = "1:1:1,5:,:,:,,"  # rmw_zenoh's token form
 COUNT = 40  # messages per talker
@@ -84,12 +86,6 @@ def official(ros_share: Path, type_name: str) -> list[str]:
     return fields_of((ros_share / pkg / "msg" / f"{name}.msg").read_text())
 
 
-async def until(predicate: Callable[[], bool], what: str, timeout: float = 20.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.05)
-
-
 async def test_sdk_talkers_are_recorded_and_read_back_with_mcap_ros2(
     sdk: Callable[..., SdkNode],
     zenoh_router: ZenohRouter,
@@ -109,8 +105,10 @@ async def test_sdk_talkers_are_recorded_and_read_back_with_mcap_ros2(
                 if topic == "/imu":  # reliable, transient local, keep last 5
                     args += ["--qos", IMU_QOS]
                 await anyio.to_thread.run_sync(lambda a=args: sdk("talker", "--rate", "50", *a))
-            await until(
-                lambda: all(rec.stats.messages.get(t, 0) >= COUNT for t in topics), "every message"
+            await wait_until(
+                lambda: all(rec.stats.messages.get(t, 0) >= COUNT for t in topics),
+                timeout=20.0,
+                what="every message",
             )
         stats = rec.stats
         assert client.rejections == {}

@@ -17,6 +17,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 
@@ -36,12 +37,6 @@ def options(domain: int, **kw: Any) -> rmb.ClientOptions:
     return rmb.ClientOptions(domain_id=domain, **kw)
 
 
-async def until(predicate: Callable[[], bool], what: str, timeout: float = 15.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.05)
-
-
 def test_the_sdk_hashes_are_the_official_ones_and_ours(
     sdk: Callable[..., SdkNode],
 ) -> None:
@@ -56,7 +51,11 @@ async def test_sdk_talker_reaches_our_subscription(
 ) -> None:
     sdk("talker", "--rate", "100")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await until(lambda: any(t.name == "/chatter" for t in client.topics), "the talker's topic")
+        await wait_until(
+            lambda: any(t.name == "/chatter" for t in client.topics),
+            timeout=15.0,
+            what="the talker's topic",
+        )
         assert [(t.name, t.schema_name) for t in client.topics] == [("/chatter", STRING)]
         async with client.subscribe("/chatter") as sub:
             got: list[int] = []
@@ -81,7 +80,9 @@ async def test_our_publisher_reaches_the_sdk_listener(
         await anyio.sleep(0.5)  # the listener's subscriber sees our publisher
         for i in range(50):
             await client.publish("/chatter", STRING, {"data": f"from rmb {i}"})
-        await until(lambda: len(listener.messages()) >= 50, "50 messages at the listener")
+        await wait_until(
+            lambda: len(listener.messages()) >= 50, timeout=15.0, what="50 messages at the listener"
+        )
     assert [m["data"] for m in listener.messages()] == [f"from rmb {i}" for i in range(50)]
 
 
@@ -90,7 +91,11 @@ async def test_we_call_the_sdk_service(
 ) -> None:
     sdk("service", "--name", "/sdk_set_bool")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await until(lambda: any(s.name == "/sdk_set_bool" for s in client.services), "the service")
+        await wait_until(
+            lambda: any(s.name == "/sdk_set_bool" for s in client.services),
+            timeout=15.0,
+            what="the service",
+        )
         assert {s.name: s.type for s in client.services}["/sdk_set_bool"] == "std_srvs/srv/SetBool"
         for value in (True, False, True):
             answer = await client.call_service("/sdk_set_bool", {"data": value}, timeout=5)
@@ -102,9 +107,10 @@ async def test_parameters_through_the_nodes_parameter_services(
 ) -> None:
     sdk("params")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await until(
+        await wait_until(
             lambda: sum(s.name.startswith("/sdk_params/") for s in client.services) == 3,
-            "the parameter services",
+            timeout=15.0,
+            what="the parameter services",
         )
         assert await client.list_parameters() == {
             "/sdk_params:enabled": True,
@@ -134,12 +140,14 @@ async def test_a_zero_twist_reaches_the_sdk_listener_last(
                 await client.publish(
                     "/cmd_vel", TWIST, {"linear": {"x": 0.4}, "angular": {"z": 0.2}}
                 )
-            await until(lambda: len(listener.messages()) >= 10, "the commands")
+            await wait_until(
+                lambda: len(listener.messages()) >= 10, timeout=15.0, what="the commands"
+            )
             if cancel:
                 scope.cancel()
                 await anyio.sleep(5)
     assert scope.cancelled_caught == cancel
-    await until(lambda: len(listener.messages()) >= 11, "the zero Twist")
+    await wait_until(lambda: len(listener.messages()) >= 11, timeout=15.0, what="the zero Twist")
     await anyio.sleep(0.3)  # nothing may follow it
     got = listener.messages()
     assert [m["linear"]["x"] for m in got] == [0.4] * 10 + [0.0]
@@ -152,7 +160,11 @@ async def test_a_talker_on_another_domain_stays_invisible(
     sdk("talker", "--rate", "100", "--topic", "/chatter", domain=zenoh_domain + 1)
     sdk("talker", "--rate", "100", "--topic", "/near")
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
-        await until(lambda: any(t.name == "/near" for t in client.topics), "the near talker")
+        await wait_until(
+            lambda: any(t.name == "/near" for t in client.topics),
+            timeout=15.0,
+            what="the near talker",
+        )
         await anyio.sleep(0.5)
         assert [t.name for t in client.topics] == ["/near"]
         async with client.subscribe("/chatter", schema=STRING) as sub:

@@ -22,6 +22,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
@@ -37,12 +38,6 @@ TRIGGER = "std_srvs/srv/Trigger"
 
 def options(domain: int, **kw: Any) -> rmb.ClientOptions:
     return rmb.ClientOptions(domain_id=domain, **kw)
-
-
-async def until(predicate: Callable[[], bool], what: str, timeout: float = 30.0) -> None:
-    with anyio.fail_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.05)
 
 
 def client_of(sdk: Callable[..., SdkNode], name: str, type_: str, requests: list[Any]) -> SdkNode:
@@ -68,7 +63,7 @@ async def test_an_sdk_client_calls_our_set_bool_and_gets_each_answer_in_order(
         calls = [{"data": True}, {"data": False}, {"data": True}]
         caller = await anyio.to_thread.run_sync(client_of, sdk, "/rmb_set_bool", SET_BOOL, calls)
         assert caller.hashes[SET_BOOL] == type_hash(CodecRegistry(), SET_BOOL)
-        await until(lambda: caller.done, "the sdk's calls")
+        await wait_until(lambda: caller.done, timeout=30.0, what="the sdk's calls")
         assert caller.records() == [
             {"response": {"success": True, "message": "#1 {'data': True}"}},
             {"response": {"success": False, "message": "#2 {'data': False}"}},
@@ -122,7 +117,7 @@ async def test_a_registered_service_type_is_served_to_the_sdk(
                 caller = await anyio.to_thread.run_sync(
                     client_of, sdk_with_add_two_ints, "/add_two_ints", ADD_TWO_INTS, calls
                 )
-                await until(lambda: caller.done, "the sdk's calls")
+                await wait_until(lambda: caller.done, timeout=30.0, what="the sdk's calls")
                 assert caller.records() == [
                     {"response": {"sum": 3}},
                     {"response": {"sum": 2**40 - 5}},
@@ -162,7 +157,7 @@ async def test_a_refused_call_reaches_the_sdk_client_as_an_error_reply(
         caller = await anyio.to_thread.run_sync(
             client_of, sdk, "/rmb_refusing", SET_BOOL, [{"data": True}] * 3
         )
-        await until(lambda: caller.done, "the sdk's calls")
+        await wait_until(lambda: caller.done, timeout=30.0, what="the sdk's calls")
         assert caller.records() == [
             {"response": {"success": True, "message": "ok 1"}},
             {"error": "not now"},
@@ -177,14 +172,24 @@ async def test_the_sdk_sees_our_server_until_it_stops_serving(
 ) -> None:
     watcher = await anyio.to_thread.run_sync(lambda: sdk("discover", "--name", "/rmb_seen"))
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        # its first look, before there is anything to see (else it may first see one server)
+        await wait_until(lambda: watcher.records(), timeout=30.0, what="the watcher's first look")
         async with client.serve("/rmb_seen", SET_BOOL):
-            await until(
-                lambda: {"servers": 1, "types": [SET_BOOL]} in watcher.records(), "discovered"
+            await wait_until(
+                lambda: {"servers": 1, "types": [SET_BOOL]} in watcher.records(),
+                timeout=30.0,
+                what="discovered",
             )
             assert client.server_info.capabilities.count("serving") == 1
-        await until(lambda: watcher.records()[-1] == {"servers": 0, "types": []}, "gone")
+        await wait_until(
+            lambda: watcher.records()[-1] == {"servers": 0, "types": []}, timeout=30.0, what="gone"
+        )
         assert [r["servers"] for r in watcher.records()] == [0, 1, 0]
-        await until(lambda: all(s.name != "/rmb_seen" for s in client.services), "our graph")
+        await wait_until(
+            lambda: all(s.name != "/rmb_seen" for s in client.services),
+            timeout=30.0,
+            what="our graph",
+        )
 
 
 async def test_two_sdk_clients_at_once_are_each_answered(
@@ -208,7 +213,7 @@ async def test_two_sdk_clients_at_once_are_each_answered(
         async with anyio.create_task_group() as starting:
             starting.start_soon(start, calls_a)
             starting.start_soon(start, calls_b)
-        await until(lambda: all(c.done for c in callers), "both clients")
+        await wait_until(lambda: all(c.done for c in callers), timeout=30.0, what="both clients")
         for caller in callers:
             answers = [r["response"] for r in caller.records()]
             assert len(answers) == 5
@@ -269,7 +274,7 @@ async def test_a_request_that_does_not_decode_is_answered_with_an_error_and_coun
         caller = await anyio.to_thread.run_sync(
             client_of, sdk, "/rmb_set_bool", SET_BOOL, [{"data": False}]
         )
-        await until(lambda: caller.done, "the sdk's call")
+        await wait_until(lambda: caller.done, timeout=30.0, what="the sdk's call")
         assert caller.records() == [
             {"response": {"success": False, "message": "#2 {'data': False}"}}
         ]
@@ -288,7 +293,11 @@ async def test_our_client_calls_another_clients_served_service(
         anyio.create_task_group() as tg,
     ):
         tg.start_soon(answer_set_bool, requests, seen)
-        await until(lambda: any(s.name == "/rmb_set_bool" for s in caller.services), "seen")
+        await wait_until(
+            lambda: any(s.name == "/rmb_set_bool" for s in caller.services),
+            timeout=30.0,
+            what="seen",
+        )
         assert [s.type for s in caller.services if s.name == "/rmb_set_bool"] == [SET_BOOL]
         answers = [
             await caller.call_service("/rmb_set_bool", {"data": d}) for d in (True, False, True)
@@ -309,7 +318,9 @@ async def test_our_client_calls_another_clients_served_service(
         anyio.create_task_group() as tg,
     ):
         tg.start_soon(refuse, requests)
-        await until(lambda: any(s.name == "/rmb_refuse" for s in caller.services), "seen")
+        await wait_until(
+            lambda: any(s.name == "/rmb_refuse" for s in caller.services), timeout=30.0, what="seen"
+        )
         with pytest.raises(rmb.ServiceError, match="refused by the test"):
             await caller.call_service("/rmb_refuse", {})
         tg.cancel_scope.cancel()
@@ -339,15 +350,25 @@ async def test_a_served_service_is_served_again_after_a_router_restart(
         ):
             tg.start_soon(answer_set_bool, requests, seen)
             async with rmb.connect(router.locator, options=options(zenoh_domain)) as caller:
-                await until(lambda: any(s.name == "/rmb_set_bool" for s in caller.services), "1")
+                await wait_until(
+                    lambda: any(s.name == "/rmb_set_bool" for s in caller.services),
+                    timeout=30.0,
+                    what="1",
+                )
                 first = await caller.call_service("/rmb_set_bool", {"data": True})
                 assert first["message"].startswith("#1")
             router.stop()
-            await until(lambda: server.status == "reconnecting", "reconnecting")
+            await wait_until(
+                lambda: server.status == "reconnecting", timeout=30.0, what="reconnecting"
+            )
             router = ZenohRouter(port=router.port).start()
-            await until(lambda: server.status == "connected", "reconnected")
+            await wait_until(lambda: server.status == "connected", timeout=30.0, what="reconnected")
             async with rmb.connect(router.locator, options=options(zenoh_domain)) as caller:
-                await until(lambda: any(s.name == "/rmb_set_bool" for s in caller.services), "2")
+                await wait_until(
+                    lambda: any(s.name == "/rmb_set_bool" for s in caller.services),
+                    timeout=30.0,
+                    what="2",
+                )
                 again = await caller.call_service("/rmb_set_bool", {"data": False})
                 assert again == {"success": False, "message": "#2 {'data': False}"}
             assert requests.stats.received == 2
@@ -390,12 +411,18 @@ async def test_calls_past_the_open_call_bound_are_refused_and_counted(
         async with client.serve("/rmb_busy", SET_BOOL, buffer=1000, timeout=60) as requests:
             for n in range(total):  # nobody reads the requests: they all wait
                 call(n)
-            await until(lambda: requests.stats.received == DEFAULT_MAX_OPEN_QUERIES, "queued")
-            await until(lambda: len(answers) == 4, "the refused calls")
+            await wait_until(
+                lambda: requests.stats.received == DEFAULT_MAX_OPEN_QUERIES,
+                timeout=30.0,
+                what="queued",
+            )
+            await wait_until(lambda: len(answers) == 4, timeout=30.0, what="the refused calls")
             refused = b"256 calls already wait for an answer"
             assert all(replies == [refused] for replies in answers.values())
-            await until(lambda: client.rejections.get("service_limit") == 4, "counted")
-        await until(lambda: len(answers) == total, "every call answered")
+            await wait_until(
+                lambda: client.rejections.get("service_limit") == 4, timeout=30.0, what="counted"
+            )
+        await wait_until(lambda: len(answers) == total, timeout=30.0, what="every call answered")
     stopped = [r for r in answers.values() if r == [b"the service stopped serving"]]
     assert len(stopped) == DEFAULT_MAX_OPEN_QUERIES
     assert requests.stats.received == DEFAULT_MAX_OPEN_QUERIES

@@ -55,10 +55,12 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._types import DEFAULT_PORTS as DEFAULT_PORTS
     from ._types import ActionOutcome as ActionOutcome
     from ._types import Compression as Compression
+    from ._types import ConnectionStats as ConnectionStats
     from ._types import Dispatch as Dispatch
     from ._types import GoalState as GoalState
     from ._types import Message as Message
     from ._types import Priority as Priority
+    from ._types import SaveBandwidth as SaveBandwidth
     from ._types import ServerInfo as ServerInfo
     from ._types import ServiceInfo as ServiceInfo
     from ._types import Status as Status
@@ -102,10 +104,12 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "DEFAULT_PORTS": ("._types", "DEFAULT_PORTS"),
     "ActionOutcome": ("._types", "ActionOutcome"),
     "Compression": ("._types", "Compression"),
+    "ConnectionStats": ("._types", "ConnectionStats"),
     "Dispatch": ("._types", "Dispatch"),
     "GoalState": ("._types", "GoalState"),
     "Message": ("._types", "Message"),
     "Priority": ("._types", "Priority"),
+    "SaveBandwidth": ("._types", "SaveBandwidth"),
     "ServerInfo": ("._types", "ServerInfo"),
     "ServiceInfo": ("._types", "ServiceInfo"),
     "Status": ("._types", "Status"),
@@ -175,6 +179,7 @@ __all__ = [
     "ClientOptions",
     "Compression",
     "ConnectError",
+    "ConnectionStats",
     "DecodeError",
     "Dispatch",
     "Endpoint",
@@ -193,6 +198,7 @@ __all__ = [
     "Recording",
     "RosBridgeError",
     "RosbridgeAuth",
+    "SaveBandwidth",
     "SchemaError",
     "ServeStats",
     "ServerInfo",

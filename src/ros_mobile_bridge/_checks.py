@@ -7,10 +7,12 @@ import difflib
 import math
 import os
 from collections.abc import Iterable
+from typing import Literal
 
 __all__ = [
     "check_interface_paths",
     "check_name",
+    "check_save_bandwidth",
     "check_schema",
     "check_timeout",
     "nearest",
@@ -26,6 +28,31 @@ def check_name(kind: str, name: object) -> str:
     if not name.startswith("/") or any(c.isspace() for c in name) or len(name) < 2:
         raise ValueError(f"{kind} must be an absolute ROS name like '/cmd_vel', got {name!r}")
     return name
+
+
+def check_save_bandwidth(
+    mode: object, max_hz: object, adaptive: bool
+) -> bool | Literal["adaptive"]:
+    """``save_bandwidth`` of a subscription: ``False``, ``True`` (needs a
+    ``max_hz``) or ``"adaptive"`` (needs a ``max_hz`` or ``adaptive=True``);
+    else ``TypeError`` / ``ValueError``: the mode pauses the stream between
+    deliveries, so it needs a rate to resume at."""
+    if mode is False:
+        return False
+    if mode is True:
+        if max_hz is None:
+            raise ValueError("save_bandwidth=True needs max_hz: the rate to resume the stream at")
+        return True
+    if mode == "adaptive" and isinstance(mode, str):
+        if max_hz is None and not adaptive:
+            raise ValueError(
+                "save_bandwidth='adaptive' needs max_hz or adaptive=True: "
+                "the rate to resume the stream at"
+            )
+        return "adaptive"
+    if isinstance(mode, str):
+        raise ValueError(f"save_bandwidth must be True, False or 'adaptive', got {mode!r}")
+    raise TypeError(f"save_bandwidth must be a bool or 'adaptive', not {type(mode).__name__}")
 
 
 def check_schema(schema: object) -> str:

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import anyio
 
 from ._action import ActionGoal
-from ._checks import check_name, check_schema, check_timeout, nearest_hint
+from ._checks import check_name, check_save_bandwidth, check_schema, check_timeout, nearest_hint
 from ._connection import Connection, RouteContext, is_velocity_type, zero_twist
 from ._errors import (
     ConnectError,
@@ -31,7 +31,17 @@ from ._options import ClientOptions
 from ._published_types import PublishTypes
 from ._router import Route
 from ._serve import DEFAULT_SERVE_BUFFER, DEFAULT_SERVE_TIMEOUT, ServiceRequests
-from ._types import Compression, Dispatch, Priority, ServerInfo, ServiceInfo, Status, TopicInfo
+from ._types import (
+    Compression,
+    ConnectionStats,
+    Dispatch,
+    Priority,
+    SaveBandwidth,
+    ServerInfo,
+    ServiceInfo,
+    Status,
+    TopicInfo,
+)
 from .codec import FieldDef, same_type_name
 from .flow import Subscription, Watcher
 
@@ -102,6 +112,14 @@ class Client:
         ``"schema_too_large"``, ``"channel_limit"``, ``"service_limit"``,
         ``"fragment_limit"``; see the limits in :class:`ClientOptions`."""
         return self._router.rejections
+
+    def stats(self) -> ConnectionStats:
+        """What this client has read from the network, over its life and
+        across reconnects: bytes (WebSocket framing included; over Zenoh the
+        samples' payload bytes) and messages. Per subscription, see
+        ``sub.stats.bytes_received``."""
+        received, messages = self._conn.traffic()
+        return ConnectionStats(bytes_received=received, messages_received=messages)
 
     # -- discovery ----------------------------------------------------------
     @property
@@ -208,6 +226,7 @@ class Client:
         buffer: int | None = None,
         compression: Compression | None = None,
         decode: bool = True,
+        save_bandwidth: SaveBandwidth = False,
     ) -> _SubscriptionContext:
         """Subscribe to ``topic``; an async context manager yielding a
         :class:`~ros_mobile_bridge.Subscription` (``async for msg in sub``).
@@ -236,8 +255,28 @@ class Client:
         frame (``rmb hz``) passes ``adaptive=False`` and no ``max_hz``, and
         reads ``stats.received`` (every frame routed to the subscription,
         counted before any filter) rather than the messages delivered, so
-        frames the buffer drops under load are still counted. Arguments are
-        checked here, at once."""
+        frames the buffer drops under load are still counted.
+
+        ``save_bandwidth`` (Foxglove; needs ``max_hz``): the Foxglove
+        protocol has no rate option, so by default the server sends every
+        message and ``max_hz`` saves CPU, not bytes. With
+        ``save_bandwidth=True`` the client unsubscribes from the channel
+        after each message it takes and subscribes again when the next one
+        is due on the ``max_hz`` schedule, so the server sends about one
+        message per interval (``"adaptive"``: the adaptive throttle's
+        interval too, when it is longer; then ``max_hz`` may be None). The
+        price: a message published while the stream is paused is never
+        seen, so when a topic stops, its last message can be missed (the
+        default mode always delivers it), and a delivery waits for the first
+        message published after the resubscription (which is made as much
+        ahead of time as that wait took lately). A message the
+        server replays to the new subscription (a transient-local topic)
+        that is byte for byte the one delivered last is skipped and
+        counted in ``stats.dropped_replay``. rosbridge accepts the mode
+        and changes nothing (``max_hz`` already reaches it as
+        ``throttle_rate``); Zenoh accepts it and changes nothing (the cap
+        saves CPU only). Several subscriptions to one topic pause only when
+        every one asks for it. Arguments are checked here, at once."""
         check_name("topic", topic)
         if schema is not None:
             check_schema(schema)
@@ -247,6 +286,7 @@ class Client:
             raise TypeError("adaptive must be a bool")
         if not isinstance(decode, bool):
             raise TypeError("decode must be a bool")
+        mode = check_save_bandwidth(save_bandwidth, max_hz, adaptive)
         route = self._router.route(
             topic,
             max_hz=max_hz,
@@ -256,6 +296,7 @@ class Client:
             buffer=buffer,
             compression=compression,
             decode=decode,
+            save_bandwidth=mode,
         )
         return _SubscriptionContext(self._conn, route)
 

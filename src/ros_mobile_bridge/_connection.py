@@ -78,6 +78,7 @@ class Connection:
         self.velocity: dict[str, str] = {}
         """Velocity topic -> the type this client published there."""
         self._task_scopes: dict[str, anyio.CancelScope] = {}
+        self._traffic_before = (0, 0)  # bytes and messages of the connections lost
         self._closing = False
 
     @property
@@ -209,8 +210,20 @@ class Connection:
         self._give_up(self.last_error if isinstance(self.last_error, ConnectError) else error)
         return False
 
+    def traffic(self) -> tuple[int, int]:
+        """Bytes and messages received over the client's life, every
+        connection it made included."""
+        before_bytes, before_messages = self._traffic_before
+        adapter = self.adapter
+        return (
+            before_bytes + adapter.bytes_received,
+            before_messages + adapter.messages_received,
+        )
+
     async def restore(self, old: Adapter, adapter: Adapter) -> None:
         """Bring a fresh connection to the state the lost one had."""
+        if old is self.adapter:  # a failed restore was counted already
+            self._traffic_before = self.traffic()
         self.adapter = adapter
         self.router.adapter = adapter
         for topic, schema in old.publishing().items():

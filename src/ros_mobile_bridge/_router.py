@@ -23,13 +23,14 @@ from ._errors import ConnectError
 from ._limits import truncate_for_log
 from ._options import ClientOptions
 from ._outbound import Outbound
-from ._types import Compression, Dispatch, ServiceInfo, Status, TopicInfo
+from ._types import Compression, Dispatch, SaveBandwidth, ServiceInfo, Status, TopicInfo
 from .adapters import (
     Adapter,
     Event,
     GraphChanged,
     ParameterValues,
     Rejected,
+    Replayed,
     SubscribeHints,
     TopicState,
 )
@@ -61,6 +62,7 @@ class Route:
     queue: FrameQueue
     throttle: AdaptiveThrottle | None
     hints: SubscribeHints
+    save_bandwidth: SaveBandwidth = False
 
 
 class Router:
@@ -96,7 +98,8 @@ class Router:
         self._inbound = 0
         self._breaker_changed = anyio.Event()  # set by the tick when a breaker changed
         self._breaker_topics: set[str] = set()  # topics to subscribe again at the bridge
-        self._forwarded_hz: dict[str, float | None] = {}  # the rate each topic's bridge sub asks
+        # the rates each topic's bridge subscription asks: (max_hz, pause_hz)
+        self._forwarded_hz: dict[str, tuple[float | None, float | None]] = {}
 
     @property
     def _connected(self) -> bool:
@@ -148,6 +151,9 @@ class Router:
             self.parameters.set(merged)
         elif type(event) is Rejected:
             self._rejected(event)
+        elif type(event) is Replayed:
+            for route in self._routes.get(event.topic, ()):
+                route.queue.replayed(event.size)
 
     def set_topic_state(self, topic: str, active: bool) -> None:
         """The server now carries ``topic`` to us, or not."""
@@ -188,6 +194,7 @@ class Router:
         buffer: int | None,
         compression: Compression | None,
         decode: bool = True,
+        save_bandwidth: SaveBandwidth = False,
     ) -> Route:
         """Build one subscription's pipeline (throttle, queue, breaker); not
         routed until :meth:`add`. The queue checks its own arguments."""
@@ -210,7 +217,7 @@ class Router:
             topic, queue, logger=self._log, throttle=throttle, breaker=breaker, decode=decode
         )
         hints = SubscribeHints(max_hz=max_hz, schema=schema, compression=compression)
-        return Route(sub, queue, throttle, hints)
+        return Route(sub, queue, throttle, hints, save_bandwidth)
 
     def _rate_for(self, route: Route) -> float | None:
         """The rate the bridge need not exceed for ``route`` (None: all): its
@@ -224,19 +231,33 @@ class Router:
             hz = adaptive if hz is None else min(hz, adaptive)
         return hz
 
+    def _pause_for(self, route: Route) -> float | None:
+        """The rate at which the bridge may resume sending after each message
+        for ``route`` (None: it must send every message): ``save_bandwidth``
+        follows the ``max_hz`` cap, ``"adaptive"`` also the adaptive
+        throttle's interval where it is tighter."""
+        mode = route.save_bandwidth
+        if mode is False:
+            return None
+        return self._rate_for(route) if mode == "adaptive" else route.hints.max_hz
+
     def _merged_hints(self, topic: str) -> SubscribeHints:
         routes = [r for r in self._routes.get(topic, ()) if not r.queue.blocked]
         caps = [self._rate_for(r) for r in routes]
         loosest = None if not caps or None in caps else max(c for c in caps if c is not None)
+        pauses = [self._pause_for(r) for r in routes]
+        pause = None if not pauses or None in pauses else max(p for p in pauses if p is not None)
         schema = next((r.hints.schema for r in routes if r.hints.schema), None)
         compression = next((r.hints.compression for r in routes if r.hints.compression), None)
-        return SubscribeHints(max_hz=loosest, schema=schema, compression=compression)
+        return SubscribeHints(
+            max_hz=loosest, schema=schema, compression=compression, pause_hz=pause
+        )
 
     async def _subscribe_at_bridge(self, topic: str) -> None:
         """Subscribe (again) at the bridge with the merged hints of the local
         subscriptions, and remember the rate forwarded."""
         hints = self._merged_hints(topic)
-        self._forwarded_hz[topic] = hints.max_hz
+        self._forwarded_hz[topic] = (hints.max_hz, hints.pause_hz)
         await self.adapter.subscribe(topic, hints)
 
     def _link(self, route: Route) -> None:
@@ -443,11 +464,9 @@ class Router:
                     self._breaker_topics.add(topic)
                     self._breaker_changed.set()
                     self._log.warning("subscription to %s: breaker %s", topic, breaker.state)
-            if (
-                topic not in self._breaker_topics
-                and topic in self._forwarded_hz
-                and self._merged_hints(topic).max_hz != self._forwarded_hz[topic]
-            ):
-                # an adaptive throttle moved: the bridge may send less (or more)
-                self._breaker_topics.add(topic)
-                self._breaker_changed.set()
+            if topic not in self._breaker_topics and topic in self._forwarded_hz:
+                hints = self._merged_hints(topic)
+                if (hints.max_hz, hints.pause_hz) != self._forwarded_hz[topic]:
+                    # an adaptive throttle moved: the bridge may send less (or more)
+                    self._breaker_topics.add(topic)
+                    self._breaker_changed.set()

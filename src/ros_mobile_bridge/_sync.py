@@ -36,10 +36,12 @@ from ._sync_worker import JOIN_S, Children, Held, Parent, SyncBackend, Worker
 from ._types import (
     ActionOutcome,
     Compression,
+    ConnectionStats,
     Dispatch,
     GoalState,
     Message,
     Priority,
+    SaveBandwidth,
     ServerInfo,
     ServiceInfo,
     Status,
@@ -320,6 +322,12 @@ class SyncClient:
         """Inbound frames skipped or refused, per reason: :attr:`Client.rejections`."""
         return self._client.rejections
 
+    @_mirrors
+    def stats(self) -> ConnectionStats:
+        """Bytes and messages read from the network: :meth:`Client.stats`
+        (read in the calling thread: two integer reads)."""
+        return self._client.stats()
+
     @property
     def worker_thread(self) -> threading.Thread:
         """The thread whose event loop runs the async client."""
@@ -502,13 +510,17 @@ class SyncClient:
         buffer: int | None = None,
         compression: Compression | None = None,
         decode: bool = True,
+        save_bandwidth: SaveBandwidth = False,
         timeout: float | None = None,
     ) -> SyncSubscription:
         """:meth:`Client.subscribe`, as a (plain) context manager yielding a
         :class:`SyncSubscription`: ``for msg in sub`` or ``sub.get()``.
         ``timeout`` is the default wait for each message (None: until one
         comes or the subscription ends). Arguments are checked here, at
-        once; the subscription starts when the block is entered."""
+        once; the subscription starts when the block is entered.
+        ``save_bandwidth`` as there: on Foxglove the stream pauses between
+        deliveries, so a message published while paused (a stopping
+        topic's last one) can be missed."""
         if self._closed:
             raise NotConnected("subscribe: the client is closed")
         _check_timeout(timeout)
@@ -525,6 +537,7 @@ class SyncClient:
                 buffer=buffer,
                 compression=compression,
                 decode=decode,
+                save_bandwidth=save_bandwidth,
             )
 
         ctx = self._worker.run(_sync_call, make, (), what=f"subscribe to {topic}")

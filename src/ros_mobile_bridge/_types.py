@@ -12,11 +12,13 @@ __all__ = [
     "DEFAULT_PORTS",
     "ActionOutcome",
     "Compression",
+    "ConnectionStats",
     "Dispatch",
     "GoalState",
     "Message",
     "Priority",
     "Protocol",
+    "SaveBandwidth",
     "ServerInfo",
     "ServiceInfo",
     "Status",
@@ -31,6 +33,7 @@ Priority = Literal["data", "control"]
 Dispatch = Literal["all", "latest"]
 SubscriptionState = Literal["pending", "active"]
 Compression = Literal["cbor", "cbor-raw"]
+SaveBandwidth = bool | Literal["adaptive"]
 GoalState = Literal["pending", "active", "succeeded", "canceled", "aborted", "failed"]
 
 DEFAULT_PORTS: Mapping[str, int] = {"foxglove-ws": 8765, "rosbridge": 9090, "zenoh": 7447}
@@ -147,12 +150,15 @@ class SubscriptionStats:
     ``dispatch="latest"``),
     ``dropped_overflow`` (the consumer fell behind; oldest dropped),
     ``dropped_breaker`` (the circuit breaker was tripped), or is still
-    queued. ``decode_failures`` counts delivered messages whose payload
-    could not be decoded (delivered raw). ``effective_interval_ms`` is the
-    larger of the ``max_hz`` cap and the adaptive throttle's interval;
-    ``bucket`` names the throttle bucket (``""`` without one);
-    ``arrival_bytes_per_s`` is the payload rate arriving over the last
-    second, before any filter."""
+    queued, or ``dropped_replay`` (``save_bandwidth`` on Foxglove: the server
+    replayed, on resubscription, the message delivered last). ``decode_failures``
+    counts delivered messages whose payload could not be decoded (delivered
+    raw). ``effective_interval_ms`` is the larger of the ``max_hz`` cap and
+    the adaptive throttle's interval; ``bucket`` names the throttle bucket
+    (``""`` without one); ``arrival_bytes_per_s`` is the payload rate
+    arriving over the last second, before any filter; ``bytes_received``
+    the payload bytes of every frame routed to the subscription (the
+    ``received`` ones), whatever became of them."""
 
     received: int
     delivered: int
@@ -164,6 +170,24 @@ class SubscriptionStats:
     dropped_breaker: int = 0
     bucket: str = ""
     arrival_bytes_per_s: float = 0.0
+    bytes_received: int = 0
+    dropped_replay: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class ConnectionStats:
+    """What one client has read from the network over its life (every
+    connection it made, reconnects included); ``Client.stats()``.
+
+    ``bytes_received``: bytes read from the socket (Foxglove, rosbridge:
+    WebSocket framing included) or the payload bytes of the samples the
+    zenoh session handed over (Zenoh: zenoh's own framing is not seen).
+    ``messages_received``: WebSocket messages (Foxglove, rosbridge) or zenoh
+    items (samples, replies, liveliness changes) received, whatever became
+    of them."""
+
+    bytes_received: int
+    messages_received: int
 
 
 @dataclass(frozen=True, slots=True)

@@ -171,8 +171,10 @@ class SdkServer:
         supported_encodings: list[str] | None = None,
         parameters: dict[str, Any] | None = None,
         tls: tuple[bytes, bytes] | None = None,
+        listener: type[_Listener] | None = None,
     ) -> None:
-        """``tls``: ``(certificate_pem, key_pem)`` to serve ``wss://``."""
+        """``tls``: ``(certificate_pem, key_pem)`` to serve ``wss://``;
+        ``listener``: a subclass of the recording listener to use instead."""
         self.recorder = Recorder()
         self.param_lock = threading.Lock()
         self.parameters: dict[str, Any] = dict(parameters or {})
@@ -184,7 +186,7 @@ class SdkServer:
             port=port,
             context=self.context,
             capabilities=ALL_CAPABILITIES if capabilities is None else capabilities,
-            server_listener=_Listener(self),
+            server_listener=(listener or _Listener)(self),
             supported_encodings=["json", "cdr"]
             if supported_encodings is None
             else supported_encodings,

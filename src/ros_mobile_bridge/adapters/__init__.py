@@ -14,6 +14,7 @@ from ._seam import GoalEvents as GoalEvents
 from ._seam import GraphChanged as GraphChanged
 from ._seam import ParameterValues as ParameterValues
 from ._seam import Rejected as Rejected
+from ._seam import Replayed as Replayed
 from ._seam import ServiceHandler as ServiceHandler
 from ._seam import SubscribeHints as SubscribeHints
 from ._seam import TopicState as TopicState

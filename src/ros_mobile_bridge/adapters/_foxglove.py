@@ -16,6 +16,7 @@ import anyio
 import anyio.to_thread
 
 from .._errors import (
+    ConnectError,
     DecodeError,
     NotSupportedError,
     ParameterError,
@@ -36,6 +37,7 @@ from ._seam import (
     GoalEvents,
     GraphChanged,
     ParameterValues,
+    Replayed,
     SubscribeHints,
     TopicState,
 )
@@ -158,6 +160,18 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         self._topic_infos: list[TopicInfo] = []
         self._wanted: dict[str, SubscribeHints] = {}
         self._active: dict[str, int] = {}  # topic -> subscription id
+        # save_bandwidth (SubscribeHints.pause_hz): the topics that pause after
+        # each message and at what rate they resume; the paused ones (when to
+        # resume, on which channel); the resumed ones (since when) whose next
+        # message is checked against the last one delivered (a replay is
+        # skipped); how long a resumed topic's next message took to come
+        # (smoothed: the next resumption is that much earlier)
+        self._saving: dict[str, float] = {}
+        self._paused: dict[str, tuple[float, fx.Channel]] = {}
+        self._resumed: dict[str, float] = {}
+        self._wait: dict[str, float] = {}
+        self._last_payload: dict[str, memoryview] = {}
+        self._pause_changed = anyio.Event()
         self._pubs: Advertisements[_ClientChannel] = Advertisements()
         self._calls: PendingRequests[Any] = PendingRequests()
         self._params: PendingRequests[dict[str, Any]] = PendingRequests()
@@ -196,7 +210,15 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         )
 
     def topic_active(self, topic: str) -> bool:
-        return topic in self._active
+        return topic in self._active or topic in self._paused
+
+    @property
+    def bytes_received(self) -> int:
+        return self._ws.bytes_received
+
+    @property
+    def messages_received(self) -> int:
+        return self._ws.messages_received
 
     def _graph(self) -> GraphChanged:
         return GraphChanged(self.topics, self.services)
@@ -249,6 +271,20 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
 
     # -- the reader ---------------------------------------------------------
     async def run(self, sink: EventSink) -> None:
+        """The reader, and beside it the task that resumes paused topics
+        (``save_bandwidth``); both end with the connection."""
+        error: ConnectError | None = None
+        async with anyio.create_task_group() as tg:
+            tg.start_soon(self._resume_paused)
+            try:
+                await self._read(sink)
+            except ConnectError as exc:
+                error = exc
+            tg.cancel_scope.cancel()
+        if error is not None:
+            raise error
+
+    async def _read(self, sink: EventSink) -> None:
         self._attach(sink)
         early, self._early = self._early, []
         for event in early:
@@ -256,6 +292,7 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         await self._deliver()
         ws = self._ws
         engine = self._engine
+        saving = self._saving  # (updated in place)
         while True:
             text, message = await ws.receive_raw()
             if text:  # UTF-8 bytes: the engine reports invalid ones
@@ -267,7 +304,11 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
             pending = self._pending
             for event in engine.receive_binary(message):
                 if type(event) is fx.MessageData:
-                    pending.append(self._frame(event, received_ns))
+                    if saving and event.channel.topic in saving:
+                        await self._saved_frame(event, received_ns)
+                        pending = self._pending  # (a subscribe call may have posted)
+                    else:
+                        pending.append(self._frame(event, received_ns))
                 else:
                     await self._handle(event)
                     pending = self._pending
@@ -354,14 +395,28 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
                     del self._decoders[ch.id]  # a re-used id gets a fresh decoder
             self._index_channels(event.channels, ())
             for ch in event.channels:
-                if ch.topic in self._wanted and ch.topic not in self._active:
+                topic = ch.topic
+                if (
+                    topic in self._wanted
+                    and topic not in self._active
+                    and topic not in self._paused
+                ):
                     await self._subscribe_channel(ch)
             self._emit(self._graph())
         elif isinstance(event, fx.Unadvertise):
             self._index_channels((), event.channels)
             for ch in event.channels:
                 sub_id = self._active.get(ch.topic)
-                if sub_id is not None and self._engine.subscription_channel(sub_id) == ch:
+                paused = self._paused.get(ch.topic)
+                if paused is not None and paused[1] == ch:
+                    del self._paused[ch.topic]  # resubscribed below if another carries it
+                    self._resumed.pop(ch.topic, None)
+                    self._last_payload.pop(ch.topic, None)
+                    self._emit(TopicState(ch.topic, False))
+                    other = self._channel_for(ch.topic)
+                    if other is not None and ch.topic in self._wanted:
+                        await self._subscribe_channel(other)
+                elif sub_id is not None and self._engine.subscription_channel(sub_id) == ch:
                     del self._active[ch.topic]
                     self._emit(TopicState(ch.topic, False))
                     # another channel may still carry the topic
@@ -411,10 +466,94 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         await self._ws.send(message)
         self._emit(TopicState(channel.topic, True))
 
+    # -- bandwidth mode (SubscribeHints.pause_hz) -----------------------------
+    async def _saved_frame(self, event: fx.MessageData, received_ns: int) -> None:
+        """A message on a topic that pauses after each one: skip it when it
+        is the server's replay of the message delivered last (the first
+        message after resuming, byte for byte the same payload), else hand
+        it up and unsubscribe until the next one is due."""
+        channel = event.channel
+        topic = channel.topic
+        payload = event.payload
+        now = anyio.current_time()
+        interval = 1.0 / self._saving[topic]
+        resumed = self._resumed.pop(topic, None)
+        if resumed is not None:
+            last = self._last_payload.get(topic)
+            if last is not None and last.nbytes == payload.nbytes and last == payload:
+                self._resumed[topic] = resumed
+                self._emit(Replayed(topic, payload.nbytes))  # keep waiting for a new one
+                return
+            waited = min(now - resumed, interval / 2)
+            before = self._wait.get(topic)
+            self._wait[topic] = waited if before is None else 0.75 * before + 0.25 * waited
+        self._pending.append(self._frame(event, received_ns))
+        self._last_payload[topic] = payload
+        sub_id = self._active.pop(topic, None)
+        if sub_id is None:  # a late frame after an unsubscribe: nothing to pause
+            return
+        # resume as much earlier as the next message took to come lately
+        # (at most half the interval): one arriving before it is due is held
+        # by the subscription's rate cap and delivered on time
+        self._paused[topic] = (now + interval - self._wait.get(topic, 0.0), channel)
+        self._pause_changed.set()
+        await self._ws.send(self._engine.unsubscribe([sub_id]))
+
+    async def _resume_paused(self) -> None:
+        """Subscribe each paused topic again when its next message is due
+        (the reader's task group runs it)."""
+        while True:
+            if not self._paused:
+                await self._pause_changed.wait()
+                self._pause_changed = anyio.Event()
+                continue
+            now = anyio.current_time()
+            due = min(when for when, _ in self._paused.values())
+            if due > now:
+                changed = self._pause_changed
+                with anyio.move_on_after(due - now):
+                    await changed.wait()
+                if changed.is_set():
+                    self._pause_changed = anyio.Event()
+                continue
+            try:
+                for topic in [t for t, (when, _) in self._paused.items() if when <= now]:
+                    await self._resume(topic)
+            except ConnectError:
+                return  # the reader reports the lost connection
+
+    async def _resume(self, topic: str) -> None:
+        """Subscribe ``topic`` again after a pause (on the channel that now
+        carries it); its first message is checked for a replay."""
+        entry = self._paused.pop(topic, None)
+        if entry is None:
+            return
+        channel = self._channel_for(topic)
+        if channel is None or topic not in self._wanted:
+            self._last_payload.pop(topic, None)
+            return
+        if self._engine.channels.get(channel.id) is not entry[1]:
+            await self._subscribe_channel(channel)  # another channel: a fresh start
+            self._post()
+            return
+        sub_id, message = self._engine.subscribe(channel.id)
+        self._active[topic] = sub_id
+        self._resumed[topic] = anyio.current_time()
+        await self._ws.send(message)
+
     # -- subscriptions ------------------------------------------------------
     async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
         self._wanted[topic] = hints
-        if topic in self._active:
+        if hints.pause_hz is not None:
+            self._saving[topic] = hints.pause_hz
+        else:
+            self._saving.pop(topic, None)
+            self._resumed.pop(topic, None)
+            self._last_payload.pop(topic, None)
+            if topic in self._paused:
+                await self._resume(topic)
+                self._resumed.pop(topic, None)
+        if topic in self._active or topic in self._paused:
             return
         channel = self._channel_for(topic)
         if channel is not None:
@@ -423,6 +562,11 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
 
     async def unsubscribe(self, topic: str) -> None:
         self._wanted.pop(topic, None)
+        self._saving.pop(topic, None)
+        self._paused.pop(topic, None)  # paused: no server subscription is left
+        self._resumed.pop(topic, None)
+        self._wait.pop(topic, None)
+        self._last_payload.pop(topic, None)
         sub_id = self._active.pop(topic, None)
         if sub_id is not None:
             await self._ws.send(self._engine.unsubscribe([sub_id]))

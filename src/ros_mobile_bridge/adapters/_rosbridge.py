@@ -304,6 +304,14 @@ class RosbridgeAdapter(
             )
 
     # -- the reader --------------------------------------------------------------
+    @property
+    def bytes_received(self) -> int:
+        return self._ws.bytes_received
+
+    @property
+    def messages_received(self) -> int:
+        return self._ws.messages_received
+
     async def run(self, sink: EventSink) -> None:
         self._attach(sink)
         await self._deliver()  # what the first discovery found

@@ -26,6 +26,7 @@ __all__ = [
     "GraphChanged",
     "ParameterValues",
     "Rejected",
+    "Replayed",
     "ServiceHandler",
     "SubscribeHints",
     "TopicState",
@@ -42,6 +43,11 @@ class SubscribeHints:
     compression: str | None = None
     """rosbridge: ``"cbor"`` or ``"cbor-raw"`` (None: JSON). Other adapters
     ignore it."""
+    pause_hz: float | None = None
+    """Foxglove: the bridge may stop sending the topic after each message
+    and send it again at this rate (every local subscription asked for
+    ``save_bandwidth``); None: send every message. Other adapters ignore it
+    (rosbridge already gets ``max_hz`` as ``throttle_rate``)."""
 
 
 class GoalEvents(Protocol):
@@ -111,7 +117,17 @@ class Rejected:
     count: int = 1
 
 
-Event = RawFrame | GraphChanged | TopicState | ParameterValues | Rejected
+@dataclass(frozen=True, slots=True)
+class Replayed:
+    """A message on ``topic`` (``size`` payload bytes) arrived and was
+    skipped: the server replayed, on a resubscription, the message the
+    client had delivered last (``SubscribeHints.pause_hz``)."""
+
+    topic: str
+    size: int
+
+
+Event = RawFrame | GraphChanged | TopicState | ParameterValues | Rejected | Replayed
 """What an adapter hands up. A :class:`~ros_mobile_bridge.flow.RawFrame` is
 one message for a subscribed topic, not decoded."""
 
@@ -147,6 +163,17 @@ class Adapter(Protocol):
 
     def topic_active(self, topic: str) -> bool:
         """Whether the server currently carries ``topic`` to this client."""
+
+    @property
+    def bytes_received(self) -> int:
+        """Bytes read from the network on this connection so far (see
+        :class:`~ros_mobile_bridge.ConnectionStats`)."""
+        ...
+
+    @property
+    def messages_received(self) -> int:
+        """Messages (or zenoh items) received on this connection so far."""
+        ...
 
     async def nodes(self) -> list[str]:
         """The ROS nodes of the graph now, full names, sorted (this client's

@@ -317,6 +317,14 @@ class ZenohAdapter(
     def topic_active(self, topic: str) -> bool:
         return topic in self._publishers_of
 
+    @property
+    def bytes_received(self) -> int:
+        return self._session.inbox.bytes_received
+
+    @property
+    def messages_received(self) -> int:
+        return self._session.inbox.items_received
+
     def offered_qos(self, topic: str) -> list[rz.Qos]:
         """The QoS of each live publisher of ``topic``, from their liveliness
         tokens (what a recording writes as ``offered_qos_profiles``)."""

@@ -123,7 +123,10 @@ class FrameQueue:
         self.dropped_conflated = 0
         self.dropped_overflow = 0
         self.dropped_breaker = 0
+        self.dropped_replay = 0
         self.decode_failures = 0
+        self.bytes_received = 0
+        """Payload bytes of every frame offered (``received``)."""
 
     @property
     def interval(self) -> float:
@@ -153,7 +156,9 @@ class FrameQueue:
             self._arrival_rate = self._rate_bytes / (now - self._rate_start)
             self._rate_start = now
             self._rate_bytes = 0
-        self._rate_bytes += frame.payload.nbytes
+        size = frame.payload.nbytes
+        self._rate_bytes += size
+        self.bytes_received += size
         if self.blocked:
             self.dropped_breaker += 1
             return
@@ -179,6 +184,15 @@ class FrameQueue:
         else:
             self._held = frame
             self._wake()  # a waiting consumer arms its timer for the release
+
+    def replayed(self, size: int) -> None:
+        """A frame of ``size`` payload bytes reached the client and was the
+        message delivered last, replayed by the server on resubscription:
+        received and dropped (``dropped_replay``), never queued."""
+        if not self._closed:
+            self.received += 1
+            self.bytes_received += size
+            self.dropped_replay += 1
 
     def _release_due(self, now: float) -> None:
         held = self._held
@@ -372,6 +386,8 @@ class Subscription:
             dropped_breaker=q.dropped_breaker,
             bucket=self._throttle.bucket_label if self._throttle is not None else "",
             arrival_bytes_per_s=q.arrival_bytes_per_s,
+            bytes_received=q.bytes_received,
+            dropped_replay=q.dropped_replay,
         )
 
     def __aiter__(self) -> Subscription:

@@ -134,6 +134,11 @@ class WebSocket:
         self.coalesced = 0
         """Reads that waited for :attr:`read_coalesce` first."""
         self._held_reads = 0
+        self.bytes_received = 0
+        """Bytes read from the socket so far (WebSocket framing included; the
+        handshake's too when :func:`connect_websocket` opened it)."""
+        self.messages_received = 0
+        """Messages :meth:`receive_raw` and :meth:`receive_ready` returned so far."""
         self.close_timeout = 1.0
         """Seconds the peer gets to end the TCP connection once the close
         handshake is done (or we failed the connection) before the client
@@ -189,6 +194,7 @@ class WebSocket:
                 await self._finish_closing()
                 raise self._closed_reason from exc  # type: ignore[misc]
             self.reads += 1
+            self.bytes_received += len(data)
             self._feed(data)
             window = self.read_coalesce
             if window:
@@ -201,6 +207,7 @@ class WebSocket:
                     self._steady = False
                 self._last_read = now
             await self._flush()  # pongs, close replies: usually nothing, and then no lock
+        self.messages_received += 1
         return messages.popleft()
 
     def receive_ready(self) -> list[tuple[bool, bytes | bytearray]]:
@@ -213,6 +220,7 @@ class WebSocket:
             return []
         ready = list(messages)
         messages.clear()
+        self.messages_received += len(ready)
         return ready
 
     async def _coalesce(self) -> bool:
@@ -672,12 +680,14 @@ async def connect_websocket(
                 await stream.send(chunk)
             response: Response | None = None
             leftover: list[Frame] = []
+            received = 0
             while response is None and proto.handshake_exc is None:
                 try:
                     data = await stream.receive(_READ_CHUNK)
                 except anyio.EndOfStream:
                     proto.receive_eof()
                     data = b""
+                received += len(data)
                 if data:
                     proto.receive_data(data)
                 for event in proto.events_received():
@@ -709,6 +719,7 @@ async def connect_websocket(
             await stream.aclose()
         raise handshake_error(url, proto.handshake_exc) from proto.handshake_exc
     ws = WebSocket(stream, proto, max_size, frames=leftover)
+    ws.bytes_received = received
     ws.read_coalesce = read_coalesce
     return ws
 

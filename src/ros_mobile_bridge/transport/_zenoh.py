@@ -112,6 +112,11 @@ class Inbox:
         self.overflowed = 0
         """Data samples dropped because the inbox was full."""
         self.overflowed_by_tag: dict[int, int] = {}
+        self.bytes_received = 0
+        """Payload bytes of the data samples zenoh handed over (dropped ones
+        included); counted per batch taken."""
+        self.items_received = 0
+        """Items taken by :meth:`get_batch` plus data samples dropped."""
 
     def _wake(self) -> None:  # in the event loop
         self._event.set()
@@ -142,6 +147,8 @@ class Inbox:
                 self._bytes and self._bytes + size > self._max_bytes
             ):
                 self.overflowed += 1
+                self.bytes_received += size
+                self.items_received += 1
                 tag = item.tag
                 self.overflowed_by_tag[tag] = self.overflowed_by_tag.get(tag, 0) + 1
                 return False
@@ -157,6 +164,8 @@ class Inbox:
                 self._wake_pending = False
                 if self._items:
                     items, self._items = self._items, []
+                    self.bytes_received += self._bytes
+                    self.items_received += len(items)
                     self._bytes = 0
                     return items
             await self._event.wait()
