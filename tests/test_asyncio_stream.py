@@ -210,7 +210,9 @@ async def test_a_reader_that_falls_behind_pauses_the_socket(peer: RawPeer) -> No
 @asyncio_only
 async def test_what_arrives_during_a_hold_is_read_in_one_go(peer: RawPeer) -> None:
     """``hold`` pauses reading: segments sent meanwhile wait in the kernel
-    and come back as one chunk after it (one wake-up, not one each)."""
+    and come back as one chunk after it (one wake-up, not one each), read by
+    the hold itself, which leaves reading paused for the next hold until
+    ``receive`` has to wait."""
     stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
     conn = await anyio.to_thread.run_sync(peer.wait)
     conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -223,9 +225,42 @@ async def test_what_arrives_during_a_hold_is_read_in_one_go(peer: RawPeer) -> No
     async with anyio.create_task_group() as tg:
         tg.start_soon(anyio.to_thread.run_sync, send_three)
         await stream.hold(0.3)
-        assert not stream._protocol.chunks  # nothing was read while held
-        assert not stream._protocol.read_paused
+        assert list(stream._protocol.chunks) == [b"one,two,three"]  # one read, after the wait
+        assert stream._protocol.read_paused  # still paused: the next hold reads again
+    assert stream.held_reads == 1
     assert await stream.receive() == b"one,two,three"
+    await anyio.to_thread.run_sync(conn.sendall, b"four")
+    assert await stream.receive() == b"four"  # it had to wait: reading resumed
+    assert not stream._protocol.read_paused
+    await stream.hold(0.01)  # nothing arrives: reading resumes after the wait
+    assert not stream._protocol.read_paused and not stream._protocol.chunks
+    assert stream.held_reads == 1
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_a_hold_that_meets_the_end_of_the_stream_resumes_reading(peer: RawPeer) -> None:
+    """Bytes and then the peer's EOF during a hold: the hold reads the
+    bytes; the next hold finds the end, resumes reading, and ``receive``
+    reports the end (the transport saw it itself)."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+
+    def send_late() -> None:
+        time.sleep(0.02)  # after the hold paused reading
+        conn.sendall(b"last")
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(anyio.to_thread.run_sync, send_late)
+        await stream.hold(0.3)
+    assert stream.held_reads == 1
+    assert await stream.receive() == b"last"
+    conn.shutdown(socket.SHUT_WR)
+    await stream.hold(0.05)
+    assert stream.held_reads == 1
+    assert not stream._protocol.read_paused
+    with anyio.fail_after(5), pytest.raises(anyio.EndOfStream):
+        await stream.receive()
     await stream.aclose()
 
 

@@ -70,7 +70,9 @@ class Talker:
         self.thread.join(timeout=30)
 
 
-async def receive(server: SdkServer, count: int, hz: float, window: float) -> tuple[int, int]:
+async def receive(
+    server: SdkServer, count: int, hz: float, window: float, held: list[int] | None = None
+) -> tuple[int, int]:
     """Stream ``count`` messages at ``hz`` into a client with
     ``read_coalesce=window``; check every one arrived in order; return the
     reads and the waiting reads the stream took."""
@@ -81,7 +83,7 @@ async def receive(server: SdkServer, count: int, hz: float, window: float) -> tu
     ):
         ws = websocket(robot)
         await anyio.sleep(0.1)  # the server has the subscription
-        reads, waited = ws.reads, ws.coalesced
+        reads, waited, direct = ws.reads, ws.coalesced, ws.held_reads
         talker.start()
         got: list[str] = []
         with anyio.fail_after(30):
@@ -93,15 +95,22 @@ async def receive(server: SdkServer, count: int, hz: float, window: float) -> tu
         assert got == [str(i) for i in range(count)]
         stats = sub.stats
         assert (stats.received, stats.delivered) == (count, count)
+        if held is not None:
+            held.append(ws.held_reads - direct)
         return ws.reads - reads, ws.coalesced - waited
 
 
 async def test_a_steady_stream_is_read_in_batches_and_arrives_whole(server: SdkServer) -> None:
     count = 800
-    reads, waited = await receive(server, count, hz=1000.0, window=0.004)
+    held: list[int] = []
+    reads, waited = await receive(server, count, hz=1000.0, window=0.004, held=held)
     # each waiting read took what arrived in up to 4 ms: about 4 frames a read
     assert waited > 0
     assert reads < count // 2, (reads, waited)
+    # and most of them took the socket's bytes at once, without a round
+    # through the event loop (asyncio: the paused socket; trio: trio's socket)
+    assert 0 < held[0] <= waited, (held, waited)
+    assert held[0] >= waited // 2, (held, waited)
 
 
 async def test_a_slow_stream_is_read_as_it_arrives(server: SdkServer) -> None:
@@ -113,8 +122,10 @@ async def test_a_slow_stream_is_read_as_it_arrives(server: SdkServer) -> None:
 
 
 async def test_no_read_waits_when_coalescing_is_off(server: SdkServer) -> None:
-    _, waited = await receive(server, 400, hz=1000.0, window=0.0)
+    held: list[int] = []
+    _, waited = await receive(server, 400, hz=1000.0, window=0.0, held=held)
     assert waited == 0
+    assert held == [0]
 
 
 def test_the_window_is_bounded() -> None:

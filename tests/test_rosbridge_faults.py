@@ -475,3 +475,38 @@ async def test_call_beyond_max_pending_requests_raises_at_once() -> None:
                         with pytest.raises(rmb.ServiceError, match="max_pending_requests"):
                             await robot.call_service("/set_flag", {"data": False})
                     tg.cancel_scope.cancel()
+
+
+async def test_messages_read_with_a_reply_are_delivered_before_it_resolves_the_call() -> None:
+    """Frames that arrive in one read are handled as a batch: the messages
+    before a service reply in that batch reach the subscription before the
+    call returns, and every message arrives, in order (a real bridge cannot
+    be made to put them in one TCP segment)."""
+
+    async def script(peer: Peer) -> None:
+        bridge = FakeBridge()
+        while True:
+            obj = json.loads(await peer.recv())
+            if obj.get("op") != "call_service":
+                continue
+            if obj["service"].startswith("/rosapi/"):
+                await bridge._rosapi(peer, obj)
+                continue
+            reply = {"op": "service_response", "service": obj["service"], "result": True}
+            frames = [publish("/chatter", str(i)) for i in range(3)]
+            frames.append(json.dumps({**reply, "values": {"success": True}, "id": obj["id"]}))
+            frames += [publish("/chatter", str(i)) for i in range(3, 5)]
+            for frame in frames:
+                peer.proto.send_text(frame.encode())
+            await peer.send_raw(b"".join(peer.proto.data_to_send()))  # one write
+
+    async with (
+        scripted_server(script, subprotocols=()) as url,
+        rmb.connect(url, protocol="rosbridge", options=options()) as robot,
+        robot.subscribe("/chatter", buffer=10) as sub,
+    ):
+        await robot.call_service("/rosapi/get_time", {}, timeout=2)  # subscribed by now
+        assert await robot.call_service("/set_flag", {"data": True}, timeout=2) == {"success": True}
+        assert sub.stats.received >= 3
+        got = await first_messages(sub, 5)
+        assert [m.data["data"] for m in got] == ["0", "1", "2", "3", "4"]

@@ -239,6 +239,42 @@ def test_publish_peek_variants(frame: bytes) -> None:
 @pytest.mark.parametrize(
     ("frame", "topic"),
     [
+        (PUBLISH, "/chatter"),  # the real frame: the prefix check
+        (b'{"op":"publish","topic":"/a/b_c","msg":{}}', "/a/b_c"),
+        (b'{"op":"publish","topic":"/t\xc3\xa9","msg":{}}', "/t\u00e9"),
+        (b'{"op": "publish", "topic": "/chatter", "msg": {}}', "/chatter"),  # the peeks
+        (b'{"topic":"/chatter","op":"publish","msg":{}}', "/chatter"),
+        # not here: receive_text takes these
+        (b'{"op":"publish","topic":"\\/chatter","msg":{}}', None),
+        (b'{"op": "publish", "topic": "\\/chatter", "msg": {}}', None),
+        (b'{"op":"publish","topic":"/t\xff","msg":{}}', None),
+        (b'{"op":"publish","topic":"/unterminated', None),
+        (b'{"op":"publishx","topic":"/chatter","msg":{}}', None),
+        (SERVICE_OK.encode(), None),
+        (PUBLISH_CBOR, None),
+    ],
+)
+def test_publish_topic_is_receive_texts_hot_path(frame: bytes, topic: str | None) -> None:
+    """``publish_topic`` names the topic exactly when ``receive_text`` gives
+    one JSON ``Publish`` of the whole frame on that topic."""
+    engine = RosbridgeEngine()
+    assert engine.publish_topic(frame) == topic
+    if topic is not None:
+        event = one_publish(engine.receive_text(frame))
+        assert (event.topic, event.kind, event.payload.obj) == (topic, "json", frame)
+
+
+def test_publish_topic_defers_to_receive_text_while_fragments_wait() -> None:
+    engine = RosbridgeEngine()
+    assert engine.receive_text(FRAGMENTS[0]) == []
+    assert engine.fragments_pending == 1
+    assert engine.publish_topic(PUBLISH) is None  # receive_text expires fragments first
+    assert one_publish(engine.receive_text(PUBLISH)).topic == "/chatter"
+
+
+@pytest.mark.parametrize(
+    ("frame", "topic"),
+    [
         (b'{"msg":{"data":"hello"},"op":"publish","topic":"/chatter"}', "/chatter"),
         (b'{"msg":{"data":"hello"},"topic":"/chatter","op":"publish"}', "/chatter"),
         (b'{"op":"publish","msg":{"data":"hello"},"topic":"/chatter"}', "/chatter"),
@@ -325,6 +361,14 @@ def test_publish_full_parse_msg_may_be_any_json() -> None:
 # decode_json_msg
 
 
+@pytest.mark.parametrize(
+    "payload",
+    [b'{"msg":{"a":1}}', b' {"msg":{"a":1}}', b'{"msg":{"a":1}}\n', b'\t{"msg":{"a":1}} '],
+)
+def test_decode_json_msg_with_and_without_whitespace_around(payload: bytes) -> None:
+    assert decode_json_msg(memoryview(payload)) == {"a": 1}
+
+
 def test_decode_json_msg_of_a_slice_and_of_bytearray() -> None:
     buf = b'xx{"op":"publish","msg":{"a":[1,2]}}yy'
     assert decode_json_msg(memoryview(buf)[2:-2]) == {"a": [1, 2]}
@@ -342,6 +386,10 @@ def test_decode_json_msg_of_a_slice_and_of_bytearray() -> None:
         (b"[1,2]", "no 'msg'"),
         (b'{"op":"publish"}', "no 'msg'"),
         (b'"msg"', "no 'msg'"),
+        (b'{"msg":1} x', "Extra data"),
+        (b'{"msg":1}{"msg":2}', "Extra data"),
+        (b'{"msg":1', "Expecting ',' delimiter"),
+        (b'{"msg":"\xff"}', "can't decode"),
     ],
 )
 def test_decode_json_msg_rejects(payload: bytes, words: str) -> None:

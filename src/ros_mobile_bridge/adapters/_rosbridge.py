@@ -333,23 +333,47 @@ class RosbridgeAdapter(
         engine = self._engine
         sink = self._sink if reading else None
         while True:
-            text, data = await ws.receive_raw()
+            first = await ws.receive_raw()
+            ready = ws.receive_ready()  # everything the same read brought: one batch
             received_ns = time.time_ns()
-            batch = engine.receive_text(data) if text else engine.receive_binary(data)
-            for event in batch:
-                if type(event) is rb.Publish:
-                    if sink is not None:
-                        self._on_publish(event, received_ns)
-                else:
-                    await self._handle(event)
+            for text, data in (first, *ready) if ready else (first,):
+                if text and sink is not None:
+                    topic = engine.publish_topic(data)
+                    if topic is not None and topic != PARAMETER_EVENTS:  # no event built
+                        self._on_publish(topic, "json", memoryview(data), received_ns)
+                        continue
+                batch = engine.receive_text(data) if text else engine.receive_binary(data)
+                for event in batch:
+                    if type(event) is rb.Publish:
+                        if sink is not None:
+                            self._on_event(event, received_ns)
+                    else:
+                        if sink is not None and self._pending:  # what came before goes first
+                            pending, self._pending = self._pending, []
+                            await sink.deliver(pending)
+                        await self._handle(event)
             if sink is not None:  # (self._deliver, inlined on the hot path)
                 pending, self._pending = self._pending, []
                 await sink.deliver(pending)
 
-    def _on_publish(self, event: rb.Publish, received_ns: int) -> None:
+    def _on_event(self, event: rb.Publish, received_ns: int) -> None:
         topic = event.topic
         if topic == PARAMETER_EVENTS and self._parameter_sub_id is not None:
             self._on_parameter_event(event)  # the watch's, and the user's if any
+        self._on_publish(
+            topic, event.kind, event.payload, received_ns, event.message, event.log_time_ns
+        )
+
+    def _on_publish(
+        self,
+        topic: str,
+        kind: rb.PublishKind,
+        payload: memoryview,
+        received_ns: int,
+        message: Any = None,
+        log_time_ns: int | None = None,
+    ) -> None:
+        """Queue one received message for delivery (a Publish event's fields)."""
         wire = self._subs.get(topic)
         if wire is None:
             if topic == PARAMETER_EVENTS and self._parameter_sub_id is not None:
@@ -361,12 +385,10 @@ class RosbridgeAdapter(
                     truncate_for_log(topic, 200),
                 )
             return
-        kind = event.kind
         if kind != wire.compression and kind in COMPRESSIONS:
             return  # still in flight from before a change of compression
         schema = wire.type or self._topics.get(topic, "")
         if kind == "parsed":
-            message = event.message
             decode: Decoder | None = lambda _payload: message  # noqa: E731
         else:
             try:
@@ -380,8 +402,8 @@ class RosbridgeAdapter(
                 topic,
                 schema,
                 _ENCODING[kind],
-                event.payload,
-                event.log_time_ns,
+                payload,
+                log_time_ns,
                 received_ns,
                 decode,
             )

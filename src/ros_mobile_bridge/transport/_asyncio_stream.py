@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
+import sys
 from collections import deque
 from typing import Final
 
@@ -34,6 +36,10 @@ _HIGH_WATER: Final = 4 * 1024 * 1024
 """Unread bytes at which reading from the socket pauses."""
 _LOW_WATER: Final = 1024 * 1024
 """Unread bytes below which it resumes."""
+_HOLD_READ: Final = 64 * 1024
+"""Bytes one :meth:`ProtocolStream.hold` reads from the socket at most
+(the read coalescing's size; a larger buffer is a fresh mapping of memory,
+three more system calls, per read)."""
 
 
 class _Protocol(asyncio.Protocol):
@@ -49,6 +55,7 @@ class _Protocol(asyncio.Protocol):
         self.chunks: deque[bytes] = deque()
         self.buffered = 0
         self.read_paused = False
+        self.held = False  # read_paused by ProtocolStream.hold, not by back-pressure
         self.eof = False
         self.error: BaseException | None = None
         self.reader: asyncio.Future[None] | None = None
@@ -104,6 +111,11 @@ class _Protocol(asyncio.Protocol):
                 fut.set_result(None)
 
 
+def _set_done(fut: asyncio.Future[None]) -> None:
+    if not fut.done():
+        fut.set_result(None)
+
+
 class ProtocolStream(anyio.abc.ByteStream):
     """One connected TCP socket (see the module docstring). Single reader:
     two tasks must not wait in :meth:`receive` at once."""
@@ -112,6 +124,11 @@ class ProtocolStream(anyio.abc.ByteStream):
         self._transport = transport
         self._protocol = protocol
         self._closed = False
+        self.held_reads = 0
+        """Reads :meth:`hold` made itself, with the transport's reading paused."""
+        sock = transport.get_extra_info("socket")
+        # hold reads the paused socket itself where a socket is a file (not Windows)
+        self._fd: int = sock.fileno() if sock is not None and sys.platform != "win32" else -1
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
         p = self._protocol
@@ -124,6 +141,8 @@ class ProtocolStream(anyio.abc.ByteStream):
                 raise anyio.EndOfStream
             if p.reader is not None:
                 raise RuntimeError("another task is already reading from this stream")
+            if p.held:
+                self._resume_held()
             p.reader = waiter = p.loop.create_future()
             try:
                 await waiter
@@ -135,7 +154,12 @@ class ProtocolStream(anyio.abc.ByteStream):
             p.chunks.appendleft(data[max_bytes:])
             data = data[:max_bytes]
         p.buffered -= len(data)
-        if p.read_paused and p.buffered < _LOW_WATER and not self._transport.is_closing():
+        if (
+            p.read_paused
+            and not p.held
+            and p.buffered < _LOW_WATER
+            and not self._transport.is_closing()
+        ):
             p.read_paused = False
             self._transport.resume_reading()
         return data
@@ -149,19 +173,57 @@ class ProtocolStream(anyio.abc.ByteStream):
         """Leave the socket unread for ``seconds``: reading is paused, so what
         arrives meanwhile waits in the kernel and is then read in one go
         (one wake-up of the loop instead of one per arriving segment).
-        Cancellable; reading resumes on every exit unless back-pressure
-        paused it."""
+
+        After the wait, the stream reads the paused socket itself (one
+        non-blocking read of up to :data:`_HOLD_READ` bytes) and, when that
+        brought bytes, leaves reading paused for the next hold: under a
+        steady stream each hold is then one timer and one read, without
+        pausing, resuming and waiting for the loop to report the socket
+        readable. :meth:`receive` resumes reading whenever it has to wait.
+        When the read finds nothing, the end of the stream or an error,
+        reading resumes and the transport sees the same. Not on Windows
+        (reading resumes after the wait). Cancellable; reading resumes on a
+        cancelled hold."""
         p = self._protocol
-        paused = not p.read_paused and not self._transport.is_closing()
-        if paused:
-            p.read_paused = True
+        if not p.read_paused and not self._transport.is_closing():
+            p.read_paused = p.held = True
             self._transport.pause_reading()
+        waiter = p.loop.create_future()  # (asyncio.sleep without its loop lookup)
+        timer = p.loop.call_later(seconds, _set_done, waiter)
         try:
-            await asyncio.sleep(seconds)
-        finally:
-            if paused and p.read_paused and not self._transport.is_closing():
-                p.read_paused = False
-                self._transport.resume_reading()
+            await waiter
+        except BaseException:
+            timer.cancel()
+            if p.held:
+                self._resume_held()
+            raise
+        if p.held:
+            self._read_held()
+
+    def _read_held(self) -> None:
+        """Read the paused socket once (see :meth:`hold`)."""
+        p = self._protocol
+        data = b""
+        if self._fd >= 0 and not p.eof and not self._transport.is_closing():
+            try:
+                data = os.read(self._fd, _HOLD_READ)
+            except (BlockingIOError, InterruptedError):
+                pass  # nothing arrived: the transport waits for it
+            except OSError as exc:  # the transport meets the error or EOF on resuming
+                p.error = p.error or exc
+        if data:
+            self.held_reads += 1
+            p.chunks.append(data)
+            p.buffered += len(data)
+        else:
+            self._resume_held()
+
+    def _resume_held(self) -> None:
+        p = self._protocol
+        p.held = False
+        if p.read_paused and not self._transport.is_closing():
+            p.read_paused = False
+            self._transport.resume_reading()
 
     async def send(self, item: bytes) -> None:
         if self._closed:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import os
+import socket
 import ssl as _ssl
 import time
 from collections import deque
@@ -134,16 +135,22 @@ class WebSocket:
         that several frames are read and handed over at one wake-up
         (:meth:`receive_raw`); 0 reads as soon as anything arrives."""
         self._last_read = 0.0  # time.monotonic() when the last read returned
+        # trio's socket under anyio's plain TCP stream: a read that waited
+        # first takes the socket's bytes directly (no scheduling round)
+        self._held_sock: socket.socket | None = None
+        if isinstance(stream, anyio.abc.SocketStream) and _on_trio():
+            self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
         self._steady = False  # read coalescing is on for the next read
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
         self.coalesced = 0
         """Reads that waited for :attr:`read_coalesce` first."""
+        self._held_reads = 0
         self.bytes_received = 0
         """Bytes read from the socket so far (WebSocket framing included; the
         handshake's too when :func:`connect_websocket` opened it)."""
         self.messages_received = 0
-        """Messages :meth:`receive_raw` returned so far."""
+        """Messages :meth:`receive_raw` and :meth:`receive_ready` returned so far."""
         self.close_timeout = 1.0
         """Seconds the peer gets to end the TCP connection once the close
         handshake is done (or we failed the connection) before the client
@@ -181,7 +188,9 @@ class WebSocket:
                 raise self._closed_reason
             held = await self._coalesce() if self._steady else False
             try:
-                data = await self._stream.receive(_READ_CHUNK)
+                data = self._read_held() if held and self._held_sock is not None else b""
+                if not data:
+                    data = await self._stream.receive(_READ_CHUNK)
             except (
                 anyio.EndOfStream,
                 anyio.ClosedResourceError,
@@ -213,6 +222,19 @@ class WebSocket:
         self.messages_received += 1
         return messages.popleft()
 
+    def receive_ready(self) -> list[tuple[bool, bytes | bytearray]]:
+        """Every message already received, oldest first, as :meth:`receive_raw`
+        returns each (an empty list when none): never reads, never waits. A
+        reader takes what one read brought this way and handles it as one
+        batch."""
+        messages = self._messages
+        if not messages:
+            return []
+        ready = list(messages)
+        messages.clear()
+        self.messages_received += len(ready)
+        return ready
+
     async def _coalesce(self) -> bool:
         """Under a steady stream, wait until :attr:`read_coalesce` seconds
         after the last read returned before reading again (not at all when
@@ -237,6 +259,29 @@ class WebSocket:
             self.coalesced += 1
             await anyio.sleep(delay)  # anyio's streams read only when asked
         return True
+
+    def _read_held(self) -> bytes:
+        """After a wait on trio: what the socket holds, read at once (b""
+        when nothing, or the end of the stream: the stream's own receive
+        then waits or reports it). Other errors raise ``OSError``."""
+        assert self._held_sock is not None
+        try:
+            data = self._held_sock.recv(_COALESCE_BELOW)  # (no fresh memory mapping per read)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        self._held_reads += bool(data)
+        return data
+
+    @property
+    def held_reads(self) -> int:
+        """Reads that waited for :attr:`read_coalesce` and then took the
+        socket's bytes directly, without a round through the event loop
+        (on asyncio the stream reads the paused socket itself, on trio the
+        WebSocket reads trio's socket)."""
+        stream = self._stream
+        if isinstance(stream, _asyncio_stream.ProtocolStream):
+            return stream.held_reads
+        return self._held_reads
 
     def _feed(self, data: bytes) -> None:
         """Parse ``data`` and handle its frames.
@@ -720,6 +765,13 @@ async def connect_websocket(
     ws.bytes_received = received
     ws.read_coalesce = read_coalesce
     return ws
+
+
+def _on_trio() -> bool:
+    try:
+        return sniffio.current_async_library() == "trio"
+    except sniffio.AsyncLibraryNotFoundError:
+        return False
 
 
 class _NoDebug(logging.LoggerAdapter):  # type: ignore[type-arg]

@@ -26,6 +26,7 @@ from ._events import (
 from ._readers import (
     PEEK_OP_FIRST,
     PEEK_TOPIC_FIRST,
+    PUBLISH_PREFIX,
     Malformed,
     cbor_loads,
     loads_utf8,
@@ -49,6 +50,7 @@ from ._writers import (
 
 __all__ = ["RosbridgeEngine"]
 
+_PREFIX_LEN: Final = len(PUBLISH_PREFIX)
 _MAX_FRAGMENTED: Final = 16
 """How many fragmented messages may be in reassembly at once."""
 
@@ -112,11 +114,12 @@ class RosbridgeEngine:
                 return [ProtocolViolation("a text frame that is not valid Unicode", "invalid_utf8")]
         else:
             raw = data if isinstance(data, bytes | bytearray) else bytes(data)
+        topic = self.publish_topic(raw)
+        if topic is not None:
+            return [Publish(topic, "json", memoryview(raw))]
         match = PEEK_OP_FIRST.match(raw) or PEEK_TOPIC_FIRST.match(raw)
         if match is not None:
-            topic_bytes = match.group(1)
-            if b"\\" in topic_bytes:
-                topic_bytes = topic_bytes.replace(b"\\/", b"/")
+            topic_bytes = match.group(1).replace(b"\\/", b"/")
             if b"\\" not in topic_bytes:
                 try:
                     topic = topic_bytes.decode()
@@ -128,6 +131,35 @@ class RosbridgeEngine:
                     ]
                 return [Publish(topic, "json", memoryview(raw))]
         return self._parse_json(raw, "a text frame")
+
+    def publish_topic(self, raw: bytes | bytearray) -> str | None:
+        """The hot path of :meth:`receive_text`: the topic of a JSON
+        ``publish`` frame whose ``op`` and ``topic`` come first (either order)
+        and whose topic is plain UTF-8 without escapes, when no fragment
+        awaits reassembly; else None, and :meth:`receive_text` handles the
+        frame. For a topic returned here, :meth:`receive_text` would return
+        exactly ``[Publish(topic, "json", memoryview(raw))]``, so a reader
+        builds its frame without the event. Found by a prefix check (the
+        compact spelling rosbridge servers send), else by the anchored
+        peeks."""
+        if self._partials or self._dropped:
+            return None
+        if raw.startswith(PUBLISH_PREFIX):
+            end = raw.find(b'"', _PREFIX_LEN)
+            topic_bytes = raw[_PREFIX_LEN:end]
+            if end < 0 or b"\\" in topic_bytes:
+                return None
+        else:
+            match = PEEK_OP_FIRST.match(raw) or PEEK_TOPIC_FIRST.match(raw)
+            if match is None:
+                return None
+            topic_bytes = match.group(1)
+            if b"\\" in topic_bytes:
+                return None
+        try:
+            return topic_bytes.decode()
+        except UnicodeDecodeError:
+            return None
 
     def _parse_json(self, raw: bytes | bytearray, what: str, *, inner: bool = False) -> list[Event]:
         """Parse a whole JSON operation (``what`` names it for a violation;

@@ -25,6 +25,7 @@ __all__ = [
     "MAX_CBOR_DEPTH",
     "PEEK_OP_FIRST",
     "PEEK_TOPIC_FIRST",
+    "PUBLISH_PREFIX",
     "Malformed",
     "cbor_loads",
     "decode_cbor_msg",
@@ -40,6 +41,10 @@ PEEK_OP_FIRST: Final = re.compile(rb'\{\s*"op"\s*:\s*"publish"\s*,\s*"topic"\s*:
 PEEK_TOPIC_FIRST: Final = re.compile(
     rb'\{\s*"topic"\s*:\s*' + _STRING + rb'\s*,\s*"op"\s*:\s*"publish"\s*[,}]'
 )
+
+PUBLISH_PREFIX: Final = b'{"op":"publish","topic":"'
+"""How a compact JSON publish frame starts (what rosbridge servers send):
+checked before the peeks, which it spares on the hot path."""
 
 MAX_CBOR_DEPTH: Final = 64
 
@@ -83,10 +88,13 @@ def loads_utf8(raw: bytes | bytearray) -> Any:
     starts with a NUL or with the bytes 0xFE or 0xFF: such bytes raise
     ``ValueError`` (not JSON) instead."""
     if b"\x00" in raw[:2] or raw[:1] in (b"\xfe", b"\xff"):
-        raise ValueError(
-            "not UTF-8 JSON text (a NUL byte or a UTF-16/32 byte order mark at its start)"
-        )
+        raise ValueError(_NOT_UTF8)
     return json.loads(raw)
+
+
+_json_decode: Final = json.JSONDecoder().decode
+_json_raw_decode: Final = json.JSONDecoder().raw_decode
+_NOT_UTF8: Final = "not UTF-8 JSON text (a NUL byte or a UTF-16/32 byte order mark at its start)"
 
 
 def decode_json_msg(payload: memoryview) -> Any:
@@ -94,8 +102,20 @@ def decode_json_msg(payload: memoryview) -> Any:
     frame that is not JSON or has no ``msg`` (``RecursionError`` for one
     nested too deeply)."""
     obj = payload.obj
-    data = obj if isinstance(obj, bytes | bytearray) and len(obj) == payload.nbytes else payload
-    frame = loads_utf8(bytes(data) if isinstance(data, memoryview) else data)
+    raw = (
+        obj if isinstance(obj, bytes | bytearray) and len(obj) == payload.nbytes else bytes(payload)
+    )
+    if b"\x00" in raw[:2] or raw[:1] in (b"\xfe", b"\xff"):  # (loads_utf8, inlined)
+        raise ValueError(_NOT_UTF8)
+    # decoded here: json.loads would first guess the encoding (a Python
+    # function per frame); UTF-8 is the only one left
+    text = raw.decode("utf-8", "surrogatepass")
+    try:  # a frame with no whitespace around it (every hot-path frame) without two regex scans
+        frame, end = _json_raw_decode(text)
+    except ValueError:
+        end = -1
+    if end != len(text):
+        frame = _json_decode(text)  # whitespace around it, or the error to raise
     if not isinstance(frame, dict) or "msg" not in frame:
         raise ValueError("the publish frame has no 'msg'")
     return frame["msg"]
