@@ -66,6 +66,7 @@ _COALESCE_BELOW: Final = 64 * 1024
 small read: the stream is saturated, and waiting could only slow it."""
 _OP_TEXT: Final = 0x1
 _OP_BINARY: Final = 0x2
+_OP_PONG: Final = 0xA
 _FIN_TEXT: Final = 0x81
 _FIN_BINARY: Final = 0x82
 _INLINE_BATCH: Final = 64
@@ -182,7 +183,24 @@ class WebSocket:
         self._inline = handler
         stream = self._protocol_stream
         if stream is not None:
-            stream.inline = None if handler is None else self._take_inline
+            stream.inline = None if handler is None else self._take_read
+
+    def _take_read(self, data: bytes) -> int:
+        """:attr:`ProtocolStream.inline`: :meth:`_take_inline`, unless reads
+        come faster than :attr:`read_coalesce` (then the reader takes them,
+        and its read coalescing gathers several frames per wake-up). A read
+        taken whole counts in :attr:`reads`."""
+        window = self.read_coalesce
+        now = 0.0
+        if window:
+            now = time.monotonic()
+            if now - self._last_read < window:
+                return 0
+        taken = self._take_inline(data)
+        if taken == len(data):
+            self.reads += 1
+            self._last_read = now
+        return taken
 
     def _take_inline(self, data: bytes) -> int:
         """:attr:`ProtocolStream.inline`: how many leading bytes of ``data``
@@ -277,6 +295,7 @@ class WebSocket:
                 await self._finish_closing()
                 raise self._closed_reason from exc  # type: ignore[misc]
             self.reads += 1
+            inline = self.inline_messages
             if self._inline is not None and (taken := self._take_inline(data)):
                 data = data[taken:]
             if data:
@@ -285,7 +304,7 @@ class WebSocket:
             if window:
                 now = time.monotonic()
                 if held:  # keep waiting while it gathers more than one message
-                    self._steady = len(messages) > 1
+                    self._steady = len(messages) + self.inline_messages - inline > 1
                 else:  # start when reads come faster than the window
                     self._steady = now - self._last_read < window
                 if len(data) >= _COALESCE_BELOW:
@@ -428,6 +447,14 @@ class WebSocket:
                 stop = pos + 2 + b1
                 if stop > end:
                     break
+                if opcode == _OP_PONG and proto.state is State.OPEN:
+                    # a pong changes nothing in websockets' state: matched to
+                    # its ping here, without its parser (a keep-alive's cost)
+                    event = self._pongs.pop(bytes(view[pos + 2 : stop]), None)
+                    if event is not None:
+                        event.set()
+                    pos = stop
+                    continue
                 # a whole control frame: websockets' parser holds nothing after it
                 proto.receive_data(bytes(view[pos:stop]))
                 self._take_events()
