@@ -73,6 +73,7 @@ from websockets.asyncio.client import connect as ws_connect
 from websockets.typing import Subprotocol
 
 import ros_mobile_bridge as rmb
+from ros_mobile_bridge.wire.foxglove import SUBPROTOCOLS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import DROP_REASONS, check_fates, subscription_counts, versions
@@ -310,21 +311,29 @@ def verdicts(r: dict[str, Any]) -> list[tuple[str, bool]]:
     ]
 
 
-async def bare_client(url: str, counts: list[int], i: int, ready: asyncio.Event) -> None:
+async def bare_client(
+    url: str, counts: list[int], i: int, ready: asyncio.Event, failures: list[str]
+) -> None:
     """One bare connection: subscribe to the scale topic's channel with the
-    Foxglove JSON op, then count the binary frames read."""
-    async with ws_connect(
-        url,
-        subprotocols=[Subprotocol("foxglove.websocket.v1")],
-        max_size=None,
-        compression=None,
-        ping_interval=None,
-    ) as ws:
-        await bare_subscribe(ws)
+    Foxglove JSON op, then count the binary frames read. A failure is
+    recorded (and counts as ready: the run reports it)."""
+    try:
+        async with ws_connect(
+            url,
+            subprotocols=[Subprotocol(s) for s in SUBPROTOCOLS],
+            max_size=None,
+            compression=None,
+            ping_interval=None,
+            open_timeout=60,
+        ) as ws:
+            await bare_subscribe(ws)
+            ready.set()
+            async for message in ws:
+                if isinstance(message, bytes):
+                    counts[i] += 1
+    except Exception as exc:
+        failures.append(f"bare client {i}: {exc!r}")
         ready.set()
-        async for message in ws:
-            if isinstance(message, bytes):
-                counts[i] += 1
 
 
 async def bare_subscribe(ws: ClientConnection) -> None:
@@ -347,8 +356,11 @@ async def run_bare(url: str, n: int, seconds: float) -> dict[str, Any]:
     asyncio: binary frames read per second and this process's CPU over a
     window of ``seconds``, 2 s after all N subscribed."""
     counts = [0] * n
+    failures: list[str] = []
     readies = [asyncio.Event() for _ in range(n)]
-    tasks = [asyncio.create_task(bare_client(url, counts, i, readies[i])) for i in range(n)]
+    tasks = [
+        asyncio.create_task(bare_client(url, counts, i, readies[i], failures)) for i in range(n)
+    ]
     try:
         await asyncio.wait_for(asyncio.gather(*(r.wait() for r in readies)), 120)
         await asyncio.sleep(2.0)
@@ -359,6 +371,7 @@ async def run_bare(url: str, n: int, seconds: float) -> dict[str, Any]:
             "n": n,
             "core": (time.process_time() - cpu0) / elapsed,
             "frames_per_s": (sum(counts) - count0) / elapsed,
+            "failures": failures[:3] + ([f"... {len(failures)} in all"] if failures else []),
         }
     finally:
         for task in tasks:
@@ -514,6 +527,7 @@ def main() -> int:
                     f" {bare['core']:.1%} of a core, {bare['frames_per_s']:,.0f} frames/s;"
                     f" library/bare CPU {last['sub_core'] / bare['core']:.2f}"
                     f" (the library read {last['received_per_s']:,.0f} frames/s)"
+                    + (f"; FAILED: {bare['failures']}" if bare["failures"] else "")
                 )
         for profile in profiles:
             profile.report(f"{backend}, the subscribed window at n={max(args.sizes)}")
