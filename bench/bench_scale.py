@@ -3,7 +3,7 @@ subscription each (stand-alone script).
 
     .venv/bin/python bench/bench_scale.py [--backend asyncio|trio|both]
         [--sizes 10,100,1000] [--seconds 5] [--rate 20] [--max-hz 5] [--json PATH]
-        [--strict]
+        [--strict] [--no-bare] [--profile]
 
 The server is the official Foxglove SDK server in its own process
 (``bench/_peer.py scale RATE``) on 127.0.0.1, with one ``std_msgs/String``
@@ -32,6 +32,17 @@ throttle's bucket of each subscription at the end is tallied too: a bucket
 other than the cap's means the adaptive throttle tightened on the event
 loop's lag.
 
+5. **bare baseline** (unless ``--no-bare``): after the library's sizes, in
+   the same process, on asyncio, N bare ``websockets.asyncio.client``
+   connections to the same server, each subscribing to ``/scale/tick`` with
+   the Foxglove ws-protocol's JSON ``subscribe`` op and counting the binary
+   frames it reads (every frame: no throttle, no decoding). Its CPU over a
+   window of the same length is the floor of holding N such connections in
+   Python; the library's subscribed CPU over it is printed as a ratio.
+
+``--profile`` samples the library's subscribed window at the largest size
+with a SIGPROF sampler (CPU time) and prints each function's share.
+
 With ``--backend both`` each backend runs in its own process (memory one
 run freed stays in the process and would hide the next one's growth).
 
@@ -43,19 +54,26 @@ delivered at <= 50% of a core, <= 0.1 MB per connection.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import collections
 import json
 import os
 import resource
+import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from types import FrameType
 from typing import Any, Final, Literal
 
 import anyio
+from websockets.asyncio.client import ClientConnection
+from websockets.asyncio.client import connect as ws_connect
+from websockets.typing import Subprotocol
 
 import ros_mobile_bridge as rmb
+from ros_mobile_bridge.wire.foxglove import SUBPROTOCOLS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import DROP_REASONS, check_fates, subscription_counts, versions
@@ -122,8 +140,68 @@ async def warm_up(url: str, max_hz: float) -> None:
                 break
 
 
+class Sampler:
+    """A statistical profiler: SIGPROF on this process's CPU time, each
+    sample charged to the interrupted Python function (own) and to every
+    function on its stack (inclusive)."""
+
+    def __init__(self) -> None:
+        self.own: collections.Counter[str] = collections.Counter()
+        self.total: collections.Counter[str] = collections.Counter()
+
+    @staticmethod
+    def where(frame: FrameType) -> str:
+        code = frame.f_code
+        path = code.co_filename
+        for marker in (
+            "site-packages/",
+            "src/",
+            f"python{sys.version_info[0]}.{sys.version_info[1]}/",
+        ):
+            if marker in path:
+                path = path.split(marker, 1)[1]
+                break
+        return f"{path}:{code.co_name}"
+
+    def sample(self, signum: int, frame: FrameType | None) -> None:
+        if frame is None:
+            return
+        self.own[self.where(frame)] += 1
+        seen: set[str] = set()
+        f: FrameType | None = frame
+        while f is not None:
+            where = self.where(f)
+            if where not in seen:
+                seen.add(where)
+                self.total[where] += 1
+            f = f.f_back
+
+    def start(self) -> None:
+        signal.signal(signal.SIGPROF, self.sample)
+        signal.setitimer(signal.ITIMER_PROF, 0.001, 0.001)
+
+    def stop(self) -> None:
+        signal.setitimer(signal.ITIMER_PROF, 0, 0)
+        signal.signal(signal.SIGPROF, signal.SIG_DFL)
+
+    def report(self, title: str) -> None:
+        samples = sum(self.own.values()) or 1
+        print(f"\nprofile, {title}: {samples} CPU samples (1 ms of CPU each)")
+        print("  own time (the function itself):")
+        for where, n in self.own.most_common(20):
+            print(f"    {n / samples:6.1%}  {where}")
+        print("  inclusive (the function and what it calls):")
+        for where, n in self.total.most_common(30):
+            print(f"    {n / samples:6.1%}  {where}")
+
+
 async def run_size(
-    peer: Peer, n: int, seconds: float, rate: float, max_hz: float
+    peer: Peer,
+    n: int,
+    seconds: float,
+    rate: float,
+    max_hz: float,
+    sampler: Sampler | None = None,
 ) -> dict[str, Any]:
     rss_before = rss_bytes()
     connected = 0
@@ -177,7 +255,13 @@ async def run_size(
         await anyio.sleep(2.0)
         count0, cpu0, t0 = sum(delivered), time.process_time(), time.perf_counter()
         received0 = sum(s.stats.received for s in subs)
-        await anyio.sleep(seconds)
+        if sampler is not None:
+            sampler.start()
+        try:
+            await anyio.sleep(seconds)
+        finally:
+            if sampler is not None:
+                sampler.stop()
         elapsed = time.perf_counter() - t0
         result["sub_core"] = (time.process_time() - cpu0) / elapsed
         result["delivered_per_s"] = (sum(delivered) - count0) / elapsed
@@ -227,16 +311,96 @@ def verdicts(r: dict[str, Any]) -> list[tuple[str, bool]]:
     ]
 
 
+async def bare_client(
+    url: str, counts: list[int], i: int, ready: asyncio.Event, failures: list[str]
+) -> None:
+    """One bare connection: subscribe to the scale topic's channel with the
+    Foxglove JSON op, then count the binary frames read. A failure is
+    recorded (and counts as ready: the run reports it)."""
+    try:
+        async with ws_connect(
+            url,
+            subprotocols=[Subprotocol(s) for s in SUBPROTOCOLS],
+            max_size=None,
+            compression=None,
+            ping_interval=None,
+            open_timeout=60,
+        ) as ws:
+            await bare_subscribe(ws)
+            ready.set()
+            async for message in ws:
+                if isinstance(message, bytes):
+                    counts[i] += 1
+    except Exception as exc:
+        failures.append(f"bare client {i}: {exc!r}")
+        ready.set()
+
+
+async def bare_subscribe(ws: ClientConnection) -> None:
+    async for message in ws:
+        if not isinstance(message, str):
+            continue
+        msg = json.loads(message)
+        if msg.get("op") != "advertise":
+            continue
+        for channel in msg["channels"]:
+            if channel["topic"] == SCALE_TOPIC:
+                op = {"op": "subscribe", "subscriptions": [{"id": 1, "channelId": channel["id"]}]}
+                await ws.send(json.dumps(op))
+                return
+    raise RuntimeError(f"the server closed before advertising {SCALE_TOPIC}")
+
+
+async def run_bare(url: str, n: int, seconds: float) -> dict[str, Any]:
+    """N bare ``websockets`` connections subscribed to the scale topic, on
+    asyncio: binary frames read per second and this process's CPU over a
+    window of ``seconds``, 2 s after all N subscribed."""
+    counts = [0] * n
+    failures: list[str] = []
+    readies = [asyncio.Event() for _ in range(n)]
+    tasks = [
+        asyncio.create_task(bare_client(url, counts, i, readies[i], failures)) for i in range(n)
+    ]
+    try:
+        await asyncio.wait_for(asyncio.gather(*(r.wait() for r in readies)), 120)
+        await asyncio.sleep(2.0)
+        count0, cpu0, t0 = sum(counts), time.process_time(), time.perf_counter()
+        await asyncio.sleep(seconds)
+        elapsed = time.perf_counter() - t0
+        return {
+            "n": n,
+            "core": (time.process_time() - cpu0) / elapsed,
+            "frames_per_s": (sum(counts) - count0) / elapsed,
+            "failures": failures[:3] + ([f"... {len(failures)} in all"] if failures else []),
+        }
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+
 async def run_backend(args: argparse.Namespace) -> list[dict[str, Any]]:
     peer = Peer(args.rate)
     try:
         await warm_up(peer.url, args.max_hz)
         results = []
         for n in args.sizes:
-            r = await run_size(peer, n, args.seconds, args.rate, args.max_hz)
+            sampler = Sampler() if args.profile and n == max(args.sizes) else None
+            r = await run_size(peer, n, args.seconds, args.rate, args.max_hz, sampler)
             results.append(r)
+            if sampler is not None:
+                r["profile"] = sampler
             await anyio.sleep(1.0)  # let the server see the previous clients go
         return results
+    finally:
+        peer.close()
+
+
+def bare_baseline(args: argparse.Namespace, n: int) -> dict[str, Any]:
+    """:func:`run_bare` on a fresh scale server, in this process."""
+    peer = Peer(args.rate)
+    try:
+        return asyncio.run(run_bare(peer.url, n, args.seconds))
     finally:
         peer.close()
 
@@ -264,6 +428,10 @@ def run_each_backend(args: argparse.Namespace) -> int:
         ]
         if args.strict:
             argv.append("--strict")
+        if args.no_bare:
+            argv.append("--no-bare")
+        if args.profile:
+            argv.append("--profile")
         part = args.json.with_suffix(f".{backend}.json") if args.json else None
         if part is not None:
             argv += ["--json", str(part)]
@@ -286,6 +454,10 @@ def main() -> int:
     parser.add_argument("--max-hz", type=float, default=5.0, help="each subscription's max_hz")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--strict", action="store_true", help="a missed target fails the run")
+    parser.add_argument("--no-bare", action="store_true", help="skip the bare websockets baseline")
+    parser.add_argument(
+        "--profile", action="store_true", help="profile the subscribed window at the largest size"
+    )
     args = parser.parse_args()
     args.sizes = [int(x) for x in args.sizes.split(",")]
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
@@ -307,6 +479,7 @@ def main() -> int:
     missed: list[str] = []
     for backend in backends:
         results = anyio.run(run_backend, args, backend=backend)
+        profiles = [r.pop("profile") for r in results if "profile" in r]
         out[backend] = results
         print(f"\n{backend}:")
         print(
@@ -346,6 +519,18 @@ def main() -> int:
                 print(f"    {'PASS' if ok else 'MISS'}  {text}")
                 if not ok:
                     missed.append(f"{backend}: {text}")
+            if not args.no_bare:
+                bare = bare_baseline(args, last["n"])
+                last["bare"] = bare
+                print(
+                    f"  bare websockets (asyncio), {bare['n']:,} connections reading every frame:"
+                    f" {bare['core']:.1%} of a core, {bare['frames_per_s']:,.0f} frames/s;"
+                    f" library/bare CPU {last['sub_core'] / bare['core']:.2f}"
+                    f" (the library read {last['received_per_s']:,.0f} frames/s)"
+                    + (f"; FAILED: {bare['failures']}" if bare["failures"] else "")
+                )
+        for profile in profiles:
+            profile.report(f"{backend}, the subscribed window at n={max(args.sizes)}")
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
         print(f"\nwrote {args.json}")

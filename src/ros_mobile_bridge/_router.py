@@ -63,6 +63,8 @@ class Route:
     throttle: AdaptiveThrottle | None
     hints: SubscribeHints
     save_bandwidth: SaveBandwidth = False
+    seen_interval: float | None = None
+    """Its throttle's interval at the last reliability tick (None: not yet)."""
 
 
 class Router:
@@ -130,6 +132,18 @@ class Router:
             if self._inbound >= _READER_YIELD_EVERY:
                 self._inbound = 0
                 await anyio.lowlevel.checkpoint()
+
+    def deliver_now(self, frame: RawFrame) -> bool:
+        """:meth:`EventSink.deliver_now`: the frame to its subscriptions at
+        once, unless control frames wait to be written (the reader's
+        :meth:`deliver` writes them first)."""
+        if self._outbound.outbox.has_control:
+            return False
+        targets = self._offers.get(frame.topic)
+        if targets:
+            for offer in targets:
+                offer(frame)
+        return True
 
     async def _send_control(self) -> None:
         with contextlib.suppress(ConnectError):  # the reader's next read reports it
@@ -450,12 +464,18 @@ class Router:
         lag = monitor.recurring_lag_ms()  # the loop's monitor, not looked up per client
         policy = self._options.breaker
         for topic, routes in self._routes.items():
+            moved = False  # an adaptive throttle's interval changed since the last tick
             for route in routes:
                 breaker = route.sub.breaker
                 throttle = route.throttle
-                if throttle is not None and policy is not None:
-                    throttle.interval_s()  # refresh at_deepest
-                    breaker.observe(lag, throttle.at_deepest)
+                if throttle is not None:
+                    if policy is not None:
+                        throttle.interval_s()  # refresh at_deepest
+                        breaker.observe(lag, throttle.at_deepest)
+                    else:
+                        breaker.poll()
+                    if throttle.interval != route.seen_interval:
+                        moved = True
                 else:
                     breaker.poll()
                 blocked = breaker.state in ("tripped_auto", "tripped_manual")
@@ -464,9 +484,14 @@ class Router:
                     self._breaker_topics.add(topic)
                     self._breaker_changed.set()
                     self._log.warning("subscription to %s: breaker %s", topic, breaker.state)
-            if topic not in self._breaker_topics and topic in self._forwarded_hz:
+            if moved and topic not in self._breaker_topics and topic in self._forwarded_hz:
+                # an adaptive throttle moved: the bridge may send less (or
+                # more); compared only then (merging the hints costs more
+                # than the rest of the tick)
+                for route in routes:
+                    if route.throttle is not None:
+                        route.seen_interval = route.throttle.interval
                 hints = self._merged_hints(topic)
                 if (hints.max_hz, hints.pause_hz) != self._forwarded_hz[topic]:
-                    # an adaptive throttle moved: the bridge may send less (or more)
                     self._breaker_topics.add(topic)
                     self._breaker_changed.set()

@@ -293,27 +293,62 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
         ws = self._ws
         engine = self._engine
         saving = self._saving  # (updated in place)
-        while True:
-            text, message = await ws.receive_raw()
-            if text:  # UTF-8 bytes: the engine reports invalid ones
-                for event in engine.receive_text(message):
-                    await self._handle(event)
-                await self._deliver()
-                continue
-            received_ns = time.time_ns()
-            pending = self._pending
-            for event in engine.receive_binary(message):
-                if type(event) is fx.MessageData:
-                    if saving and event.channel.topic in saving:
-                        await self._saved_frame(event, received_ns)
-                        pending = self._pending  # (a subscribe call may have posted)
+        ws.handle_inline(self._take_inline)
+        try:
+            while True:
+                text, message = await ws.receive_raw()
+                if text:  # UTF-8 bytes: the engine reports invalid ones
+                    for event in engine.receive_text(message):
+                        await self._handle(event)
+                    await self._deliver()
+                    continue
+                received_ns = time.time_ns()
+                pending = self._pending
+                for event in engine.receive_binary(message):
+                    if type(event) is fx.MessageData:
+                        if saving and event.channel.topic in saving:
+                            await self._saved_frame(event, received_ns)
+                            pending = self._pending  # (a subscribe call may have posted)
+                        else:
+                            pending.append(self._frame(event, received_ns))
                     else:
-                        pending.append(self._frame(event, received_ns))
-                else:
-                    await self._handle(event)
-                    pending = self._pending
-            self._pending = []
-            await sink.deliver(pending)  # (self._deliver, inlined on the hot path)
+                        await self._handle(event)
+                        pending = self._pending
+                self._pending = []
+                await sink.deliver(pending)  # (self._deliver, inlined on the hot path)
+        finally:
+            ws.handle_inline(None)
+
+    def _take_inline(self, text: bool, data: bytes, start: int, stop: int) -> bool:
+        """The WebSocket's inline handler: a message-data frame of a live
+        subscription whose decoder is built goes to the sink as soon as it is
+        read (on asyncio in the loop's read callback, with no task step),
+        with no event or event list built. Anything else, anything while
+        events wait for the sink, and a topic in bandwidth mode (its pause
+        is the reader's) is left to the reader (False), unchanged."""
+        if text or self._pending:
+            return False
+        peeked = self._engine.peek_message_data(data, start, stop)
+        if peeked is None:
+            return False
+        channel, log_time_ns, payload = peeked
+        entry = self._decoders.get(channel.id)
+        sink = self._sink
+        if entry is None or entry[0] is not channel or sink is None:
+            return False  # the reader builds the decoder
+        saving = self._saving
+        if saving and channel.topic in saving:
+            return False
+        frame = RawFrame(
+            channel.topic,
+            channel.schema_name,
+            channel.encoding,
+            payload,
+            log_time_ns,
+            time.time_ns(),
+            entry[1],
+        )
+        return sink.deliver_now(frame)
 
     def _frame(self, event: fx.MessageData, received_ns: int) -> RawFrame:
         channel = event.channel

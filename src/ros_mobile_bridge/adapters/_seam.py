@@ -146,6 +146,13 @@ class EventSink(Protocol):
         """One event from outside the reader (a subscribe call, a discovery
         poll), applied at once. Must not block."""
 
+    def deliver_now(self, frame: RawFrame) -> bool:
+        """One frame handed over synchronously where the transport read it
+        (outside the reader's task, while the reader waits with nothing
+        pending), as :meth:`deliver` would hand it. False, having done
+        nothing, when it must go through :meth:`deliver` instead (control
+        frames wait to be written first)."""
+
 
 class Adapter(Protocol):
     """One connection to one bridge. Built connected by the adapter's

@@ -16,6 +16,12 @@ connection failed, ``ClosedResourceError`` after :meth:`aclose`. ``receive``
 does not checkpoint when data is already buffered: the WebSocket's reader
 yields to the loop on its own schedule. Used for plain TCP on asyncio only;
 TLS and trio keep anyio's streams.
+
+Bytes can also be handled where they are read: :attr:`ProtocolStream.inline`,
+a synchronous callable the owner installs, gets each read made while the
+reader waits with nothing buffered, and says how many of its bytes it took;
+the rest is buffered and wakes the reader as usual. A read taken whole costs
+no task step (the WebSocket's fast path uses it for whole data frames).
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ import contextlib
 import os
 import sys
 from collections import deque
+from collections.abc import Callable
 from typing import Final
 
 import anyio
@@ -61,12 +68,22 @@ class _Protocol(asyncio.Protocol):
         self.reader: asyncio.Future[None] | None = None
         self.write_paused = False
         self.drainers: list[asyncio.Future[None]] = []
+        self.inline: Callable[[bytes], int] | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
 
     def data_received(self, data: bytes) -> None:
+        inline = self.inline
+        if inline is not None and self.reader is not None and not self.chunks:
+            # the reader waits with nothing buffered: the owner may take the
+            # bytes here, in this callback, without a task step
+            taken = inline(data)
+            if taken:
+                if taken >= len(data):
+                    return
+                data = data[taken:]
         self.chunks.append(data)
         self.buffered += len(data)
         if self.buffered > _HIGH_WATER and not self.read_paused and self.transport is not None:
@@ -163,6 +180,19 @@ class ProtocolStream(anyio.abc.ByteStream):
             p.read_paused = False
             self._transport.resume_reading()
         return data
+
+    @property
+    def inline(self) -> Callable[[bytes], int] | None:
+        """Called with each read made while a task waits in :meth:`receive`
+        and nothing is buffered, in the event loop's read callback (so it
+        must not block, and must not raise); returns how many leading bytes
+        it took (handled for good). The rest is buffered for :meth:`receive`.
+        None (the default): every read is buffered."""
+        return self._protocol.inline
+
+    @inline.setter
+    def inline(self, handler: Callable[[bytes], int] | None) -> None:
+        self._protocol.inline = handler
 
     @property
     def has_data(self) -> bool:

@@ -4,7 +4,11 @@ by an anyio byte stream, so one implementation serves asyncio and trio.
 The connection is used by exactly one reader task (:meth:`WebSocket.receive`)
 and any number of writers (:meth:`WebSocket.send`), serialised by a lock so
 frames never interleave. Keep-alive is WebSocket ping/pong
-(:meth:`WebSocket.keepalive`, run as a task by the owner)."""
+(:meth:`WebSocket.keepalive`, run as a task by the owner).
+
+On asyncio's plain TCP stream the owner may also take whole data messages
+synchronously where they are read (:meth:`WebSocket.handle_inline`): no task
+step per message for those it takes."""
 
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ from typing import Final
 
 import anyio
 import anyio.abc
+import anyio.lowlevel
 import sniffio
 from websockets.client import ClientProtocol
 from websockets.exceptions import InvalidHandshake, InvalidStatus, InvalidURI
@@ -32,7 +37,17 @@ from websockets.uri import parse_uri
 from .._errors import ConnectError
 from . import _asyncio_stream
 
-__all__ = ["ConnectionLost", "HandshakeRejected", "WebSocket", "connect_websocket"]
+__all__ = [
+    "ConnectionLost",
+    "HandshakeRejected",
+    "InlineHandler",
+    "WebSocket",
+    "connect_websocket",
+]
+
+InlineHandler = Callable[[bool, bytes, int, int], bool]
+"""``handler(is_text, data, start, stop)``: take the message ``data[start:stop]``
+now, or return False (having done nothing) to leave it to the reader."""
 
 _READ_CHUNK: Final = 1 << 20
 _FEED_STEP: Final = 16 * 1024
@@ -59,6 +74,11 @@ unparsed-bytes buffer and cutting the frame out of it cost two copies, a
 buffer regrown to the frame's size and shrunk again, per camera image."""
 _OP_TEXT: Final = 0x1
 _OP_BINARY: Final = 0x2
+_OP_PONG: Final = 0xA
+_FIN_TEXT: Final = 0x81
+_FIN_BINARY: Final = 0x82
+_INLINE_BATCH: Final = 64
+"""Messages one read may hand to the inline handler (:meth:`WebSocket.handle_inline`)."""
 _CONTROL_OPCODES: Final = (0x8, 0x9, 0xA)
 """Close, ping, pong: the control frames websockets accepts."""
 
@@ -111,6 +131,10 @@ class WebSocket:
         frames: Iterable[Frame] = (),
     ) -> None:
         self._stream = stream
+        # asyncio's own stream, or None (an isinstance of an ABC per read costs)
+        self._protocol_stream = (
+            stream if isinstance(stream, _asyncio_stream.ProtocolStream) else None
+        )
         self._proto = protocol
         self._max_size = max_size
         self._send_lock = anyio.Lock(fast_acquire=True)
@@ -124,6 +148,9 @@ class WebSocket:
         self._parts: list[bytes | bytearray | memoryview] | None = None
         self._missing = 0
         self._parts_text = False
+        self._inline: InlineHandler | None = None
+        self.inline_messages = 0
+        """Messages taken by the :meth:`handle_inline` handler so far."""
         self._pongs: dict[bytes, anyio.Event] = {}
         self._closed_reason: ConnectionLost | None = None
         self.subprotocol: str | None = protocol.subprotocol
@@ -160,6 +187,96 @@ class WebSocket:
             self._on_frame(frame)
 
     # -- receiving ---------------------------------------------------------
+    def handle_inline(self, handler: InlineHandler | None) -> None:
+        """Offer whole data messages to ``handler`` as soon as they are read,
+        ahead of :meth:`receive_raw` (None: stop). On asyncio's plain TCP
+        stream that is in the event loop's read callback, while the reader
+        task waits with nothing buffered: a message taken there costs no
+        task step. Elsewhere (trio, TLS) the reader offers them right after
+        its read, before any message object is built.
+
+        Only an unfragmented, unmasked text or binary frame with a length
+        below 64 KiB that starts a read, or follows taken ones in it, is
+        offered, while nothing waits for :meth:`receive_raw`, websockets'
+        parser holds nothing and the connection is open; at most
+        :data:`_INLINE_BATCH` per read, so a large burst still reaches the
+        reader, which lets consumers run between its batches. Anything else
+        (a control frame, a partial frame) and everything after it in the
+        read goes to the reader, in order. A handler that raises is removed;
+        the message goes to the reader."""
+        self._inline = handler
+        stream = self._protocol_stream
+        if stream is not None:
+            stream.inline = None if handler is None else self._take_read
+
+    def _take_read(self, data: bytes) -> int:
+        """:attr:`ProtocolStream.inline`: :meth:`_take_inline`, unless reads
+        come faster than :attr:`read_coalesce` (then the reader takes them,
+        and its read coalescing gathers several frames per wake-up). A read
+        taken whole counts in :attr:`reads`."""
+        window = self.read_coalesce
+        now = 0.0
+        if window:
+            now = time.monotonic()
+            if now - self._last_read < window:
+                return 0
+        taken = self._take_inline(data)
+        self.bytes_received += taken  # (the rest is counted by the reader's read)
+        if taken == len(data):
+            self.reads += 1
+            self._last_read = now
+        return taken
+
+    def _take_inline(self, data: bytes) -> int:
+        """:attr:`ProtocolStream.inline`: how many leading bytes of ``data``
+        the inline handler took (see :meth:`handle_inline`)."""
+        handler = self._inline
+        if (
+            handler is None
+            or not self._fast
+            or self._buf
+            or self._messages
+            or self._more
+            or self._fragment is not None
+            or self._closed_reason is not None
+            or self._proto.state is not State.OPEN
+        ):
+            return 0
+        max_size = self._max_size
+        end = len(data)
+        pos = 0
+        taken = 0
+        while end - pos >= 2 and taken < _INLINE_BATCH:
+            b0 = data[pos]
+            b1 = data[pos + 1]
+            if b0 != _FIN_BINARY and b0 != _FIN_TEXT:
+                break
+            if b1 < 126:  # (also: not masked)
+                start = pos + 2
+                length = b1
+            elif b1 == 126:
+                if end - pos < 4:
+                    break
+                start = pos + 4
+                length = (data[pos + 2] << 8) | data[pos + 3]
+            else:  # 64-bit length or masked: the reader's
+                break
+            stop = start + length
+            if stop > end or (max_size is not None and length > max_size):
+                break
+            try:
+                took = handler(b0 == _FIN_TEXT, data, start, stop)
+            except Exception:
+                self.handle_inline(None)  # a bug: the reader handles it, and reports it
+                break
+            if not took:
+                break
+            taken += 1
+            pos = stop
+        self.inline_messages += taken
+        self.messages_received += taken
+        return pos
+
     async def receive(self) -> str | bytes | bytearray:
         """The next complete message: ``str`` for text, ``bytes`` or a
         ``bytearray`` that nothing else holds for binary.
@@ -207,18 +324,28 @@ class WebSocket:
                 raise self._closed_reason from exc  # type: ignore[misc]
             self.reads += 1
             self.bytes_received += len(data)
-            self._feed(data)
+            inline = self.inline_messages
+            if self._inline is not None and (taken := self._take_inline(data)):
+                data = data[taken:]
+            if data:
+                self._feed(data)
             window = self.read_coalesce
             if window:
                 now = time.monotonic()
                 if held:  # keep waiting while it gathers more than one message
-                    self._steady = len(messages) > 1
+                    self._steady = len(messages) + self.inline_messages - inline > 1
                 else:  # start when reads come faster than the window
                     self._steady = now - self._last_read < window
                 if len(data) >= _COALESCE_BELOW:
                     self._steady = False
                 self._last_read = now
-            await self._flush()  # pongs, close replies: usually nothing, and then no lock
+            if data:
+                await self._flush()  # pongs, close replies: usually nothing, and then no lock
+            elif self._stream_buffered():
+                # all taken inline, and more is buffered (a burst read in many
+                # chunks): the consumers get a turn first (anyio's streams
+                # checkpoint in every receive)
+                await anyio.lowlevel.checkpoint()
         self.messages_received += 1
         return messages.popleft()
 
@@ -234,6 +361,10 @@ class WebSocket:
         messages.clear()
         self.messages_received += len(ready)
         return ready
+
+    def _stream_buffered(self) -> bool:
+        stream = self._protocol_stream
+        return stream is not None and stream.has_data
 
     async def _coalesce(self) -> bool:
         """Under a steady stream, wait until :attr:`read_coalesce` seconds
@@ -395,6 +526,14 @@ class WebSocket:
                 stop = pos + 2 + b1
                 if stop > end:
                     break
+                if opcode == _OP_PONG and proto.state is State.OPEN:
+                    # a pong changes nothing in websockets' state: matched to
+                    # its ping here, without its parser (a keep-alive's cost)
+                    event = self._pongs.pop(bytes(view[pos + 2 : stop]), None)
+                    if event is not None:
+                        event.set()
+                    pos = stop
+                    continue
                 # a whole control frame: websockets' parser holds nothing after it
                 proto.receive_data(bytes(view[pos:stop]))
                 self._take_events()

@@ -209,6 +209,23 @@ class FoxgloveEngine:
         not a live subscription."""
         return self._subs.get(sub_id)
 
+    def peek_message_data(
+        self, data: bytes, start: int, stop: int
+    ) -> tuple[Channel, int, memoryview] | None:
+        """The hot path's look at the binary frame ``data[start:stop]``: for a
+        well-formed message-data frame of a live subscription, its channel,
+        log time and payload (a zero-copy ``memoryview`` of ``data``); None
+        for anything else, which :meth:`receive_binary` then parses and
+        reports. Reads nothing but the header, changes no state, never raises
+        (given ``0 <= start <= stop <= len(data)``)."""
+        if stop - start < MESSAGE_DATA_PAYLOAD_AT or data[start] != OP_MESSAGE_DATA:
+            return None
+        sub_id, log_time = MESSAGE_DATA_HEADER.unpack_from(data, start + 1)
+        channel = self._subs.get(sub_id)
+        if channel is None:
+            return None
+        return channel, log_time, memoryview(data)[start + MESSAGE_DATA_PAYLOAD_AT : stop]
+
     # -- server -> client: text ---------------------------------------------
 
     def receive_text(self, text: str | bytes | bytearray | memoryview) -> list[Event]:

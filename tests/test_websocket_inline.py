@@ -1,0 +1,110 @@
+"""Whole data messages taken where they are read (``WebSocket.handle_inline``,
+asyncio's plain TCP stream): the messages the handler takes and those the
+reader gets are, together, every message in the order sent, whatever the
+reads are cut into and whatever control frames come between; a handler that
+refuses or raises leaves the message to the reader. On both loops (asyncio
+in the read callback, trio right after the reader's read)."""
+
+from __future__ import annotations
+
+import struct
+
+import anyio
+import pytest
+
+from peers.scripted import Peer, scripted_server
+from ros_mobile_bridge.transport import ConnectionLost, connect_websocket
+
+
+def frame(opcode: int, payload: bytes) -> bytes:
+    n = len(payload)
+    if n < 126:
+        head = bytes([0x80 | opcode, n])
+    elif n < 1 << 16:
+        head = bytes([0x80 | opcode, 126]) + struct.pack("!H", n)
+    else:
+        head = bytes([0x80 | opcode, 127]) + struct.pack("!Q", n)
+    return head + payload
+
+
+def messages(count: int, *, plain: bool) -> list[tuple[bool, bytes]]:
+    """Text and binary, small, 16-bit-length and (unless ``plain``) one with
+    a 64-bit length and some the handler refuses (``refuse`` in them)."""
+    out: list[tuple[bool, bytes]] = []
+    for i in range(count):
+        size = 70_000 if i == 10 and not plain else (3, 200, 1000, 0)[i % 4]
+        refused = i % 5 == 3 and not plain
+        body = (b"refuse" if refused else b"take") + str(i).encode().rjust(6, b"0")
+        out.append((i % 3 == 0, (body * (size // len(body) + 1))[: max(size, len(body))]))
+    return out
+
+
+async def run_case(chunk: int, *, raising: bool = False) -> None:
+    sent = messages(40, plain=raising)
+    wire = b""
+    for i, (text, data) in enumerate(sent):
+        wire += frame(0x1 if text else 0x2, data)
+        if i % 7 == 6 and not raising:
+            wire += frame(0x9, b"p%d" % i)  # a ping between messages
+    got: list[tuple[str, bool, bytes]] = []
+    pongs: list[bytes] = []
+    done = anyio.Event()
+
+    async def script(peer: Peer) -> None:
+        assert await peer.recv() == "go"  # the client's reader waits from then on
+        for start in range(0, len(wire), chunk):
+            await peer.send_raw(wire[start : start + chunk])
+            await anyio.sleep(0)
+        await peer.send_raw(frame(0x8, struct.pack("!H", 1000)))
+        # the pongs the client answered with, then its close reply
+        while True:
+            data = await peer.stream.receive()
+            peer.proto.receive_data(data)
+            for event in peer.proto.events_received():
+                if getattr(event, "opcode", None) is not None and event.opcode.name == "PONG":
+                    pongs.append(bytes(event.data))
+            if peer.proto.close_rcvd is not None:
+                break
+        await done.wait()
+
+    def handler(text: bool, data: bytes, start: int, stop: int) -> bool:
+        body = data[start:stop]
+        if b"refuse" in body:
+            return False
+        if raising and b"000013" in body:
+            raise RuntimeError("a bug in the handler")
+        got.append(("inline", text, body))
+        return True
+
+    async with scripted_server(script) as url:
+        ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",), max_size=None)
+        ws.handle_inline(handler)
+        await ws.send("go")
+        with pytest.raises(ConnectionLost):
+            with anyio.fail_after(20):
+                while True:
+                    text, data = await ws.receive_raw()
+                    got.append(("reader", text, bytes(data)))
+        done.set()
+        await ws.aclose(timeout=0.5)
+    assert [(text, data) for _, text, data in got] == sent
+    inline = [data for how, _, data in got if how == "inline"]
+    assert ws.inline_messages == len(inline)
+    if chunk > len(wire):  # one write: its first messages start a read
+        assert inline
+    if raising:  # taken up to the raise; then the reader got all the rest
+        assert [how for how, _, _ in got] == ["inline"] * 13 + ["reader"] * 27
+    else:
+        assert all(b"refuse" not in data for data in inline)
+    assert sorted(pongs) == sorted(
+        b"p%d" % i for i in range(len(sent)) if i % 7 == 6 and not raising
+    )
+
+
+@pytest.mark.parametrize("chunk", [7, 100, 1 << 20])
+async def test_inline_and_reader_together_keep_every_message_in_order(chunk: int) -> None:
+    await run_case(chunk)
+
+
+async def test_a_handler_that_raises_is_removed_and_the_reader_takes_over() -> None:
+    await run_case(1 << 20, raising=True)
