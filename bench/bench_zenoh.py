@@ -405,8 +405,9 @@ async def library(env: Env, kind: Kind, count: int) -> AsyncIterator[Receiver]:
 
         def watch() -> None:
             if inbox is not None:
-                peaks["inbox_samples"] = max(peaks["inbox_samples"], len(inbox._items))
-                peaks["inbox_bytes"] = max(peaks["inbox_bytes"], inbox._bytes)
+                samples, size = inbox.waiting
+                peaks["inbox_samples"] = max(peaks["inbox_samples"], samples)
+                peaks["inbox_bytes"] = max(peaks["inbox_bytes"], size)
             peaks["queue"] = max(peaks["queue"], len(sub._queue))
 
         def fates() -> dict[str, int]:

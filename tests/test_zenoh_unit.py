@@ -20,7 +20,7 @@ from ros_mobile_bridge.adapters._zenoh import (
 )
 from ros_mobile_bridge.codec import CodecRegistry
 from ros_mobile_bridge.transport._zenoh import Inbox
-from ros_mobile_bridge.wire.rmw_zenoh import LivelinessChange, Sample
+from ros_mobile_bridge.wire.rmw_zenoh import LivelinessChange, Samples
 
 # -- the inbox: zenoh's threads to the event loop, in batches ---------------------
 
@@ -39,13 +39,15 @@ async def test_inbox_hands_over_every_item_in_order_in_few_batches() -> None:
     inbox._wake = counting_wake  # type: ignore[method-assign]
 
     def produce() -> None:
-        for i in range(count):
-            inbox.push_data(Sample(1, "k", i.to_bytes(4, "big"), None), 1)
+        for start in range(0, count, 7):  # batches of 7 samples, as a pump hands them over
+            batch = [("k", i.to_bytes(4, "big"), None) for i in range(start, min(start + 7, count))]
+            assert inbox.push_samples(1, batch, len(batch), start) == len(batch)
         inbox.push(LivelinessChange(0, "end", True))
 
     thread = threading.Thread(target=produce)
     thread.start()
     seen: list[int] = []
+    stamps: list[int] = []
     batches = 0
     with anyio.fail_after(30):
         while True:
@@ -56,39 +58,61 @@ async def test_inbox_hands_over_every_item_in_order_in_few_batches() -> None:
                 if type(item) is LivelinessChange:
                     done = True
                 else:
-                    assert type(item) is Sample
-                    seen.append(int.from_bytes(item.payload, "big"))
+                    assert type(item) is Samples
+                    assert item.tag == 1
+                    stamps.append(item.receive_time_ns)
+                    seen.extend(int.from_bytes(payload, "big") for _k, payload, _a in item.samples)
             if done:
                 break
     thread.join()
     assert seen == list(range(count))
+    assert stamps == list(range(0, count, 7))
     assert inbox.overflowed == 0
+    assert inbox.waiting == (0, 0)
     # one wake-up per batch at most, never one per item
     assert wakes <= batches + 1
-    assert batches < count
+    assert batches < count // 7
 
 
 async def test_inbox_bounds_samples_and_bytes_and_counts_the_rest() -> None:
     inbox = Inbox(max_items=10, max_bytes=1000)
-    accepted = [inbox.push_data(Sample(7, "k", b"x", None), 10) for _ in range(15)]
-    assert accepted == [True] * 10 + [False] * 5
-    assert inbox.overflowed == 5
-    assert inbox.overflowed_by_tag == {7: 5}
+    one = [("k", b"x" * 10, None)]
+    accepted = [inbox.push_samples(7, one, 10, 0) for _ in range(8)]
+    assert accepted == [1] * 8
+    assert inbox.waiting == (8, 80)
+    # a batch that passes the bound: what fits is kept, in order; the rest counted
+    batch = [("k", bytes([i]) * 10, None) for i in range(5)]
+    assert inbox.push_samples(7, batch, 50, 0) == 2
+    assert inbox.overflowed == 3
+    assert inbox.overflowed_by_tag == {7: 3}
+    assert inbox.waiting == (10, 100)
+    assert inbox.push_samples(7, one, 10, 0) == 0
+    assert inbox.overflowed_by_tag == {7: 4}
     inbox.push(LivelinessChange(0, "k", True))  # control items are never dropped
-    batch = await inbox.get_batch()
-    assert len(batch) == 11
-    # by bytes: one large sample passes alone, a second does not
-    assert inbox.push_data(Sample(8, "k", b"x", None), 5000)
-    assert not inbox.push_data(Sample(8, "k", b"y", None), 1)
-    assert inbox.overflowed_by_tag == {7: 5, 8: 1}
+    items = await inbox.get_batch()
+    assert [type(item) for item in items] == [Samples] * 9 + [LivelinessChange]
+    kept = items[8]
+    assert isinstance(kept, Samples)
+    assert [payload for _k, payload, _a in kept.samples] == [b"\x00" * 10, b"\x01" * 10]
+    assert inbox.waiting == (0, 0)
+    # by bytes: one large sample passes alone, a second (however small) does not
+    assert inbox.push_samples(8, [("k", b"x" * 5000, None)], 5000, 0) == 1
+    assert inbox.push_samples(8, [("k", b"y", None)], 1, 0) == 0
+    # within one batch too: a small one after the large one that passed alone
+    await inbox.get_batch()
+    both = [("k", b"x" * 5000, None), ("k", b"y", None)]
+    assert inbox.push_samples(9, both, 5001, 0) == 1
+    assert inbox.overflowed_by_tag == {7: 4, 8: 1, 9: 1}
+    assert inbox.overflowed == 6
 
 
 async def test_a_closed_inbox_takes_nothing_more() -> None:
     inbox = Inbox(max_items=10, max_bytes=1000)
-    inbox.push_data(Sample(1, "k", b"x", None), 1)
+    inbox.push_samples(1, [("k", b"x", None)], 1, 0)
     inbox.close()
     inbox.push(LivelinessChange(0, "k", True))
-    assert not inbox.push_data(Sample(1, "k", b"y", None), 1)
+    assert inbox.push_samples(1, [("k", b"y", None)], 1, 0) == 0
+    assert inbox.waiting == (0, 0)
     with anyio.move_on_after(0.2) as scope:
         await inbox.get_batch()
     assert scope.cancelled_caught  # nothing was queued before or after close
