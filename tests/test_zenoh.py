@@ -315,6 +315,47 @@ async def test_a_full_backlog_drops_and_counts(
         assert logged == dropped
 
 
+def pump_threads() -> set[threading.Thread]:
+    """The data subscribers' receiving threads alive now (``transport._zenoh``)."""
+    return {t for t in threading.enumerate() if t.name.startswith("rmb-zenoh-pump-")}
+
+
+async def test_a_burst_arrives_whole_and_in_order_and_its_thread_ends_with_the_client(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    """Samples put back to back (reliable, congestion control BLOCK) reach
+    the subscription every one, in order, each with its own sequence number
+    and source stamp from its attachment, though they cross from zenoh in
+    batches; the subscriber's receiving thread ends with the client."""
+    key = data_key(zenoh_domain, "/burst")
+    sent = 3000
+    before = pump_threads()
+    async with (
+        rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
+        client.subscribe("/burst", schema=STRING, buffer=sent, adaptive=False) as sub,
+    ):
+        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        ours = pump_threads() - before
+        assert len(ours) == 1
+        publisher = raw.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        stamp = time.time_ns()
+        for i in range(1, sent + 1):
+            publisher.put(
+                cdr(STRING, {"data": f"m{i}"}),
+                attachment=rz.encode_attachment(i, stamp + i, bytes(16)),
+            )
+        publisher.undeclare()
+        got = await take(sub, sent)
+        assert [m.sequence for m in got] == list(range(1, sent + 1))
+        assert [m.data["data"] for m in got] == [f"m{i}" for i in range(1, sent + 1)]
+        assert [m.log_time_ns for m in got] == [stamp + i for i in range(1, sent + 1)]
+        received = [m.receive_time_ns for m in got]
+        assert received == sorted(received) and received[0] >= stamp
+        assert sub.stats.delivered == sent
+        assert client.rejections == {}
+    assert not any(thread.is_alive() for thread in ours)
+
+
 async def test_a_service_without_server_fails_with_a_reason(
     zenoh_router: Any, zenoh_domain: int
 ) -> None:

@@ -225,7 +225,11 @@ async def test_fetch_definition_schema_definition_and_recorder_text(
             await first_messages(client, 3)
             # the recorder's task writes what it was handed in its own turn:
             # leaving before it did would cancel it with frames unwritten
-            await until(lambda: recording.stats.messages.get("/described", 0) >= 3, "recorded")
+            await wait_until(
+                lambda: recording.stats.messages.get("/described", 0) >= 3,
+                timeout=15.0,
+                what="recorded",
+            )
         assert recording is not None
     with path.open("rb") as f:
         recorded = list(make_reader(f).iter_messages(log_time_order=False))

@@ -86,6 +86,7 @@ PUMP_CHANNEL_CAPACITY: Final = 256
 PUMP_BATCH: Final = 512
 """The most samples a pump hands to the inbox at once."""
 _PUMP_JOIN_TIMEOUT: Final = 5.0
+"""Seconds :meth:`ZenohSession.aclose` waits for the pumps, all together."""
 
 
 def load_zenoh() -> Any:
@@ -185,10 +186,7 @@ class Inbox:
             if self._closed:
                 return 0
             count = len(samples)
-            if (
-                self._samples + count > self._max_items
-                or self._bytes + size > self._max_bytes
-            ):
+            if self._samples + count > self._max_items or self._bytes + size > self._max_bytes:
                 samples, size = self._fit(tag, samples)
                 count = len(samples)
                 if not count:
@@ -365,12 +363,12 @@ class ZenohSession:
         ``tag``, in batches (see :func:`_pump`). Returns a handle for
         :meth:`undeclare`."""
         z = load_zenoh()
-        subscriber = self._session.declare_subscriber(
+        subscriber: Any = self._session.declare_subscriber(
             key_expr, z.handlers.FifoChannel(PUMP_CHANNEL_CAPACITY)
         )
         pump = threading.Thread(
             target=_pump,
-            args=(subscriber.handler, tag, self.inbox),
+            args=(subscriber.handler, tag, self.inbox, z.ZError),
             name=f"rmb-zenoh-pump-{tag}",
             daemon=True,  # it ends when the subscriber is undeclared (aclose joins it)
         )
@@ -599,14 +597,15 @@ class ZenohSession:
                     obj.undeclare()
             with contextlib.suppress(Exception):
                 session.close()  # type: ignore[no-untyped-call]
+            deadline = time.monotonic() + _PUMP_JOIN_TIMEOUT
             for pump in pumps:  # each ends once its subscriber's channel is closed
-                pump.join(_PUMP_JOIN_TIMEOUT)
+                pump.join(max(deadline - time.monotonic(), 0.0))
 
         with anyio.CancelScope(shield=True):
             await anyio.to_thread.run_sync(close)
 
 
-def _pump(handler: Any, tag: int, inbox: Inbox) -> None:
+def _pump(handler: Any, tag: int, inbox: Inbox, closed: type[Exception]) -> None:
     """A data subscriber's thread: wait for a sample in zenoh's channel
     (without the GIL), then take what else waits there (:data:`PUMP_BATCH`
     at most), copy each out of its zenoh objects and hand the lot to the
@@ -617,9 +616,10 @@ def _pump(handler: Any, tag: int, inbox: Inbox) -> None:
     call Python once per sample; here a sample costs one ``try_recv`` and
     its copies, and a burst one inbox lock and at most one wake-up of the
     event loop. Consecutive samples on one key share one key string (a
-    subscriber usually hears one key). A failure here that is not the
-    channel closing ends the session (``SessionLost``) rather than leaving
-    the subscription silent."""
+    subscriber usually hears one key). ``closed`` is what the channel
+    raises once it is closed and empty (``zenoh.ZError``); any other
+    failure here ends the session (``SessionLost``, the reconnect policy
+    then opens a new one) rather than leaving the subscription silent."""
     recv, try_recv = handler.recv, handler.try_recv
     push = inbox.push_samples
     clock = time.time_ns
@@ -630,7 +630,7 @@ def _pump(handler: Any, tag: int, inbox: Inbox) -> None:
         while open_:
             try:
                 sample = recv()
-            except Exception:  # zenoh.ZError: undeclared or closed, and empty
+            except closed:  # undeclared or closed, and empty
                 return
             received = clock()
             batch: list[SampleData] = []
@@ -649,12 +649,11 @@ def _pump(handler: Any, tag: int, inbox: Inbox) -> None:
                     break
                 try:
                     sample = try_recv()
-                except Exception:  # zenoh.ZError: undeclared or closed
+                except closed:  # undeclared or closed
                     sample, open_ = None, False
             push(tag, batch, size, received)
-    except BaseException as exc:
+    except Exception as exc:
         inbox.push(SessionLost(f"the receiving thread of subscriber {tag} failed: {exc!r}"))
-        raise
 
 
 def _answer_error(query: Any, text: str) -> None:
