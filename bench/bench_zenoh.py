@@ -594,7 +594,8 @@ def report(
     print("  fate of every message sent (sums over the repetitions):")
     print(
         f"  {'case':<20} {'client':<8} {'sent':>9} {'delivered':>9} {'throttle':>8}"
-        f" {'conflated':>9} {'overflow':>8} {'breaker':>7} {'queued':>6} {'inbox full':>10}"
+        f" {'conflated':>9} {'overflow':>8} {'breaker':>7} {'replay':>6} {'queued':>6}"
+        f" {'inbox full':>10}"
         f" {'rejected':>8} {'unaccounted':>11}  verdict"
     )
     problems: list[str] = []
@@ -612,7 +613,7 @@ def report(
                 received = sum(s.fates["received"] for s in runs)
                 print(
                     f"  {LABEL[kind]:<20} {client:<8} {sent:9d} {received:9d}"
-                    f" {'-':>8} {'-':>9} {'-':>8} {'-':>7} {'-':>6} {'-':>10} {'-':>8}"
+                    f" {'-':>8} {'-':>9} {'-':>8} {'-':>7} {'-':>6} {'-':>6} {'-':>10} {'-':>8}"
                     f" {sent - received:11d}  {'FAIL' if failed else 'ok'}"
                 )
                 continue
@@ -625,7 +626,7 @@ def report(
             print(
                 f"  {LABEL[kind]:<20} {client:<8} {sent:9d} {total['delivered']:9d}"
                 + "".join(
-                    f" {total[r]:{w}d}" for r, w in zip(DROP_REASONS, (8, 9, 8, 7), strict=True)
+                    f" {total[r]:{w}d}" for r, w in zip(DROP_REASONS, (8, 9, 8, 7, 6), strict=True)
                 )
                 + f" {total['queued']:6d} {total['backlog_overflow']:10d} {total['rejected']:8d}"
                 f" {sent - counted:11d}  {verdict}"

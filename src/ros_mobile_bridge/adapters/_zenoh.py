@@ -91,11 +91,9 @@ __all__ = [
 _GRAPH_TAG: Final = 0
 _FIXED: Final = rz.ATTACHMENT_SIZE
 _GID_SIZE: Final = 16
-_DELIVER_EVERY: Final = 256
-"""Frames the reader hands up at once while a long batch is read: the
-consumers take them before the next ones are built, so a backlog waits as
-the inbox's plain tuples, not as frames (which the garbage collector would
-walk again and again)."""
+_DELIVER_EVERY: Final = 32
+"""Frames the reader hands up at once while a long batch is read, then lets
+the consumers have a turn (see :meth:`ZenohAdapter._hand_up`)."""
 _HEAD: Final = struct.Struct("<qqB")
 """The fixed attachment form's head: sequence number, source timestamp, gid length."""
 _MAX_KEYS_PER_TOPIC: Final = 16
@@ -374,14 +372,20 @@ class ZenohAdapter(
         self._attach(sink)
         inbox = self._session.inbox
         by_tag = self._by_tag
+        pace_below = self._options.zenoh_backlog // 2
         while True:
             if self._lost is not None:
                 raise ConnectError(f"zenoh: {self._lost}")
             batch = await inbox.get_batch()
             graph_changed = False
             requests: list[rz.Request] = []
+            # samples taken and not yet read: while they and those waiting in
+            # the inbox are under half its bound, the consumers get a turn
+            # every _DELIVER_EVERY frames (see _hand_up)
+            left = sum(len(item.samples) for item in batch if type(item) is rz.Samples)
             for item in batch:
                 if type(item) is rz.Samples:
+                    left -= len(item.samples)
                     sub = by_tag.get(item.tag)
                     if sub is None:
                         pass  # its subscriber was undeclared since
@@ -392,9 +396,12 @@ class ZenohAdapter(
                         for key, payload, attachment in item.samples:
                             self._on_parameter_event(key, payload, attachment)
                     else:
-                        self._on_samples(sub, item.samples, item.receive_time_ns)
-                    if len(self._pending) >= _DELIVER_EVERY:
-                        await self._deliver()
+                        samples, at = item.samples, item.receive_time_ns
+                        for start in range(0, len(samples), _DELIVER_EVERY):
+                            self._on_samples(sub, samples[start : start + _DELIVER_EVERY], at)
+                            if len(self._pending) >= _DELIVER_EVERY:
+                                behind = left + len(samples) - start + inbox.waiting[0]
+                                await self._hand_up(behind < pace_below)
                 elif type(item) is rz.LivelinessChange:
                     graph_changed |= self._on_token(item.key, item.alive)
                 elif type(item) is rz.Reply:
@@ -427,6 +434,23 @@ class ZenohAdapter(
                 await self._on_request(request)
             self._count_refused_queries()
             await self._deliver()
+
+    async def _hand_up(self, pace: bool) -> None:
+        """Hand the frames built so far up; with ``pace``, then give the other
+        tasks (the consumers) a turn before building more. Without it the
+        reader, which builds a frame faster than a consumer decodes one,
+        turns a burst waiting in the inbox into queued frames at once, and a
+        backlog of frames (two objects the garbage collector tracks each)
+        costs full collections, where the inbox's plain tuples cost none.
+        Not backpressure: the reader goes on after the turn whatever the
+        consumers took. The reader paces itself only while the samples
+        behind it are under half the inbox's bound: past that it reads
+        ahead, so that under a lasting overload the subscriptions' own
+        policies (``buffer``, ``dispatch``) choose what is dropped, not the
+        inbox (which can only refuse the newest)."""
+        await self._deliver()
+        if pace:
+            await anyio.lowlevel.checkpoint()
 
     def _on_samples(
         self, sub: Subscription, samples: list[rz.SampleData], receive_time_ns: int
