@@ -223,6 +223,13 @@ async def test_fetch_definition_schema_definition_and_recorder_text(
         path = tmp_path / "described.mcap"
         async with client.record(path, topics=["/described"]) as recording:
             await first_messages(client, 3)
+            # the recorder's task writes what it was handed in its own turn:
+            # leaving before it did would cancel it with frames unwritten
+            await wait_until(
+                lambda: recording.stats.messages.get("/described", 0) >= 3,
+                timeout=15.0,
+                what="recorded",
+            )
         assert recording is not None
     with path.open("rb") as f:
         recorded = list(make_reader(f).iter_messages(log_time_order=False))

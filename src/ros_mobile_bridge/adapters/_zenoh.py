@@ -39,6 +39,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import logging
+import struct
 import time
 from dataclasses import dataclass
 from typing import Any, Final
@@ -89,6 +90,12 @@ __all__ = [
 
 _GRAPH_TAG: Final = 0
 _FIXED: Final = rz.ATTACHMENT_SIZE
+_GID_SIZE: Final = 16
+_DELIVER_EVERY: Final = 32
+"""Frames the reader hands up at once while a long batch is read, then lets
+the consumers have a turn (see :meth:`ZenohAdapter._hand_up`)."""
+_HEAD: Final = struct.Struct("<qqB")
+"""The fixed attachment form's head: sequence number, source timestamp, gid length."""
 _MAX_KEYS_PER_TOPIC: Final = 16
 """Distinct (type, hash) keys remembered per subscribed topic; a sample on a
 further key is decoded without the cache (a hostile peer cannot grow it)."""
@@ -365,23 +372,36 @@ class ZenohAdapter(
         self._attach(sink)
         inbox = self._session.inbox
         by_tag = self._by_tag
+        pace_below = self._options.zenoh_backlog // 2
         while True:
             if self._lost is not None:
                 raise ConnectError(f"zenoh: {self._lost}")
             batch = await inbox.get_batch()
             graph_changed = False
             requests: list[rz.Request] = []
+            # samples taken and not yet read: while they and those waiting in
+            # the inbox are under half its bound, the consumers get a turn
+            # every _DELIVER_EVERY frames (see _hand_up)
+            left = sum(len(item.samples) for item in batch if type(item) is rz.Samples)
             for item in batch:
-                if type(item) is rz.Sample:
+                if type(item) is rz.Samples:
+                    left -= len(item.samples)
                     sub = by_tag.get(item.tag)
                     if sub is None:
-                        pass
+                        pass  # its subscriber was undeclared since
                     elif sub.feedback_of is not None:
-                        self._on_feedback(sub, item.payload, item.attachment)
+                        for _key, payload, attachment in item.samples:
+                            self._on_feedback(sub, payload, attachment)
                     elif sub.parameter_events:
-                        self._on_parameter_event(item.key, item.payload, item.attachment)
+                        for key, payload, attachment in item.samples:
+                            self._on_parameter_event(key, payload, attachment)
                     else:
-                        self._on_sample(sub, item.key, item.payload, item.attachment)
+                        samples, at = item.samples, item.receive_time_ns
+                        for start in range(0, len(samples), _DELIVER_EVERY):
+                            self._on_samples(sub, samples[start : start + _DELIVER_EVERY], at)
+                            if len(self._pending) >= _DELIVER_EVERY:
+                                behind = left + len(samples) - start + inbox.waiting[0]
+                                await self._hand_up(behind < pace_below)
                 elif type(item) is rz.LivelinessChange:
                     graph_changed |= self._on_token(item.key, item.alive)
                 elif type(item) is rz.Reply:
@@ -415,16 +435,74 @@ class ZenohAdapter(
             self._count_refused_queries()
             await self._deliver()
 
+    async def _hand_up(self, pace: bool) -> None:
+        """Hand the frames built so far up; with ``pace``, then give the other
+        tasks (the consumers) a turn before building more. Without it the
+        reader, which builds a frame faster than a consumer decodes one,
+        turns a burst waiting in the inbox into queued frames at once, and a
+        backlog of frames (two objects the garbage collector tracks each)
+        costs full collections, where the inbox's plain tuples cost none.
+        Not backpressure: the reader goes on after the turn whatever the
+        consumers took. The reader paces itself only while the samples
+        behind it are under half the inbox's bound: past that it reads
+        ahead, so that under a lasting overload the subscriptions' own
+        policies (``buffer``, ``dispatch``) choose what is dropped, not the
+        inbox (which can only refuse the newest)."""
+        await self._deliver()
+        if pace:
+            await anyio.lowlevel.checkpoint()
+
+    def _on_samples(
+        self, sub: Subscription, samples: list[rz.SampleData], receive_time_ns: int
+    ) -> None:
+        """A batch of one subscription's data samples to frames, in order.
+        The common case is read here: a key seen before, the topic's type not
+        being described, the fixed attachment form (one ``unpack_from``);
+        anything else goes through :meth:`_on_sample`."""
+        keys = sub.keys
+        held = self._held
+        topic = sub.topic
+        unpack = _HEAD.unpack_from
+        for key, payload, attachment in samples:
+            entry = keys.get(key)
+            if (
+                entry is None
+                or attachment is None
+                or len(attachment) != _FIXED
+                or (held and topic in held)
+            ):
+                self._on_sample(sub, key, payload, attachment, receive_time_ns)
+                continue
+            sequence, stamp, gid_size = unpack(attachment)
+            if gid_size != _GID_SIZE:
+                self._on_sample(sub, key, payload, attachment, receive_time_ns)
+                continue
+            # self._pending each time: an event handed up in between replaces it
+            self._pending.append(
+                RawFrame(
+                    topic,
+                    entry[0],
+                    "cdr",
+                    memoryview(payload),
+                    stamp if stamp > 0 else None,
+                    receive_time_ns,
+                    entry[1],
+                    sequence,
+                )
+            )
+
     def _on_sample(
         self,
         sub: Subscription,
         key: str,
         payload: bytes,
         attachment: bytes | None,
+        receive_time_ns: int | None = None,
     ) -> None:
-        if attachment is not None and len(attachment) == _FIXED and attachment[16] == 0x10:
-            stamp = int.from_bytes(attachment[8:16], "little", signed=True)
-            sequence = int.from_bytes(attachment[:8], "little", signed=True)
+        """One data sample to a frame (or held, or skipped and counted): the
+        general case of :meth:`_on_samples`, and the held samples' replay."""
+        if attachment is not None and len(attachment) == _FIXED and attachment[16] == _GID_SIZE:
+            sequence, stamp, _ = _HEAD.unpack_from(attachment)
         else:  # the older keyed form, or nothing readable
             try:
                 older = rz.decode_attachment(attachment)
@@ -460,7 +538,7 @@ class ZenohAdapter(
                 "cdr",
                 memoryview(payload),
                 stamp if stamp > 0 else None,
-                time.time_ns(),
+                time.time_ns() if receive_time_ns is None else receive_time_ns,
                 decode,
                 sequence,
             )

@@ -2,12 +2,20 @@
 with everything its threads hand over funnelled into one :class:`Inbox` that
 the event loop drains in batches.
 
-Zenoh calls back on its own threads, one call per sample, reply or
-liveliness change. A thread hop per item costs 12-15 us, so the callbacks
-do not hop: they copy what they need out of the zenoh objects, append it to
-the inbox under a lock and wake the event loop only when the inbox was empty
-(one wake-up per batch, however many items it holds). The adapter's reader
-task takes the whole batch at once.
+Zenoh calls back on its own threads, one call per reply or liveliness
+change. A thread hop per item costs 12-15 us, so the callbacks do not hop:
+they copy what they need out of the zenoh objects, append it to the inbox
+under a lock and wake the event loop only when none is pending (one
+wake-up per batch, however many items it holds). The adapter's reader task
+takes the whole batch at once.
+
+Data samples, the hot path, take no callback: each data subscriber has a
+zenoh FIFO channel (:data:`PUMP_CHANNEL_CAPACITY` samples) and a thread of
+its own, its pump (:func:`_pump`), that waits on the channel without the
+GIL and hands what waits there to the inbox as one ``Samples`` item, so a
+burst costs one lock and one wake-up per batch instead of a Python call
+(and a GIL hand-over) per sample. A pump ends when its subscriber is
+undeclared or the session closes; :meth:`ZenohSession.aclose` joins them.
 
 Data samples are bounded (``max_items`` samples and ``max_bytes`` payload
 bytes waiting); past either bound a sample is dropped and counted
@@ -26,7 +34,7 @@ queryable is undeclared or the session closes is answered with an error
 reply then: none is left without an answer.
 
 Lifecycle: every subscriber, liveliness subscriber, queryable and token
-declared here is undeclared, and the session closed, by
+declared here is undeclared (ending the pumps), and the session closed, by
 :meth:`ZenohSession.aclose` (the adapter calls it on every exit path,
 shielded). A callback still declared at interpreter exit would hang the
 process for 20 s or more.
@@ -39,6 +47,7 @@ from __future__ import annotations
 import contextlib
 import json
 import threading
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Final
 
@@ -47,7 +56,16 @@ import anyio.to_thread
 import sniffio
 
 from .._errors import ConnectError, NotSupportedError
-from ..wire.rmw_zenoh import InboxItem, LivelinessChange, QueryDone, Reply, Request, Sample
+from ..wire.rmw_zenoh import (
+    InboxItem,
+    LivelinessChange,
+    QueryDone,
+    Reply,
+    Request,
+    SampleData,
+    Samples,
+    SessionLost,
+)
 
 if TYPE_CHECKING:
     import zenoh
@@ -62,6 +80,13 @@ __all__ = [
 _EXTRA_HINT: Final = "pip install 'ros-mobile-bridge[zenoh]'"
 DEFAULT_MAX_OPEN_QUERIES: Final = 256
 """Queries to this session's queryables that may wait unanswered at once."""
+PUMP_CHANNEL_CAPACITY: Final = 256
+"""Samples zenoh holds for one data subscriber until its pump takes them
+(past it zenoh's receiving thread waits, as it does for a callback)."""
+PUMP_BATCH: Final = 512
+"""The most samples a pump hands to the inbox at once."""
+_PUMP_JOIN_TIMEOUT: Final = 5.0
+"""Seconds :meth:`ZenohSession.aclose` waits for the pumps, all together."""
 
 
 def load_zenoh() -> Any:
@@ -96,12 +121,19 @@ def _threadsafe_caller() -> Callable[[Callable[[], None]], None]:
 class Inbox:
     """Items from zenoh's threads to the event loop, taken in batches.
 
-    ``push`` and ``push_data`` may be called from any thread;
-    :meth:`get_batch` only from the event loop that built the inbox."""
+    ``push`` and ``push_samples`` may be called from any thread;
+    :meth:`get_batch` only from the event loop that built the inbox.
+
+    Data samples are bounded: at most ``max_items`` samples and
+    ``max_bytes`` payload bytes wait (a sample larger than ``max_bytes``
+    still passes when nothing else waits); past either bound a sample is
+    dropped and counted (:attr:`overflowed`, :attr:`overflowed_by_tag`)."""
 
     def __init__(self, max_items: int, max_bytes: int) -> None:
         self._lock = threading.Lock()
         self._items: list[InboxItem] = []
+        self._samples = 0  # data samples waiting (bounded)
+        self._controls = 0  # other items waiting (never dropped)
         self._bytes = 0
         self._max_items = max_items
         self._max_bytes = max_bytes
@@ -116,7 +148,13 @@ class Inbox:
         """Payload bytes of the data samples zenoh handed over (dropped ones
         included); counted per batch taken."""
         self.items_received = 0
-        """Items taken by :meth:`get_batch` plus data samples dropped."""
+        """Data samples and other items taken by :meth:`get_batch`, plus
+        data samples dropped."""
+
+    @property
+    def waiting(self) -> tuple[int, int]:
+        """The data samples and their payload bytes waiting now."""
+        return self._samples, self._bytes
 
     def _wake(self) -> None:  # in the event loop
         self._event.set()
@@ -135,27 +173,51 @@ class Inbox:
             if self._closed:
                 return
             self._items.append(item)
+            self._controls += 1
             self._schedule_wake()
 
-    def push_data(self, item: Sample, size: int) -> bool:
-        """Queue a data sample of ``size`` payload bytes, unless the inbox is
-        full (then count it and return False)."""
+    def push_samples(
+        self, tag: int, samples: list[SampleData], size: int, receive_time_ns: int
+    ) -> int:
+        """Queue the data ``samples`` of the subscriber ``tag`` (``size``: the
+        sum of their payloads' lengths) as one item, oldest first; those past
+        the bounds are dropped and counted. Returns how many were queued."""
         with self._lock:
             if self._closed:
-                return False
-            if len(self._items) >= self._max_items or (
-                self._bytes and self._bytes + size > self._max_bytes
-            ):
-                self.overflowed += 1
-                self.bytes_received += size
-                self.items_received += 1
-                tag = item.tag
-                self.overflowed_by_tag[tag] = self.overflowed_by_tag.get(tag, 0) + 1
-                return False
-            self._items.append(item)
+                return 0
+            count = len(samples)
+            if self._samples + count > self._max_items or self._bytes + size > self._max_bytes:
+                samples, size = self._fit(tag, samples)
+                count = len(samples)
+                if not count:
+                    return 0
+            self._items.append(Samples(tag, samples, receive_time_ns))
+            self._samples += count
             self._bytes += size
             self._schedule_wake()
-            return True
+            return count
+
+    def _fit(self, tag: int, samples: list[SampleData]) -> tuple[list[SampleData], int]:
+        """The samples that fit, sample by sample (with the lock held); the
+        others are counted as overflowed."""
+        kept: list[SampleData] = []
+        waiting, waiting_bytes, size = self._samples, self._bytes, 0
+        for sample in samples:
+            length = len(sample[1])
+            total = waiting_bytes + size
+            if waiting + len(kept) >= self._max_items or (
+                total and total + length > self._max_bytes
+            ):
+                continue
+            kept.append(sample)
+            size += length
+        dropped = len(samples) - len(kept)
+        if dropped:
+            self.overflowed += dropped
+            self.overflowed_by_tag[tag] = self.overflowed_by_tag.get(tag, 0) + dropped
+            self.items_received += dropped
+            self.bytes_received += sum(len(sample[1]) for sample in samples) - size
+        return kept, size
 
     async def get_batch(self) -> list[InboxItem]:
         """Everything queued, oldest first; waits until there is something."""
@@ -165,7 +227,9 @@ class Inbox:
                 if self._items:
                     items, self._items = self._items, []
                     self.bytes_received += self._bytes
-                    self.items_received += len(items)
+                    self.items_received += self._samples + self._controls
+                    self._samples = 0
+                    self._controls = 0
                     self._bytes = 0
                     return items
             await self._event.wait()
@@ -176,6 +240,8 @@ class Inbox:
         with self._lock:
             self._closed = True
             self._items.clear()
+            self._samples = 0
+            self._controls = 0
             self._bytes = 0
 
 
@@ -212,6 +278,7 @@ class ZenohSession:
         self._session = session
         self.inbox = inbox
         self._declared: dict[int, Any] = {}  # handle -> subscriber, queryable or token
+        self._pumps: list[threading.Thread] = []  # the data subscribers' pump threads
         self._handles = 0
         self._queries = 0
         self._closed = False
@@ -292,24 +359,28 @@ class ZenohSession:
     # -- declarations ----------------------------------------------------------
     def subscribe(self, key_expr: str, tag: int) -> int:
         """Declare a data subscriber; its samples arrive as
-        :class:`~ros_mobile_bridge.wire.rmw_zenoh.Sample` items
-        tagged ``tag``. Returns a handle for :meth:`undeclare`."""
-        inbox = self.inbox
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            payload = sample.payload.to_bytes()
-            attachment = sample.attachment
-            inbox.push_data(
-                Sample(
-                    tag,
-                    str(sample.key_expr),
-                    payload,
-                    None if attachment is None else attachment.to_bytes(),
-                ),
-                len(payload),
-            )
-
-        return self._keep(self._session.declare_subscriber(key_expr, on_sample))
+        :class:`~ros_mobile_bridge.wire.rmw_zenoh.Samples` items tagged
+        ``tag``, in batches (see :func:`_pump`). Returns a handle for
+        :meth:`undeclare`."""
+        z = load_zenoh()
+        subscriber: Any = self._session.declare_subscriber(
+            key_expr, z.handlers.FifoChannel(PUMP_CHANNEL_CAPACITY)
+        )
+        pump = threading.Thread(
+            target=_pump,
+            args=(subscriber.handler, tag, self.inbox, z.ZError),
+            name=f"rmb-zenoh-pump-{tag}",
+            daemon=True,  # it ends when the subscriber is undeclared (aclose joins it)
+        )
+        try:
+            pump.start()
+        except BaseException:
+            with contextlib.suppress(Exception):
+                subscriber.undeclare()
+            raise
+        self._pumps = [t for t in self._pumps if t.is_alive()]
+        self._pumps.append(pump)
+        return self._keep(subscriber)
 
     def subscribe_liveliness(self, key_expr: str, tag: int) -> int:
         """Declare a liveliness subscriber with history (the tokens alive now
@@ -513,6 +584,7 @@ class ZenohSession:
         self.inbox.close()
         declared = list(self._declared.values())
         self._declared.clear()
+        pumps, self._pumps = self._pumps, []
         self._queryable_tags.clear()
         with self._served_lock:
             self._live_tags.clear()
@@ -525,9 +597,63 @@ class ZenohSession:
                     obj.undeclare()
             with contextlib.suppress(Exception):
                 session.close()  # type: ignore[no-untyped-call]
+            deadline = time.monotonic() + _PUMP_JOIN_TIMEOUT
+            for pump in pumps:  # each ends once its subscriber's channel is closed
+                pump.join(max(deadline - time.monotonic(), 0.0))
 
         with anyio.CancelScope(shield=True):
             await anyio.to_thread.run_sync(close)
+
+
+def _pump(handler: Any, tag: int, inbox: Inbox, closed: type[Exception]) -> None:
+    """A data subscriber's thread: wait for a sample in zenoh's channel
+    (without the GIL), then take what else waits there (:data:`PUMP_BATCH`
+    at most), copy each out of its zenoh objects and hand the lot to the
+    inbox as one item, stamped with one receive time; until the channel
+    closes (the subscriber is undeclared or the session closed).
+
+    Zenoh's own callback thread would take the GIL, build the arguments and
+    call Python once per sample; here a sample costs one ``try_recv`` and
+    its copies, and a burst one inbox lock and at most one wake-up of the
+    event loop. Consecutive samples on one key share one key string (a
+    subscriber usually hears one key). ``closed`` is what the channel
+    raises once it is closed and empty (``zenoh.ZError``); any other
+    failure here ends the session (``SessionLost``, the reconnect policy
+    then opens a new one) rather than leaving the subscription silent."""
+    recv, try_recv = handler.recv, handler.try_recv
+    push = inbox.push_samples
+    clock = time.time_ns
+    last_expr: Any = None
+    last_key = ""
+    open_ = True
+    try:
+        while open_:
+            try:
+                sample = recv()
+            except closed:  # undeclared or closed, and empty
+                return
+            received = clock()
+            batch: list[SampleData] = []
+            size = 0
+            while sample is not None:
+                expr = sample.key_expr
+                if expr != last_expr:
+                    last_expr, last_key = expr, str(expr)
+                payload = sample.payload.to_bytes()
+                attachment = sample.attachment
+                batch.append(
+                    (last_key, payload, None if attachment is None else attachment.to_bytes())
+                )
+                size += len(payload)
+                if len(batch) >= PUMP_BATCH:
+                    break
+                try:
+                    sample = try_recv()
+                except closed:  # undeclared or closed
+                    sample, open_ = None, False
+            push(tag, batch, size, received)
+    except Exception as exc:
+        inbox.push(SessionLost(f"the receiving thread of subscriber {tag} failed: {exc!r}"))
 
 
 def _answer_error(query: Any, text: str) -> None:

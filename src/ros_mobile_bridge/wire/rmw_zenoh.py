@@ -80,7 +80,8 @@ __all__ = [
     "QueryDone",
     "Reply",
     "Request",
-    "Sample",
+    "SampleData",
+    "Samples",
     "SessionLost",
     "Token",
     "TopicKey",
@@ -500,7 +501,7 @@ def entity_gid(token_key: str) -> bytes:
 
 # -- what a session hands the adapter ----------------------------------------------------------
 # One object per item a Zenoh session's threads hand to the event loop (one per
-# data sample on the hot path). Plain __slots__ classes with a plain __init__:
+# batch of data samples on the hot path). Plain __slots__ classes with a plain __init__:
 # the cheapest typed form to build (a slotted dataclass costs ~20% more, a
 # frozen one ~5x). Read-only by convention.
 class _Item:
@@ -512,17 +513,22 @@ class _Item:
         return f"{type(self).__name__}({fields})"
 
 
-class Sample(_Item):
-    """A data sample of the subscriber tagged ``tag``: its key, payload and
-    attachment (None when the sample carried none)."""
+SampleData: TypeAlias = tuple[str, bytes, bytes | None]
+"""One data sample: its key, payload and attachment (None when it carried none)."""
 
-    __slots__ = ("attachment", "key", "payload", "tag")
 
-    def __init__(self, tag: int, key: str, payload: bytes, attachment: bytes | None) -> None:
+class Samples(_Item):
+    """Data samples of the subscriber tagged ``tag``, oldest first, taken
+    from zenoh together at ``receive_time_ns`` (``time.time_ns()``). One
+    item per batch, not per sample: each sample is a plain
+    :data:`SampleData` tuple (the cheapest form to build and to keep)."""
+
+    __slots__ = ("receive_time_ns", "samples", "tag")
+
+    def __init__(self, tag: int, samples: list[SampleData], receive_time_ns: int) -> None:
         self.tag = tag
-        self.key = key
-        self.payload = payload
-        self.attachment = attachment
+        self.samples = samples
+        self.receive_time_ns = receive_time_ns
 
 
 class LivelinessChange(_Item):
@@ -590,5 +596,5 @@ class SessionLost(_Item):
         self.reason = reason
 
 
-InboxItem: TypeAlias = Sample | LivelinessChange | Reply | Request | QueryDone | SessionLost
+InboxItem: TypeAlias = Samples | LivelinessChange | Reply | Request | QueryDone | SessionLost
 """Anything a session's inbox holds."""
