@@ -27,12 +27,8 @@ import httpx
 from websockets.http11 import Response
 
 from .._errors import ConnectError
-from ._websocket import (
-    HandshakeRejected,
-    WebSocket,
-    client_protocol,
-    handshake_error,
-)
+from ._websocket import WebSocket
+from ._ws_connect import HandshakeRejected, client_protocol, handshake_error
 
 __all__ = ["HttpxByteStream", "connect_httpx_websocket"]
 
