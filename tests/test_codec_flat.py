@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from ros_mobile_bridge._errors import DecodeError, SchemaError
 from ros_mobile_bridge.codec import CodecRegistry, bundled_interface_names
+from ros_mobile_bridge.codec._model import INT_RANGES
 
 REG = CodecRegistry()
 
@@ -34,18 +35,7 @@ def _flat_types() -> list[str]:
 
 
 FLAT = _flat_types()
-INTS = {
-    "byte": (0, 255),
-    "char": (0, 255),
-    "int8": (-(2**7), 2**7 - 1),
-    "uint8": (0, 2**8 - 1),
-    "int16": (-(2**15), 2**15 - 1),
-    "uint16": (0, 2**16 - 1),
-    "int32": (-(2**31), 2**31 - 1),
-    "uint32": (0, 2**32 - 1),
-    "int64": (-(2**63), 2**63 - 1),
-    "uint64": (0, 2**64 - 1),
-}
+INTS = {**INT_RANGES, "byte": (0, 255)}  # ROS 2's octet is unsigned
 TEXT = st.text(st.characters(blacklist_characters="\x00", blacklist_categories=("Cs",)))
 
 

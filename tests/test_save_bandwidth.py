@@ -20,7 +20,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import FAST, wait_port_free, wait_until
+from _util import FAST, take, wait_port_free, wait_until
 from peers.foxglove_sdk import SdkServer, _Listener, image_msg, string_msg
 
 STRING = "std_msgs/msg/String"
@@ -233,12 +233,7 @@ async def test_a_second_subscription_without_the_mode_keeps_the_stream_whole(
             async with robot.subscribe("/both") as whole:
                 for i in range(5):
                     chatter.log(string_msg(f"w{i}"))
-                got = []
-                with anyio.fail_after(5):
-                    async for msg in whole:
-                        got.append(msg.data["data"])
-                        if len(got) == 5:
-                            break
+                got = [msg.data["data"] for msg in await take(whole, 5, timeout=5)]
             assert got == [f"w{i}" for i in range(5)]
             # no pause while the whole stream is wanted
             assert unsubscribes(server, "/both") == 1

@@ -45,6 +45,7 @@ from ._shared import (
     Advertisement,
     Advertisements,
     CannotServe,
+    CountsWebSocket,
     EventSource,
     Publishes,
     codec_registry,
@@ -131,7 +132,7 @@ def _greeted(engine: fx.FoxgloveEngine) -> bool:
     return engine.server_info is not None
 
 
-class FoxgloveAdapter(EventSource, Publishes, CannotServe):
+class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
     """One Foxglove WebSocket connection (see :class:`~.Adapter`)."""
 
     protocol = "foxglove-ws"
@@ -211,14 +212,6 @@ class FoxgloveAdapter(EventSource, Publishes, CannotServe):
 
     def topic_active(self, topic: str) -> bool:
         return topic in self._active or topic in self._paused
-
-    @property
-    def bytes_received(self) -> int:
-        return self._ws.bytes_received
-
-    @property
-    def messages_received(self) -> int:
-        return self._ws.messages_received
 
     def _graph(self) -> GraphChanged:
         return GraphChanged(self.topics, self.services)

@@ -47,6 +47,7 @@ from ._seam import EventSink, GoalEvents, SubscribeHints, TopicState
 from ._shared import (
     Advertisement,
     Advertisements,
+    CountsWebSocket,
     EventSource,
     Publishes,
     check_fits,
@@ -181,6 +182,7 @@ class _Publisher(Advertisement):
 class RosbridgeAdapter(
     EventSource,
     Publishes,
+    CountsWebSocket,
     RosbridgeDiscovery,
     RosbridgeDefinitions,
     RosbridgeServing,
@@ -304,14 +306,6 @@ class RosbridgeAdapter(
             )
 
     # -- the reader --------------------------------------------------------------
-    @property
-    def bytes_received(self) -> int:
-        return self._ws.bytes_received
-
-    @property
-    def messages_received(self) -> int:
-        return self._ws.messages_received
-
     async def run(self, sink: EventSink) -> None:
         self._attach(sink)
         await self._deliver()  # what the first discovery found

@@ -151,6 +151,22 @@ class Publishes:
         return self._pubs.ready_schema(topic)
 
 
+class CountsWebSocket:
+    """The traffic counters of an adapter over one :class:`WebSocket`
+    (``_ws``): ``bytes_received`` and ``messages_received``, as the socket
+    counts them."""
+
+    _ws: WebSocket
+
+    @property
+    def bytes_received(self) -> int:
+        return self._ws.bytes_received
+
+    @property
+    def messages_received(self) -> int:
+        return self._ws.messages_received
+
+
 class EventSource:
     """How an adapter hands its events up. Every emitting place calls
     :meth:`_emit`; the reader passes what collected to the sink after each
