@@ -11,9 +11,22 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-__all__ = ["ROOT", "cli_env", "rmb", "rmb_proc"]
+__all__ = ["PYTHON_SIGINT_DEFAULT", "ROOT", "cli_env", "rmb", "rmb_proc"]
 
 ROOT = Path(__file__).resolve().parent.parent
+
+PYTHON_SIGINT_DEFAULT = [
+    sys.executable,
+    "-c",
+    "import os, signal, sys\n"
+    "signal.signal(signal.SIGINT, signal.SIG_DFL)\n"
+    "os.execv(sys.executable, [sys.executable, *sys.argv[1:]])",
+]
+"""``python`` (append its arguments) started with SIGINT's default action,
+whatever this process's is. A shell's background job (``cmd &`` without job
+control) ignores SIGINT, and a Python started with SIGINT ignored keeps it
+ignored: a test that interrupts the program before the program installs a
+handler of its own needs this."""
 
 
 def cli_env(url: str | None = None, *, drop: Iterable[str] = (), **extra: str) -> dict[str, str]:

@@ -12,11 +12,10 @@ import os
 import pkgutil
 import signal
 import subprocess
-import sys
 
 import pytest
 
-from _cli_run import ROOT, rmb
+from _cli_run import PYTHON_SIGINT_DEFAULT, ROOT, rmb
 from ros_mobile_bridge import _cli
 from ros_mobile_bridge._cli import _app, _table
 
@@ -81,7 +80,7 @@ def _modules_after(argv: list[str]) -> tuple[int, set[str], str]:
         "sys.exit(rc)\n"
     )
     result = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT
+        [*PYTHON_SIGINT_DEFAULT, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT
     )
     line = next(x for x in result.stdout.splitlines() if x.startswith("MODULES "))
     return result.returncode, set(line.split()[1:]), result.stdout
@@ -138,7 +137,7 @@ def test_ctrl_c_while_a_verb_module_is_imported_is_exit_130_without_a_traceback(
         "sys.exit(main(['echo', '/odom', '-u', '127.0.0.1:1']))\n"
     )
     result = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT
+        [*PYTHON_SIGINT_DEFAULT, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT
     )
     assert result.returncode == 130, result.stderr
     assert result.stderr == ""
@@ -148,7 +147,7 @@ def test_ctrl_c_while_python_m_loads_the_command_is_exit_130_without_a_traceback
     # -X importtime says when our first module is in: the signal then lands
     # in the imports of __main__ or of the verb's module
     proc = subprocess.Popen(
-        [sys.executable, "-X", "importtime", "-m", "ros_mobile_bridge", "echo", "/odom"],
+        [*PYTHON_SIGINT_DEFAULT, "-X", "importtime", "-m", "ros_mobile_bridge", "echo", "/odom"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
