@@ -221,7 +221,10 @@ async def test_an_unanswered_request_is_answered_false_when_the_block_exits(
 
         async def call() -> None:
             try:
-                await caller.call_service(name, {"data": True}, timeout=3)
+                # routed through the ROS graph to a just-advertised service, which
+                # can take seconds on a loaded machine; the bridge cannot carry the
+                # failed answer, so the call ends at this timeout
+                await caller.call_service(name, {"data": True}, timeout=8)
             except rmb.ServiceError as exc:
                 outcome.append(exc)
 
@@ -319,7 +322,10 @@ async def test_a_serve_cancelled_while_confirming_answers_its_calls_and_unadvert
 
         async def call() -> None:
             try:
-                await caller.call_service(name, {"data": True}, timeout=3)
+                # routed through the ROS graph to a just-advertised service, which
+                # can take seconds on a loaded machine; the bridge cannot carry the
+                # failed answer, so the call ends at this timeout
+                await caller.call_service(name, {"data": True}, timeout=8)
             except rmb.ServiceError as exc:
                 failures.append(exc)
 
@@ -329,7 +335,7 @@ async def test_a_serve_cancelled_while_confirming_answers_its_calls_and_unadvert
                 await confirming.wait()
             (requests,) = handlers
             tg.start_soon(call)
-            await wait_until(lambda: requests.stats.received == 1, 10)
+            await wait_until(lambda: requests.stats.received == 1, 10, "the call routed here")
             entering.cancel()
         assert entering.cancelled_caught
         stats = requests.stats
