@@ -188,8 +188,10 @@ def test_zenoh_graph_watch_sees_a_talker_come_and_go(
     assert ("added", "topic", "/chatter", "std_msgs/msg/String") in [
         (e["event"], e["kind"], e["name"], e["type"]) for e in came
     ]
-    assert all(e["event"] == "added" for e in came)
-    assert all(e["event"] == "removed" for e in went)
+    # ``rmb node list`` is a node of its own while it runs; the watch may see
+    # it come and go between the talker's events (it did under CI's load)
+    assert all(e["event"] == "added" for e in came if not e["name"].startswith("/rmb_"))
+    assert all(e["event"] == "removed" for e in went if not e["name"].startswith("/rmb_"))
     assert listed.returncode == 0, listed.stderr
     # the talker, and the node of the rmb graph command itself
     names = [json.loads(x)["name"] for x in listed.stdout.splitlines()]
