@@ -5,6 +5,7 @@ from __future__ import annotations
 import socket
 import time
 from collections.abc import Callable
+from typing import Any
 
 import anyio
 
@@ -48,3 +49,19 @@ async def wait_port_free(port: int, timeout: float = 5.0) -> None:
                 if time.monotonic() > deadline:
                     raise
         await anyio.sleep(0.02)
+
+
+async def routed(session: Any, key: str, timeout: float = 10.0) -> None:
+    """Wait until the Zenoh router routes puts on ``key`` to a subscriber,
+    as a raw eclipse-zenoh ``session``'s publisher sees it (its matching
+    status). A fixed sleep after subscribing was not always enough under
+    CI's load: a sample put before the route exists is lost."""
+    publisher = session.declare_publisher(key)
+    try:
+        await wait_until(
+            lambda: publisher.matching_status.matching,
+            timeout,
+            what=f"the router to route {key} to a subscriber",
+        )
+    finally:
+        publisher.undeclare()

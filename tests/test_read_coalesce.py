@@ -4,7 +4,7 @@ SDK server, published from a thread at a fixed rate, into ``async for``.
 
 Under a 1 kHz stream the reader waits up to the window before reading again,
 so several frames are read and handed over at one wake-up, and every message
-still arrives, in order. A slow stream (one message per 25 ms, slower than
+still arrives, in order. A slow stream (one message per 100 ms, slower than
 the window) is read as it arrives: nothing waits. With
 ``read_coalesce=0`` no read ever waits. The transport counts its reads
 (``WebSocket.reads``) and the reads that waited first
@@ -21,6 +21,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.foxglove_sdk import SdkServer, string_msg
 from ros_mobile_bridge.transport import WebSocket
 
@@ -82,7 +83,7 @@ async def receive(
         robot.subscribe(TOPIC, buffer=count) as sub,
     ):
         ws = websocket(robot)
-        await anyio.sleep(0.1)  # the server has the subscription
+        await wait_until(lambda: TOPIC in server.subscribed(), what="the server's subscription")
         reads, waited, direct = ws.reads, ws.coalesced, ws.held_reads
         talker.start()
         got: list[str] = []
@@ -114,11 +115,12 @@ async def test_a_steady_stream_is_read_in_batches_and_arrives_whole(server: SdkS
 
 
 async def test_a_slow_stream_is_read_as_it_arrives(server: SdkServer) -> None:
-    # 25 ms between messages, slower than the 4 ms window: never steady
-    # (a late thread wake-up may put two messages close together once or twice)
-    reads, waited = await receive(server, 40, hz=40.0, window=0.004)
+    # 100 ms between messages, far slower than the 4 ms window: never steady
+    # (a late thread wake-up may put two messages close together once or
+    # twice; at 25 ms apart it did more often on a loaded machine)
+    reads, waited = await receive(server, 20, hz=10.0, window=0.004)
     assert waited <= 2, (reads, waited)
-    assert reads >= 38
+    assert reads >= 18
 
 
 async def test_no_read_waits_when_coalescing_is_off(server: SdkServer) -> None:

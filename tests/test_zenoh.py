@@ -23,7 +23,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import take, wait_until
+from _util import routed, take, wait_until
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 
@@ -172,7 +172,7 @@ async def test_hostile_samples_are_skipped_and_counted(
         rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
         client.subscribe("/chatter", schema=STRING) as sub,
     ):
-        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        await routed(raw, key)
         raw.put(key, good)  # no attachment
         raw.put(key, good, attachment=b"\x00" * 20)  # short
         raw.put(key, good, attachment=attachment(1)[:16] + b"\x0f" + bytes(16))  # bad gid length
@@ -213,7 +213,7 @@ async def test_the_keyed_attachments_of_early_rmw_zenoh_releases_are_read(
         rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
         client.subscribe("/chatter", schema=STRING) as sub,
     ):
-        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        await routed(raw, key)
         keyed = rz.encode_keyed_attachment(1, 1_700_000_000_000_000_001, bytes(16))
         raw.put(key, cdr(STRING, {"data": "keyed"}), attachment=keyed)
         broken = keyed[:50] + b"X" + keyed[51:]  # "source_gid" misspelt
@@ -235,9 +235,9 @@ async def test_a_sample_of_another_definition_is_not_recorded_under_ours(
     path = tmp_path / "z.mcap"
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
         async with client.record(path, topics=["/chatter"], adaptive=False) as rec:
-            await anyio.sleep(0.3)  # the recorder's subscriber reaches the router
-            raw.put(foreign, cdr(STRING, {"data": "theirs"}), attachment=attachment(1))
             key = data_key(zenoh_domain, "/chatter")
+            await routed(raw, key)
+            raw.put(foreign, cdr(STRING, {"data": "theirs"}), attachment=attachment(1))
             raw.put(key, cdr(STRING, {"data": "ours"}), attachment=attachment(2))
             await wait_until(
                 lambda: rec.stats.total + sum(rec.stats.skipped.values()) >= 2,
@@ -292,7 +292,7 @@ async def test_a_full_backlog_drops_and_counts(
         ) as client,
         client.subscribe("/burst", schema=STRING, buffer=1000) as sub,
     ):
-        await anyio.sleep(0.3)
+        await routed(raw, key)
         publisher = raw.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         # block the event loop while the samples arrive, as a slow consumer would
         for i in range(sent):
@@ -334,7 +334,7 @@ async def test_a_burst_arrives_whole_and_in_order_and_its_thread_ends_with_the_c
         rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
         client.subscribe("/burst", schema=STRING, buffer=sent, adaptive=False) as sub,
     ):
-        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        await routed(raw, key)
         ours = pump_threads() - before
         assert len(ours) == 1
         publisher = raw.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
@@ -374,7 +374,7 @@ async def test_a_waiting_burst_is_read_at_the_consumers_pace_under_half_the_back
         ) as client,
         client.subscribe("/paced", schema=STRING, buffer=sent, adaptive=False) as sub,
     ):
-        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        await routed(raw, key)
         publisher = raw.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         for i in range(1, sent + 1):
             publisher.put(cdr(STRING, {"data": f"m{i}"}), attachment=attachment(i))

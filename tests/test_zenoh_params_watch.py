@@ -19,7 +19,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import routed, wait_until
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
@@ -145,7 +145,7 @@ async def test_hostile_parameter_events_are_counted_not_fatal(
         rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
         client.watch_parameters(["/robot:gain", "/robot:old"]) as updates,
     ):
-        await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+        await routed(raw, key)
         raw.put(key, b"\xff" * 7, attachment=attachment(1))  # garbage CDR
         raw.put(key, good)  # no attachment
         wrong_hash = key.rsplit("/", 1)[0] + f"/RIHS01_{'0' * 64}"
@@ -156,7 +156,7 @@ async def test_hostile_parameter_events_are_counted_not_fatal(
         assert client.rejections == {"decode": 1, "attachment": 1, "malformed": 1}
         # still reading: a user subscription works as before
         async with client.subscribe("/chatter", schema=STRING) as sub:
-            await anyio.sleep(0.3)
+            await routed(raw, data_key(zenoh_domain, "/chatter", STRING))
             raw.put(
                 data_key(zenoh_domain, "/chatter", STRING),
                 cdr(STRING, {"data": "still here"}),
