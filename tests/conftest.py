@@ -6,11 +6,14 @@ from __future__ import annotations
 import json
 import random
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
 from peers.zenoh_router import ZenohRouter
+
+if TYPE_CHECKING:
+    from peers.foxglove_sdk import SdkServer
 
 _ROS_FIXTURES = frozenset({"ros_peer_env", "ros_graph", "rosbridge", "rosbridge_factory"})
 """The fixtures of tests/peers/ros_fixtures.py: the ROS 2 Jazzy peer environment."""
@@ -52,6 +55,16 @@ def raw(zenoh_router: ZenohRouter) -> Iterator[Any]:
         yield session
     finally:
         session.close()
+
+
+@pytest.fixture
+def server() -> Iterator[SdkServer]:
+    """A fresh Foxglove SDK server on a loopback port (tests/peers/foxglove_sdk.py);
+    a module that needs one set up otherwise defines its own ``server``."""
+    from peers.foxglove_sdk import SdkServer
+
+    with SdkServer() as srv:
+        yield srv
 
 
 @pytest.fixture

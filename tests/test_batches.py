@@ -5,7 +5,6 @@ and cancellation behave as for ``async for msg in sub``."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Any
 
 import anyio
@@ -16,12 +15,6 @@ from _util import wait_until
 from peers.foxglove_sdk import SdkServer, string_msg
 
 TOPIC = "/chatter"
-
-
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
 
 
 def options(**kw: Any) -> rmb.ClientOptions:

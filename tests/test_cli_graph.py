@@ -11,7 +11,7 @@ import signal
 import subprocess
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -130,12 +130,6 @@ def test_changes_are_removals_then_additions_sorted_and_actions_are_read_off_ser
 
 
 # -- Foxglove ----------------------------------------------------------------------------------
-
-
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -37,12 +37,6 @@ def options(**kw: Any) -> rmb.ClientOptions:
     return rmb.ClientOptions(**kw)
 
 
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
-
-
 @pytest.fixture(scope="module")
 def ca() -> trustme.CA:
     return trustme.CA()

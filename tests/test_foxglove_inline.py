@@ -5,21 +5,13 @@ loops; a burst read in one go keeps its order and loses nothing."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Any
 
 import anyio
-import pytest
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
 from peers.foxglove_sdk import SdkServer, string_msg
-
-
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
 
 
 def options(**kw: Any) -> rmb.ClientOptions:

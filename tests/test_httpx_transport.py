@@ -37,12 +37,6 @@ def options(client: httpx.AsyncClient, **kw: Any) -> rmb.ClientOptions:
 
 
 @pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
-
-
-@pytest.fixture
 async def client() -> AsyncIterator[httpx.AsyncClient]:
     async with httpx.AsyncClient() as c:
         yield c

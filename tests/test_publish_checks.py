@@ -7,7 +7,6 @@ with a ROS 2 graph behind it."""
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
 from typing import Any
 
 import anyio
@@ -26,12 +25,6 @@ pytest_plugins = ["peers.ros_fixtures"]
 _unique = itertools.count()
 
 THING = "float64 speed\nstring label\ngeometry_msgs/Vector3 direction\n"
-
-
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
 
 
 def options(**kw: Any) -> rmb.ClientOptions:

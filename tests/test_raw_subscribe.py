@@ -7,7 +7,7 @@ Foxglove a channel whose schema the codec cannot parse still yields no
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -49,12 +49,6 @@ def check_raw(got: list[rmb.Message], sub: rmb.Subscription) -> None:
     assert stats.decode_failures == 0
     assert stats.delivered == len(got)
     assert stats.received >= len(got)
-
-
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
 
 
 async def test_foxglove_raw_messages_are_never_decoded(

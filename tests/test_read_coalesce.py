@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import anyio
@@ -26,12 +25,6 @@ from peers.foxglove_sdk import SdkServer, string_msg
 from ros_mobile_bridge.transport import WebSocket
 
 TOPIC = "/chatter"
-
-
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
 
 
 def options(**kw: Any) -> rmb.ClientOptions:

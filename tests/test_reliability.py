@@ -11,11 +11,9 @@ machine is."""
 from __future__ import annotations
 
 import threading
-from collections.abc import Iterator
 from typing import Any
 
 import anyio
-import pytest
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
@@ -25,12 +23,6 @@ from ros_mobile_bridge.flow import current_monitor
 QUICK_BREAKER = rmb.BreakerPolicy(
     cooldowns_s=(1.5, 3.0), saturation_ms=250, dwell_s=0.0, warmup_s=0.0, probe_s=0.3
 )
-
-
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
 
 
 def saturate(lag_ms: float) -> None:

@@ -58,12 +58,6 @@ class ReplayingServer(SdkServer):
 
 
 @pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
-
-
-@pytest.fixture
 def replaying() -> Iterator[ReplayingServer]:
     srv = ReplayingServer()
     try:

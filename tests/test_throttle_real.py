@@ -19,7 +19,6 @@ import logging
 import struct
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import anyio
@@ -70,12 +69,6 @@ class Camera:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=10)
-
-
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
 
 
 def options(**kw: Any) -> rmb.ClientOptions:
