@@ -170,6 +170,35 @@ async def test_a_replay_on_resubscription_is_skipped_and_counted(
     assert stats.bytes_received == 2 * len(string_msg("first")) + 2 * len(string_msg("second"))
 
 
+async def test_a_stream_of_identical_messages_is_delivered_on_schedule(server: SdkServer) -> None:
+    """Only the first message after a resubscription is checked for a
+    replay: a topic that publishes the same bytes again and again (a
+    status without a stamp, a camera on a still scene with a fixed stamp)
+    loses at most one message per resubscription, never the stream."""
+    chatter = server.channel("/same", STRING)
+    payload = string_msg("ok")
+    stop = threading.Event()
+
+    def publish() -> None:
+        while not stop.wait(0.01):  # 100 Hz
+            chatter.log(payload)
+
+    thread = threading.Thread(target=publish, daemon=True)
+    async with rmb.connect(server.url, options=options()) as robot:
+        async with robot.subscribe("/same", max_hz=20, save_bandwidth=True, adaptive=False) as sub:
+            thread.start()
+            try:
+                got = await take(sub, 4, timeout=10)
+                await wait_until(lambda: subscribes(server, "/same") >= 4)
+            finally:
+                stop.set()
+                thread.join()
+    assert [m.data["data"] for m in got] == ["ok"] * 4
+    stats = sub.stats
+    # one check per resubscription: at most one skipped each time
+    assert stats.dropped_replay <= subscribes(server, "/same") - 1
+
+
 async def test_the_default_mode_delivers_a_replay_again(replaying: ReplayingServer) -> None:
     """Without the mode there is no resubscription and so no replay; the
     first subscription's replay is a message like any other."""

@@ -272,7 +272,9 @@ class Client:
         ahead of time as that wait took lately). A message the
         server replays to the new subscription (a transient-local topic)
         that is byte for byte the one delivered last is skipped and
-        counted in ``stats.dropped_replay``. rosbridge accepts the mode
+        counted in ``stats.dropped_replay`` (only the first message after
+        each resubscription is checked, so a topic whose messages are all
+        alike loses one per resubscription, never the stream). rosbridge accepts the mode
         and changes nothing (``max_hz`` already reaches it as
         ``throttle_rate``); Zenoh accepts it and changes nothing (the cap
         saves CPU only). Several subscriptions to one topic pause only when

@@ -163,13 +163,13 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         self._active: dict[str, int] = {}  # topic -> subscription id
         # save_bandwidth (SubscribeHints.pause_hz): the topics that pause after
         # each message and at what rate they resume; the paused ones (when to
-        # resume, on which channel); the resumed ones (since when) whose next
-        # message is checked against the last one delivered (a replay is
-        # skipped); how long a resumed topic's next message took to come
+        # resume, on which channel); the resumed ones (since when, and whether
+        # their next message is still to be checked against the last one
+        # delivered: one replay at most is skipped per resumption); how long a resumed topic's next message took to come
         # (smoothed: the next resumption is that much earlier)
         self._saving: dict[str, float] = {}
         self._paused: dict[str, tuple[float, fx.Channel]] = {}
-        self._resumed: dict[str, float] = {}
+        self._resumed: dict[str, tuple[float, bool]] = {}
         self._wait: dict[str, float] = {}
         self._last_payload: dict[str, memoryview] = {}
         self._pause_changed = anyio.Event()
@@ -499,7 +499,9 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         """A message on a topic that pauses after each one: skip it when it
         is the server's replay of the message delivered last (the first
         message after resuming, byte for byte the same payload), else hand
-        it up and unsubscribe until the next one is due."""
+        it up and unsubscribe until the next one is due. Only the first
+        message after a resumption is checked: a topic whose messages are
+        all alike loses one per resumption, never all of them."""
         channel = event.channel
         topic = channel.topic
         payload = event.payload
@@ -507,12 +509,14 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         interval = 1.0 / self._saving[topic]
         resumed = self._resumed.pop(topic, None)
         if resumed is not None:
+            since, check = resumed
             last = self._last_payload.get(topic)
-            if last is not None and last.nbytes == payload.nbytes and last == payload:
-                self._resumed[topic] = resumed
-                self._emit(Replayed(topic, payload.nbytes))  # keep waiting for a new one
+            if check and last is not None and last.nbytes == payload.nbytes and last == payload:
+                # keep waiting for the next one, which is delivered whatever it holds
+                self._resumed[topic] = (since, False)
+                self._emit(Replayed(topic, payload.nbytes))
                 return
-            waited = min(now - resumed, interval / 2)
+            waited = min(now - since, interval / 2)
             before = self._wait.get(topic)
             self._wait[topic] = waited if before is None else 0.75 * before + 0.25 * waited
         self._pending.append(self._frame(event, received_ns))
@@ -566,7 +570,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             return
         sub_id, message = self._engine.subscribe(channel.id)
         self._active[topic] = sub_id
-        self._resumed[topic] = anyio.current_time()
+        self._resumed[topic] = (anyio.current_time(), True)
         await self._ws.send(message)
 
     # -- subscriptions ------------------------------------------------------
