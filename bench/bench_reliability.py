@@ -1102,13 +1102,13 @@ def report_throttle(backend: Backend, samples: list[ThrottleSample]) -> list[dic
         f" (medians of {reps} windows)"
     )
     print(
-        f"  {'load':<15} {'client':<18} {'frames/s':>8} {'delivered/s':>11} {'CPU ms/s':>8}"
+        f"  {'load':<15} {'client':<31} {'frames/s':>8} {'delivered/s':>11} {'CPU ms/s':>8}"
         f" {'CPU ms/1000':>11} {'(min)':>7} {'(max)':>7} {'net of idle':>11} {'faults/frame':>12}"
     )
     for r in rows:
         delivered = "-" if r["client"] == "transport" else f"{r['delivered_per_s']:.1f}"
         print(
-            f"  {r['load']:<15} {r['client']:<18} {r['frames_per_s']:8.0f} {delivered:>11}"
+            f"  {r['load']:<15} {r['client']:<31} {r['frames_per_s']:8.0f} {delivered:>11}"
             f" {r['cpu_ms_per_s']:8.1f} {fmt(r['cpu_ms_per_1000'], 11)}"
             f" {fmt(r['cpu_ms_per_1000_min'], 7)} {fmt(r['cpu_ms_per_1000_max'], 7)}"
             f" {fmt(r['cpu_ms_per_1000_net'], 11)} {r['faults_per_frame']:12.1f}"
