@@ -89,8 +89,7 @@ def subscribes(server: SdkServer, topic: str) -> int:
 
 
 def unsubscribes(server: SdkServer, topic: str) -> int:
-    with server.recorder.lock:
-        return server.recorder.unsubscribed.count(topic)
+    return server.unsubscribed().count(topic)
 
 
 # -- arguments ------------------------------------------------------------------

@@ -9,6 +9,8 @@ or again and again. No lag is injected: the lag monitor measures the loop.
   the first message) loses nothing.
 - A loop busy 85 % of the time still tightens the throttle within about a
   second, logs the change at INFO, and relaxes once the loop is calm.
+- ``save_bandwidth="adaptive"`` pauses the server's stream between
+  deliveries while that loop is busy, and not while it is calm.
 
 Frames carry their sequence number in ``header.stamp.sec``, so the tests
 count exactly which frames arrived."""
@@ -225,3 +227,68 @@ async def test_a_loop_busy_85_percent_tightens_within_about_a_second_then_relaxe
     changes = [r.getMessage() for r in caplog.records if r.getMessage().startswith("throttle ")]
     assert any("/camera: full rate ->" in line and "recurring" in line for line in changes)
     assert any("-> full rate" in line for line in changes)
+
+
+async def test_adaptive_save_bandwidth_pauses_the_stream_while_the_loop_is_busy(
+    server: SdkServer,
+) -> None:
+    """``save_bandwidth="adaptive"`` without ``max_hz``: while the loop is
+    calm the server's stream is whole (no pause, every frame in order); a
+    loop busy 85 % of the time tightens the throttle and the client starts
+    unsubscribing between deliveries, so the server stops sending; once the
+    loop is calm again the stream is whole again."""
+    camera = Camera(server)
+    busy = anyio.Event()
+    calm = anyio.Event()
+    seqs: list[int] = []
+    try:
+        async with (
+            rmb.connect(server.url, options=options(breaker=None)) as robot,
+            robot.subscribe("/camera", save_bandwidth="adaptive") as sub,
+            anyio.create_task_group() as tg,
+        ):
+            await wait_until(lambda: "/camera" in server.subscribed(), what="subscribed")
+            camera.start(int(RATE_HZ * 60))
+
+            async def consume() -> None:
+                async for msg in sub:
+                    seqs.append(msg.data["header"]["stamp"]["sec"])
+
+            async def load() -> None:
+                await busy.wait()
+                while not calm.is_set():
+                    time.sleep(0.085)  # the loop is blocked 85 % of the time
+                    await anyio.sleep(0.015)
+
+            tg.start_soon(consume)
+            tg.start_soon(load)
+            await wait_until(lambda: len(seqs) >= 30, timeout=10, what="the stream")
+            # calm: one subscription, never paused, every frame
+            assert server.unsubscribed().count("/camera") == 0
+            assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
+            busy.set()
+            await wait_until(
+                lambda: server.unsubscribed().count("/camera") >= 3,
+                timeout=15,
+                what="the stream paused between deliveries",
+            )
+            assert sub.stats.bucket != "full rate"
+            assert server.subscribed().count("/camera") >= 3  # and resumed each time
+            calm.set()
+            await wait_until(lambda: sub.stats.bucket == "full rate", timeout=20, what="relaxing")
+            # whole again once the relaxed rate reaches the adapter (the
+            # router's next tick; a resumption or two may pause once more):
+            # then 30 frames in a row without a pause, each in order
+            for _ in range(5):
+                paused = server.unsubscribed().count("/camera")
+                start = len(seqs)
+                await wait_until(lambda s=start: len(seqs) >= s + 31, timeout=10, what="frames")
+                if server.unsubscribed().count("/camera") == paused:
+                    break
+            else:
+                raise AssertionError("the stream still pauses after the loop is calm")
+            tail = seqs[start + 1 :]  # the first may follow a pause
+            assert tail == list(range(tail[0], tail[0] + len(tail)))
+            tg.cancel_scope.cancel()
+    finally:
+        camera.stop()

@@ -221,6 +221,10 @@ class SdkServer:
         with self.recorder.lock:
             return list(self.recorder.subscribed)
 
+    def unsubscribed(self) -> list[str]:
+        with self.recorder.lock:
+            return list(self.recorder.unsubscribed)
+
     def publish_parameters(self, values: dict[str, Any]) -> None:
         with self.param_lock:
             self.parameters.update(values)
