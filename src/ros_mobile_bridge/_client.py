@@ -274,11 +274,12 @@ class Client:
         that is byte for byte the one delivered last is skipped and
         counted in ``stats.dropped_replay`` (only the first message after
         each resubscription is checked, so a topic whose messages are all
-        alike loses one per resubscription, never the stream). rosbridge accepts the mode
-        and changes nothing (``max_hz`` already reaches it as
-        ``throttle_rate``); Zenoh accepts it and changes nothing (the cap
-        saves CPU only). Several subscriptions to one topic pause only when
-        every one asks for it. Arguments are checked here, at once."""
+        alike loses one per resubscription, never the stream). On Zenoh
+        the subscriber is undeclared and declared again the same way (no
+        replay there). rosbridge accepts the mode and changes nothing
+        (``max_hz`` already reaches it as ``throttle_rate``). Several
+        subscriptions to one topic pause only when every one asks for it.
+        Arguments are checked here, at once."""
         check_name("topic", topic)
         if schema is not None:
             check_schema(schema)

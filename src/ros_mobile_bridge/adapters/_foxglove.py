@@ -32,6 +32,7 @@ from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket
 from ..wire import foxglove as fx
+from ._pauses import PauseSchedule
 from ._seam import (
     EventSink,
     GoalEvents,
@@ -161,18 +162,10 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         self._topic_infos: list[TopicInfo] = []
         self._wanted: dict[str, SubscribeHints] = {}
         self._active: dict[str, int] = {}  # topic -> subscription id
-        # save_bandwidth (SubscribeHints.pause_hz): the topics that pause after
-        # each message and at what rate they resume; the paused ones (when to
-        # resume, on which channel); the resumed ones (since when, and whether
-        # their next message is still to be checked against the last one
-        # delivered: one replay at most is skipped per resumption); how long a resumed topic's next message took to come
-        # (smoothed: the next resumption is that much earlier)
-        self._saving: dict[str, float] = {}
-        self._paused: dict[str, tuple[float, fx.Channel]] = {}
-        self._resumed: dict[str, tuple[float, bool]] = {}
-        self._wait: dict[str, float] = {}
-        self._last_payload: dict[str, memoryview] = {}
-        self._pause_changed = anyio.Event()
+        # save_bandwidth (SubscribeHints.pause_hz): a paused topic keeps the
+        # channel it paused on; the first message after a resumption may be
+        # the server's replay (foxglove_bridge, transient-local topics)
+        self._pauses: PauseSchedule[fx.Channel] = PauseSchedule()
         self._pubs: Advertisements[_ClientChannel] = Advertisements()
         self._calls: PendingRequests[Any] = PendingRequests()
         self._params: PendingRequests[dict[str, Any]] = PendingRequests()
@@ -211,7 +204,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         )
 
     def topic_active(self, topic: str) -> bool:
-        return topic in self._active or topic in self._paused
+        return topic in self._active or topic in self._pauses.paused
 
     def _graph(self) -> GraphChanged:
         return GraphChanged(self.topics, self.services)
@@ -285,7 +278,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         await self._deliver()
         ws = self._ws
         engine = self._engine
-        saving = self._saving  # (updated in place)
+        saving = self._pauses.rates  # (updated in place)
         ws.handle_inline(self._take_inline)
         try:
             while True:
@@ -329,7 +322,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         sink = self._sink
         if entry is None or entry[0] is not channel or sink is None:
             return False  # the reader builds the decoder
-        saving = self._saving
+        saving = self._pauses.rates
         if saving and channel.topic in saving:
             return False
         frame = RawFrame(
@@ -427,7 +420,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
                 if (
                     topic in self._wanted
                     and topic not in self._active
-                    and topic not in self._paused
+                    and topic not in self._pauses.paused
                 ):
                     await self._subscribe_channel(ch)
             self._emit(self._graph())
@@ -435,11 +428,9 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             self._index_channels((), event.channels)
             for ch in event.channels:
                 sub_id = self._active.get(ch.topic)
-                paused = self._paused.get(ch.topic)
+                paused = self._pauses.paused.get(ch.topic)
                 if paused is not None and paused[1] == ch:
-                    del self._paused[ch.topic]  # resubscribed below if another carries it
-                    self._resumed.pop(ch.topic, None)
-                    self._last_payload.pop(ch.topic, None)
+                    self._pauses.unpause(ch.topic)  # resubscribed below if another carries it
                     self._emit(TopicState(ch.topic, False))
                     other = self._channel_for(ch.topic)
                     if other is not None and ch.topic in self._wanted:
@@ -497,95 +488,54 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
     # -- bandwidth mode (SubscribeHints.pause_hz) -----------------------------
     async def _saved_frame(self, event: fx.MessageData, received_ns: int) -> None:
         """A message on a topic that pauses after each one: skip it when it
-        is the server's replay of the message delivered last (the first
-        message after resuming, byte for byte the same payload), else hand
-        it up and unsubscribe until the next one is due. Only the first
-        message after a resumption is checked: a topic whose messages are
-        all alike loses one per resumption, never all of them."""
+        is the server's replay of the message delivered last, else hand it
+        up and unsubscribe until the next one is due (see
+        :class:`PauseSchedule`)."""
         channel = event.channel
         topic = channel.topic
-        payload = event.payload
         now = anyio.current_time()
-        interval = 1.0 / self._saving[topic]
-        resumed = self._resumed.pop(topic, None)
-        if resumed is not None:
-            since, check = resumed
-            last = self._last_payload.get(topic)
-            if check and last is not None and last.nbytes == payload.nbytes and last == payload:
-                # keep waiting for the next one, which is delivered whatever it holds
-                self._resumed[topic] = (since, False)
-                self._emit(Replayed(topic, payload.nbytes))
-                return
-            waited = min(now - since, interval / 2)
-            before = self._wait.get(topic)
-            self._wait[topic] = waited if before is None else 0.75 * before + 0.25 * waited
+        if not self._pauses.take(topic, now, event.payload):
+            self._emit(Replayed(topic, event.payload.nbytes))  # wait for the next one
+            return
         self._pending.append(self._frame(event, received_ns))
-        self._last_payload[topic] = payload
         sub_id = self._active.pop(topic, None)
         if sub_id is None:  # a late frame after an unsubscribe: nothing to pause
             return
-        # resume as much earlier as the next message took to come lately
-        # (at most half the interval): one arriving before it is due is held
-        # by the subscription's rate cap and delivered on time
-        self._paused[topic] = (now + interval - self._wait.get(topic, 0.0), channel)
-        self._pause_changed.set()
+        self._pauses.pause(topic, now, channel)
         await self._ws.send(self._engine.unsubscribe([sub_id]))
 
     async def _resume_paused(self) -> None:
         """Subscribe each paused topic again when its next message is due
         (the reader's task group runs it)."""
-        while True:
-            if not self._paused:
-                await self._pause_changed.wait()
-                self._pause_changed = anyio.Event()
-                continue
-            now = anyio.current_time()
-            due = min(when for when, _ in self._paused.values())
-            if due > now:
-                changed = self._pause_changed
-                with anyio.move_on_after(due - now):
-                    await changed.wait()
-                if changed.is_set():
-                    self._pause_changed = anyio.Event()
-                continue
-            try:
-                for topic in [t for t, (when, _) in self._paused.items() if when <= now]:
-                    await self._resume(topic)
-            except ConnectError:
-                return  # the reader reports the lost connection
+        try:
+            await self._pauses.run(self._resume)
+        except ConnectError:
+            return  # the reader reports the lost connection
 
-    async def _resume(self, topic: str) -> None:
+    async def _resume(self, topic: str, paused_on: fx.Channel) -> None:
         """Subscribe ``topic`` again after a pause (on the channel that now
         carries it); its first message is checked for a replay."""
-        entry = self._paused.pop(topic, None)
-        if entry is None:
-            return
         channel = self._channel_for(topic)
         if channel is None or topic not in self._wanted:
-            self._last_payload.pop(topic, None)
+            self._pauses.unpause(topic)
             return
-        if self._engine.channels.get(channel.id) is not entry[1]:
+        if self._engine.channels.get(channel.id) is not paused_on:
             await self._subscribe_channel(channel)  # another channel: a fresh start
             self._post()
             return
         sub_id, message = self._engine.subscribe(channel.id)
         self._active[topic] = sub_id
-        self._resumed[topic] = (anyio.current_time(), True)
+        self._pauses.resumed(topic, anyio.current_time())
         await self._ws.send(message)
 
     # -- subscriptions ------------------------------------------------------
     async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
         self._wanted[topic] = hints
-        if hints.pause_hz is not None:
-            self._saving[topic] = hints.pause_hz
-        else:
-            self._saving.pop(topic, None)
-            self._resumed.pop(topic, None)
-            self._last_payload.pop(topic, None)
-            if topic in self._paused:
-                await self._resume(topic)
-                self._resumed.pop(topic, None)
-        if topic in self._active or topic in self._paused:
+        self._pauses.set_rate(topic, hints.pause_hz)
+        if hints.pause_hz is None and (paused := self._pauses.unpause(topic)) is not None:
+            await self._resume(topic, paused[1])
+            self._pauses.unpause(topic)  # no replay check: every message is wanted now
+        if topic in self._active or topic in self._pauses.paused:
             return
         channel = self._channel_for(topic)
         if channel is not None:
@@ -594,11 +544,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
 
     async def unsubscribe(self, topic: str) -> None:
         self._wanted.pop(topic, None)
-        self._saving.pop(topic, None)
-        self._paused.pop(topic, None)  # paused: no server subscription is left
-        self._resumed.pop(topic, None)
-        self._wait.pop(topic, None)
-        self._last_payload.pop(topic, None)
+        self._pauses.forget(topic)  # paused: no server subscription is left
         sub_id = self._active.pop(topic, None)
         if sub_id is not None:
             await self._ws.send(self._engine.unsubscribe([sub_id]))

@@ -59,6 +59,7 @@ from ..codec import same_type_name, type_hash
 from ..flow import PendingRequests, RawFrame, TopicMessage, WireMessage
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
+from ._pauses import PauseSchedule
 from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
 from ._shared import (
     Advertisement,
@@ -185,6 +186,9 @@ class ZenohAdapter(
         self._wanted: dict[str, SubscribeHints] = {}
         self._subs: dict[str, Subscription] = {}
         self._by_tag: dict[int, Subscription] = {}
+        # save_bandwidth: a paused topic's subscriber is undeclared (the
+        # router stops sending) until its next message is due
+        self._pauses: PauseSchedule[None] = PauseSchedule()
         self._pubs: Advertisements[_Publisher] = Advertisements()
         self._client_gids: dict[str, tuple[bytes, int]] = {}  # service -> (gid, token)
         self._call_seq = itertools.count(1)
@@ -358,6 +362,7 @@ class ZenohAdapter(
         lost: ConnectError | None = None
         async with anyio.create_task_group() as group:
             self._describe_group = group  # type descriptions are fetched in its tasks
+            group.start_soon(self._pauses.run, self._resume)
             try:
                 await self._read(sink)
             except ConnectError as exc:
@@ -372,6 +377,7 @@ class ZenohAdapter(
         self._attach(sink)
         inbox = self._session.inbox
         by_tag = self._by_tag
+        saving = self._pauses.rates  # (updated in place)
         pace_below = self._options.zenoh_backlog // 2
         while True:
             if self._lost is not None:
@@ -398,7 +404,10 @@ class ZenohAdapter(
                     else:
                         samples, at = item.samples, item.receive_time_ns
                         for start in range(0, len(samples), _DELIVER_EVERY):
+                            built = len(self._pending)
                             self._on_samples(sub, samples[start : start + _DELIVER_EVERY], at)
+                            if saving and sub.topic in saving and len(self._pending) > built:
+                                self._pause(sub)
                             if len(self._pending) >= _DELIVER_EVERY:
                                 behind = left + len(samples) - start + inbox.waiting[0]
                                 await self._hand_up(behind < pace_below)
@@ -632,7 +641,11 @@ class ZenohAdapter(
     # -- subscriptions --------------------------------------------------------------------
     async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
         self._wanted[topic] = hints
+        self._pauses.set_rate(topic, hints.pause_hz)
         if topic in self._subs:
+            if hints.pause_hz is None and self._pauses.unpause(topic) is not None:
+                await self._resume(topic, None)  # every message is wanted now
+                self._pauses.unpause(topic)
             return
         type_name = hints.schema or self._topic_type(topic)
         announced = self._graph_hash(topic, (rz.EntityKind.PUBLISHER,))
@@ -641,8 +654,7 @@ class ZenohAdapter(
         elif type_name is not None:
             await self._prepare_decoder(topic, type_name)
         tag = next(self._tags)
-        selector = f"{self.domain}/{topic.lstrip('/')}/*/*"
-        handle = self._session.subscribe(selector, tag)
+        handle = self._session.subscribe(self._data_selector(topic), tag)
         sub = Subscription(topic, tag, handle)
         self._subs[topic] = sub
         self._by_tag[tag] = sub
@@ -651,6 +663,35 @@ class ZenohAdapter(
         if topic in self._publishers_of:
             self._emit(TopicState(topic, True))
         self._post()
+
+    def _data_selector(self, topic: str) -> str:
+        return f"{self.domain}/{topic.lstrip('/')}/*/*"
+
+    def _pause(self, sub: Subscription) -> None:
+        """``save_bandwidth``: a message of ``sub`` was taken; undeclare its
+        subscriber until the next one is due. Samples already on their way
+        still arrive under its tag (the rate cap takes them)."""
+        if sub.handle is None:
+            return
+        now = anyio.current_time()
+        self._pauses.take(sub.topic, now)  # times the last resumption (no replays here)
+        self._session.undeclare(sub.handle)
+        sub.handle = None
+        self._pauses.pause(sub.topic, now, None)
+
+    async def _resume(self, topic: str, _: None) -> None:
+        """Declare a paused topic's subscriber again, under the same tag. A
+        failure to declare it ends the session (the client reconnects)."""
+        sub = self._subs.get(topic)
+        if sub is None or sub.handle is not None:
+            self._pauses.unpause(topic)
+            return
+        try:
+            sub.handle = self._session.subscribe(self._data_selector(topic), sub.tag)
+        except Exception as exc:
+            self._session.inbox.push(rz.SessionLost(f"cannot subscribe to {topic} again: {exc}"))
+            return
+        self._pauses.resumed(topic, anyio.current_time())
 
     async def _prepare_decoder(self, topic: str, type_name: str) -> None:
         """Build the type's decoder (and hash) in a worker thread ahead of
@@ -689,7 +730,9 @@ class ZenohAdapter(
             return
         self._by_tag.pop(sub.tag, None)
         self._held.pop(topic, None)
-        self._session.undeclare(sub.handle)
+        self._pauses.forget(topic)
+        if sub.handle is not None:
+            self._session.undeclare(sub.handle)
         if sub.token is not None:
             self._session.undeclare(sub.token)
 

@@ -99,7 +99,8 @@ class ZenohParameterEvents:
         if sub is not None and not self._watched_parameters:
             self._parameter_sub = None
             self._by_tag.pop(sub.tag, None)
-            self._session.undeclare(sub.handle)
+            if sub.handle is not None:
+                self._session.undeclare(sub.handle)
 
     def _on_parameter_event(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         """One ``/parameter_events`` sample (see the module's contract)."""

@@ -42,7 +42,7 @@ def default_domain() -> int:
 class Subscription:
     topic: str
     tag: int
-    handle: int
+    handle: int | None  # None while paused (save_bandwidth)
     token: int | None = None
     feedback_of: str | None = None  # the action whose feedback topic this is
     parameter_events: bool = False  # the internal /parameter_events subscription
