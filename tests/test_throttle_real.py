@@ -73,6 +73,14 @@ class Camera:
             self._thread.join(timeout=10)
 
 
+async def busy_loop(busy: anyio.Event, calm: anyio.Event) -> None:
+    """From ``busy`` until ``calm``, block the event loop 85 % of the time."""
+    await busy.wait()
+    while not calm.is_set():
+        time.sleep(0.085)
+        await anyio.sleep(0.015)
+
+
 def options(**kw: Any) -> rmb.ClientOptions:
     kw.setdefault("zero_twist_on_exit", False)
     return rmb.ClientOptions(**kw)
@@ -192,14 +200,8 @@ async def test_a_loop_busy_85_percent_tightens_within_about_a_second_then_relaxe
                     async for _ in sub:
                         pass
 
-                async def load() -> None:
-                    await busy.wait()
-                    while not calm.is_set():
-                        time.sleep(0.085)  # the loop is blocked 85 % of the time
-                        await anyio.sleep(0.015)
-
                 tg.start_soon(consume)
-                tg.start_soon(load)
+                tg.start_soon(busy_loop, busy, calm)
                 await wait_until(lambda: sub.stats.delivered >= 30, what="the stream")
                 assert sub.stats.bucket == "full rate"
                 start = time.monotonic()
@@ -254,14 +256,8 @@ async def test_adaptive_save_bandwidth_pauses_the_stream_while_the_loop_is_busy(
                 async for msg in sub:
                     seqs.append(msg.data["header"]["stamp"]["sec"])
 
-            async def load() -> None:
-                await busy.wait()
-                while not calm.is_set():
-                    time.sleep(0.085)  # the loop is blocked 85 % of the time
-                    await anyio.sleep(0.015)
-
             tg.start_soon(consume)
-            tg.start_soon(load)
+            tg.start_soon(busy_loop, busy, calm)
             await wait_until(lambda: len(seqs) >= 30, timeout=10, what="the stream")
             # calm: one subscription, never paused, every frame
             assert server.unsubscribed().count("/camera") == 0
