@@ -25,6 +25,8 @@ bytes>``, then reads commands on stdin, one a line:
   ``count`` samples as fast as the loop goes and print ``done <sent> <start>
   <end>`` (``CLOCK_MONOTONIC`` seconds around the puts, comparable with the
   parent's clock), or ``error <text>``;
+* ``paced <string|image> <count> <rate>``: the same, but the puts are paced
+  at ``rate`` a second on a fixed schedule (``bench/bench_bandwidth.py``);
 * ``quit`` (or the end of stdin): undeclare everything, close, exit.
 
 The attachments are built before the puts so that the publisher's own Python
@@ -145,8 +147,9 @@ class Publishers:
             self.tokens.append(self.session.liveliness().declare_token(token_key))
         self.sequence = dict.fromkeys(TOPICS, 0)
 
-    def burst(self, kind: str, count: int) -> str:
-        """Put ``count`` samples of ``kind``; the reply line."""
+    def burst(self, kind: str, count: int, rate: float | None = None) -> str:
+        """Put ``count`` samples of ``kind``, as fast as the loop goes or at
+        ``rate`` a second; the reply line."""
         publisher = self.publishers[kind]
         payload = zenoh.ZBytes(self.payloads[kind])  # one buffer, no copy per put
         gid, first, now = self.gids[kind], self.sequence[kind] + 1, time.time_ns()
@@ -159,7 +162,9 @@ class Publishers:
             time.sleep(0.001)
         put = publisher.put
         start = monotonic()
-        for attachment in attachments:
+        for i, attachment in enumerate(attachments):
+            if rate is not None and (delay := start + i / rate - monotonic()) > 0:
+                time.sleep(delay)
             put(payload, attachment=attachment)
         end = monotonic()
         return f"done {count} {start!r} {end!r}"
@@ -181,6 +186,8 @@ def run_publisher(endpoint: str, domain: int) -> None:
                 break
             if words[0] == "burst" and len(words) == 3 and words[1] in TOPICS:
                 reply = pubs.burst(words[1], int(words[2]))
+            elif words[0] == "paced" and len(words) == 4 and words[1] in TOPICS:
+                reply = pubs.burst(words[1], int(words[2]), float(words[3]))
             else:
                 reply = f"error unknown command {line.strip()!r}"
             print(reply, flush=True)

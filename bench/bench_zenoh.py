@@ -262,13 +262,16 @@ class Publisher:
             raise
         self.sizes: dict[Kind, int] = {"string": int(words[1]), "image": int(words[2])}
 
-    def burst(self, kind: Kind, count: int) -> tuple[int, float, float]:
-        """Have ``count`` samples of ``kind`` put (blocks until they are):
-        ``(sent, start, end)`` of the puts, ``CLOCK_MONOTONIC`` seconds."""
+    def burst(self, kind: Kind, count: int, rate: float | None = None) -> tuple[int, float, float]:
+        """Have ``count`` samples of ``kind`` put, as fast as it goes or at
+        ``rate`` a second (blocks until they are): ``(sent, start, end)`` of
+        the puts, ``CLOCK_MONOTONIC`` seconds."""
         assert self.proc.stdin is not None
-        self.proc.stdin.write(f"burst {kind} {count}\n")
+        command = f"burst {kind} {count}" if rate is None else f"paced {kind} {count} {rate}"
+        self.proc.stdin.write(command + "\n")
         self.proc.stdin.flush()
-        words = read_line(self.proc, REPLY_TIMEOUT, "publisher")
+        timeout = REPLY_TIMEOUT + (0.0 if rate is None else count / rate)
+        words = read_line(self.proc, timeout, "publisher")
         if len(words) != 4 or words[0] != "done":
             raise RuntimeError(f"publisher: {' '.join(words)}")
         return int(words[1]), float(words[2]), float(words[3])
