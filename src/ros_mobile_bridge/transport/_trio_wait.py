@@ -22,14 +22,13 @@ _FAILED = trio.lowlevel.Abort.FAILED
 _SUCCEEDED = trio.lowlevel.Abort.SUCCEEDED
 
 
-async def sleep_until(deadline: float) -> None:
-    """Sleep until ``deadline`` (:func:`trio.current_time`), as
-    :func:`trio.sleep_until` does, and end without raising when the deadline
-    ends the sleep. Cancelled from outside before the deadline, it raises
-    ``Cancelled``; a cancellation from outside that comes once the deadline
-    has passed is taken at the caller's next checkpoint."""
+async def sleep(seconds: float) -> None:
+    """Sleep ``seconds``, as :func:`trio.sleep` does, and end without raising
+    when the deadline ends the sleep. Cancelled from outside before the
+    deadline, it raises ``Cancelled``; a cancellation from outside that comes
+    once the deadline has passed is taken at the caller's next checkpoint."""
     task = trio.lowlevel.current_task()
-    scope = trio.CancelScope(deadline=deadline)
+    scope = trio.CancelScope(deadline=trio.current_time() + seconds)
 
     def abort(_raise_cancel: trio.lowlevel.RaiseCancelT) -> trio.lowlevel.Abort:
         if scope.cancel_called:  # the deadline passed: wake with a value
@@ -41,6 +40,6 @@ async def sleep_until(deadline: float) -> None:
         await trio.lowlevel.wait_task_rescheduled(abort)
 
 
-async def sleep(seconds: float) -> None:
-    """:func:`sleep_until` ``seconds`` from now."""
-    await sleep_until(trio.current_time() + seconds)
+async def sleep_until(deadline: float) -> None:
+    """:func:`sleep` until ``deadline`` (:func:`trio.current_time`)."""
+    await sleep(deadline - trio.current_time())
