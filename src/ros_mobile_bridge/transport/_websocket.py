@@ -373,12 +373,12 @@ class WebSocket:
                 return False  # bytes that arrived before the wait are read at once
             self.coalesced += 1
             await stream.hold(delay)  # reading paused: no wake-up per arriving segment
-        elif self._trio_sleep is not None:
+        else:  # anyio's streams read only when asked
             self.coalesced += 1
-            await self._trio_sleep(delay)  # anyio's streams read only when asked
-        else:
-            self.coalesced += 1
-            await anyio.sleep(delay)
+            if self._trio_sleep is not None:
+                await self._trio_sleep(delay)  # (no Cancelled raised and caught)
+            else:
+                await anyio.sleep(delay)
         return True
 
     def _read_held(self) -> bytes:
