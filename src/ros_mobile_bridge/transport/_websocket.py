@@ -16,7 +16,7 @@ import os
 import socket
 import time
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from typing import Final
 
@@ -146,8 +146,14 @@ class WebSocket:
         # trio's socket under anyio's plain TCP stream: a read that waited
         # first takes the socket's bytes directly (no scheduling round)
         self._held_sock: socket.socket | None = None
-        if isinstance(stream, anyio.abc.SocketStream) and _on_trio():
-            self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
+        # on trio, read coalescing's waits end without an exception (_trio_wait)
+        self._trio_sleep: Callable[[float], Awaitable[None]] | None = None
+        if self._protocol_stream is None and _on_trio():
+            from . import _trio_wait  # (trio is optional: imported once it runs)
+
+            self._trio_sleep = _trio_wait.sleep
+            if isinstance(stream, anyio.abc.SocketStream):
+                self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
         self._steady = False  # read coalescing is on for the next read
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
@@ -361,15 +367,18 @@ class WebSocket:
         delay = self._last_read + self.read_coalesce - time.monotonic()
         if delay <= 0:
             return False
-        stream = self._stream
-        if isinstance(stream, _asyncio_stream.ProtocolStream):
+        stream = self._protocol_stream
+        if stream is not None:
             if stream.has_data:
                 return False  # bytes that arrived before the wait are read at once
             self.coalesced += 1
             await stream.hold(delay)  # reading paused: no wake-up per arriving segment
-        else:
+        else:  # anyio's streams read only when asked
             self.coalesced += 1
-            await anyio.sleep(delay)  # anyio's streams read only when asked
+            if self._trio_sleep is not None:
+                await self._trio_sleep(delay)  # (no Cancelled raised and caught)
+            else:
+                await anyio.sleep(delay)
         return True
 
     def _read_held(self) -> bytes:
