@@ -1,8 +1,8 @@
 """Large data frames (64 KiB and more: camera images) over a real socket, on
 both loops: whatever the reads are cut into, each arrives whole, as one
 ``bytes`` of its size, in order with the small frames and control frames
-around it. On trio's plain TCP socket a large frame's rest is read straight
-into a buffer the connection keeps (``WebSocket.direct_frames`` counts them),
+around it. On a plain TCP socket a large frame's rest is read straight into
+a buffer the connection keeps (``WebSocket.direct_frames`` counts them),
 at most ``_DIRECT_MAX`` bytes (a larger frame is gathered chunk by chunk, and
 the kept buffer never grows past the bound); the end of the stream or a
 cancelled read in the middle of such a frame loses nothing it must not."""
@@ -99,9 +99,9 @@ async def test_large_frames_arrive_whole_as_bytes_in_order(chunk: int, small_bou
         # pieces, and each one under the bound is read straight in
         assert ws.direct_frames == under == 4
         assert 250_000 <= len(ws._direct_buf) <= small_bound
-    else:
-        assert ws.direct_frames == 0
-        assert len(ws._direct_buf) == 0
+    else:  # asyncio reads up to 256 KiB: a frame may come whole in one read
+        assert ws.direct_frames <= under
+        assert len(ws._direct_buf) <= small_bound
 
 
 async def test_the_end_of_the_stream_inside_a_large_frame_ends_the_connection() -> None:
@@ -148,7 +148,7 @@ async def test_a_read_cancelled_inside_a_large_frame_loses_nothing() -> None:
         with anyio.fail_after(10):
             assert await ws.receive_raw() == (False, payload)
             assert await ws.receive_raw() == (True, b"after")
-        assert ws.direct_frames == (1 if on_trio() else 0)
+        assert ws.direct_frames == 1
         await ws.aclose(timeout=0.5)
 
 
@@ -160,8 +160,8 @@ def server() -> Iterator[SdkServer]:
 
 async def test_camera_images_arrive_whole_and_read_only(server: SdkServer) -> None:
     """Images from the official Foxglove SDK server: every one arrives, its
-    pixels intact, as a read-only numpy array (the bytes it views); on trio
-    each was read straight into the connection's kept buffer."""
+    pixels intact, as a read-only numpy array (the bytes it views); each
+    was read straight into the connection's kept buffer."""
     cam = server.channel("/camera", "sensor_msgs/msg/Image")
     t = TYPESTORE.types
     count = 12
@@ -197,6 +197,6 @@ async def test_camera_images_arrive_whole_and_read_only(server: SdkServer) -> No
                     if len(got) == count:
                         break
             ws = robot._conn.adapter._ws  # type: ignore[attr-defined]
-            assert ws.direct_frames == (count if on_trio() else 0)
+            assert ws.direct_frames == count  # larger than any one read
     assert all(np.array_equal(a, b) for a, b in zip(got, images, strict=True))
     assert not any(a.flags.writeable for a in got)

@@ -73,13 +73,13 @@ size: one copy and one buffer of the frame's size per frame, where growing the
 unparsed-bytes buffer and cutting the frame out of it cost two copies, a
 buffer regrown to the frame's size and shrunk again, per camera image."""
 _DIRECT_MAX: Final = 8 * 1024 * 1024
-"""On trio's plain TCP socket a large data frame (see :data:`_ASSEMBLE_FROM`)
-up to this many bytes is read straight from the socket into one buffer the
-connection keeps for the next one (:meth:`WebSocket._read_direct`), then
-copied once into its ``bytes``: no fresh read buffer per socket read (each a
-new mapping of memory to fault in). The kept buffer is the largest such
-frame's size, so at most this many bytes per connection; a larger frame is
-gathered chunk by chunk."""
+"""On a plain TCP socket (asyncio's :class:`~._asyncio_stream.ProtocolStream`,
+trio's socket) a large data frame (see :data:`_ASSEMBLE_FROM`) up to this many
+bytes is read straight from the socket into one buffer the connection keeps
+for the next one (:meth:`WebSocket._read_direct`), then copied once into its
+``bytes``: no fresh read buffer per socket read (each new memory to fault
+in). The kept buffer is the largest such frame's size, so at most this many
+bytes per connection; a larger frame is gathered chunk by chunk."""
 _OP_TEXT: Final = 0x1
 _OP_BINARY: Final = 0x2
 _OP_PONG: Final = 0xA
@@ -172,6 +172,7 @@ class WebSocket:
         if isinstance(stream, anyio.abc.SocketStream) and _on_trio():
             self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
         self._read_size = READ_CHUNK if self._held_sock is None else _TRIO_READ
+        self._direct_reads = self._held_sock is not None or self._protocol_stream is not None
         self._steady = False  # read coalescing is on for the next read
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
@@ -418,26 +419,31 @@ class WebSocket:
 
     async def _read_direct(self) -> None:
         """One read of the large frame being read straight into its buffer
-        (trio's socket, see :data:`_DIRECT_MAX`); queues it as one ``bytes``
-        once whole. Waits for the socket when it has nothing; otherwise
-        yields to the scheduler after the read, as anyio's ``receive`` does.
-        Raises ``EndOfStream`` at the end of the stream, ``OSError`` on an
-        error."""
-        sock = self._held_sock
+        (see :data:`_DIRECT_MAX`); queues it as one ``bytes`` once whole.
+        Waits for the socket when it has nothing; on trio it otherwise yields
+        to the scheduler after the read, as anyio's ``receive`` does. Raises
+        as the stream's ``receive`` does (``EndOfStream`` at the end of the
+        stream, ``OSError`` on an error)."""
         view = self._direct
-        assert sock is not None
         assert view is not None
         filled = self._filled
-        waited = False
-        while True:
-            try:
-                n = sock.recv_into(view[filled:])
-                break
-            except (BlockingIOError, InterruptedError):
-                await anyio.wait_readable(sock)
-                waited = True
-        if not n:
-            raise anyio.EndOfStream
+        stream = self._protocol_stream
+        waited = True
+        if stream is not None:
+            n = await stream.receive_into(view[filled:])
+        else:
+            sock = self._held_sock
+            assert sock is not None
+            waited = False
+            while True:
+                try:
+                    n = sock.recv_into(view[filled:])
+                    break
+                except (BlockingIOError, InterruptedError):
+                    await anyio.wait_readable(sock)
+                    waited = True
+            if not n:
+                raise anyio.EndOfStream
         self.reads += 1
         self.bytes_received += n
         filled += n
@@ -561,8 +567,8 @@ class WebSocket:
                         if length < _ASSEMBLE_FROM:
                             break
                         self._parts_text = opcode == _OP_TEXT
-                        if self._held_sock is not None and length <= _DIRECT_MAX:
-                            # read straight into its buffer from here (trio)
+                        if self._direct_reads and length <= _DIRECT_MAX:
+                            # read straight into its buffer from here
                             self._start_direct(length, view, start, end)
                             buf.clear()
                             return b""
