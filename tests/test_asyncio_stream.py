@@ -343,8 +343,9 @@ async def test_a_read_that_landed_before_a_cancellation_is_counted_next_time(
     peer: RawPeer,
 ) -> None:
     """``receive_into`` cancelled after the socket's read landed in its
-    buffer (the loop read it, the task had not resumed yet): the next call
-    with the same view returns that count, so no byte is lost."""
+    buffer (the loop read it, and buffered a later read, before the task
+    resumed): the next call with the same view returns that count, the one
+    after it the buffered bytes, so no byte is lost or overwritten."""
     stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
     await anyio.to_thread.run_sync(peer.wait)
     target = bytearray(8)
@@ -368,6 +369,9 @@ async def test_a_read_that_landed_before_a_cancellation_is_counted_next_time(
     landed = p.get_buffer(-1)
     landed[:3] = b"xyz"
     p.buffer_updated(3)
+    later = p.get_buffer(-1)  # and a later read, buffered
+    later[:4] = b"more"
+    p.buffer_updated(4)
     task.cancel()
     with pytest.raises(asyncio.CancelledError):
         await task
@@ -375,5 +379,7 @@ async def test_a_read_that_landed_before_a_cancellation_is_counted_next_time(
     assert p.target is None
     with anyio.fail_after(5):  # (nothing more comes from the peer)
         assert await stream.receive_into(view) == 3
-    assert target[:3] == b"xyz"
+        assert target[:3] == b"xyz"
+        assert await stream.receive_into(view[3:]) == 4
+    assert target[:7] == b"xyzmore"
     await stream.aclose()

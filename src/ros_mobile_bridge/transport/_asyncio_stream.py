@@ -229,11 +229,13 @@ class ProtocolStream(anyio.abc.ByteStream):
         read's count from the next call, which must then pass a view
         starting at the same place."""
         p = self._protocol
-        while not p.chunks:
+        while True:
             n = p.target_filled
-            if n:
+            if n:  # (before the buffer: later reads may have been buffered)
                 p.target_filled = 0
                 return n
+            if p.chunks:
+                break
             if self._closed:
                 raise anyio.ClosedResourceError
             if p.eof:
