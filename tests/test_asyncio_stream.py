@@ -4,6 +4,7 @@ WebSocket keeps anyio's stream, which the last test checks."""
 
 from __future__ import annotations
 
+import asyncio
 import socket
 import threading
 import time
@@ -298,3 +299,87 @@ async def test_the_websocket_uses_this_stream_only_on_asyncio(
         ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",))
         await ws.aclose(timeout=0.5)
     assert calls == (["127.0.0.1"] if anyio_backend_name == "asyncio" else [])
+
+
+@asyncio_only
+async def test_receive_into_takes_buffered_bytes_first_then_reads_straight_in(
+    peer: RawPeer,
+) -> None:
+    """Bytes already buffered are copied in (what does not fit stays
+    buffered, in order); with nothing buffered the socket's next read lands
+    in the caller's buffer; the end of the stream raises ``EndOfStream``."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    await anyio.to_thread.run_sync(conn.sendall, b"abcdefgh")
+    with anyio.fail_after(10):
+        while not stream.has_data:
+            await anyio.sleep(0.01)
+    target = bytearray(5)
+    assert await stream.receive_into(memoryview(target)) == 5
+    assert target == b"abcde"
+    assert await stream.receive_into(memoryview(target)) == 3  # the rest of that read
+    assert target[:3] == b"fgh"
+    assert not stream.has_data
+    block = bytes(range(256)) * 1024
+    big = bytearray(len(block))
+    view = memoryview(big)
+    sender = threading.Thread(target=conn.sendall, args=(block,))
+    sender.start()
+    filled = 0
+    with anyio.fail_after(10):
+        while filled < len(block):
+            filled += await stream.receive_into(view[filled:])
+    sender.join()
+    assert big == block
+    assert not stream.has_data  # nothing went through the buffer
+    conn.shutdown(socket.SHUT_WR)
+    with pytest.raises(anyio.EndOfStream), anyio.fail_after(10):
+        await stream.receive_into(view)
+    await stream.aclose()
+
+
+@asyncio_only
+async def test_a_read_that_landed_before_a_cancellation_is_counted_next_time(
+    peer: RawPeer,
+) -> None:
+    """``receive_into`` cancelled after the socket's read landed in its
+    buffer (the loop read it, and buffered a later read, before the task
+    resumed): the next call with the same view returns that count, the one
+    after it the buffered bytes, so no byte is lost or overwritten."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    await anyio.to_thread.run_sync(peer.wait)
+    target = bytearray(8)
+    view = memoryview(target)
+    outcome: list[str] = []
+
+    async def reader() -> None:
+        try:
+            await stream.receive_into(view)
+        except asyncio.CancelledError:
+            outcome.append("cancelled")
+            raise
+
+    task = asyncio.get_running_loop().create_task(reader())
+    with anyio.fail_after(10):
+        while stream._protocol.target is None:
+            await anyio.sleep(0.01)
+    # what the event loop does on a read, then the cancellation before the
+    # reader resumes (asyncio's own: it cancels a task whose wait is over)
+    p = stream._protocol
+    landed = p.get_buffer(-1)
+    landed[:3] = b"xyz"
+    p.buffer_updated(3)
+    later = p.get_buffer(-1)  # and a later read, buffered
+    later[:4] = b"more"
+    p.buffer_updated(4)
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    assert outcome == ["cancelled"]
+    assert p.target is None
+    with anyio.fail_after(5):  # (nothing more comes from the peer)
+        assert await stream.receive_into(view) == 3
+        assert target[:3] == b"xyz"
+        assert await stream.receive_into(view[3:]) == 4
+    assert target[:7] == b"xyzmore"
+    await stream.aclose()

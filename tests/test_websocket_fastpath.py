@@ -231,3 +231,24 @@ def test_a_large_frame_is_gathered_and_joined_once_into_bytes_of_its_size() -> N
     assert ws._parts is None
     assert not ws._buf
     assert ws._fast
+
+
+def test_a_read_inside_a_large_frame_is_never_offered_to_the_inline_handler() -> None:
+    """A read that continues a large frame being gathered can start with
+    bytes that look like a whole small frame (``82 02 'ab'``): they are the
+    large frame's, not a message, and the inline handler never sees them."""
+    size = 200_000
+    payload = bytearray(os.urandom(size))
+    split = 70_000  # the second read starts 70,000 bytes into the wire
+    payload[split - 10 : split - 6] = b"\x82\x02ab"  # (10 header bytes)
+    data = bytes([0x82, 127]) + struct.pack("!Q", size) + bytes(payload)
+    proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=None)
+    ws = WebSocket(None, proto, None)  # type: ignore[arg-type]
+    taken: list[bytes] = []
+    ws.handle_inline(lambda text, buf, start, stop: taken.append(bytes(buf[start:stop])) is None)
+    ws._feed(data[:split])
+    assert ws._parts is not None  # gathering the large frame
+    assert ws._take_inline(data[split:]) == 0
+    ws._feed(data[split:])
+    assert taken == []
+    assert [(text, bytes(p)) for text, p in ws._messages] == [(False, bytes(payload))]

@@ -17,6 +17,12 @@ does not checkpoint when data is already buffered: the WebSocket's reader
 yields to the loop on its own schedule. Used for plain TCP on asyncio only;
 TLS and trio keep anyio's streams.
 
+A large frame's bytes can go straight where they belong:
+:meth:`ProtocolStream.receive_into` has the next read of the socket land in
+the caller's buffer (an ``asyncio.BufferedProtocol`` read), with no
+intermediate ``bytes``; other reads land in one buffer per thread and are
+copied out at their exact size.
+
 Bytes can also be handled where they are read: :attr:`ProtocolStream.inline`,
 a synchronous callable the owner installs, gets each read made while the
 reader waits with nothing buffered, and says how many of its bytes it took;
@@ -30,6 +36,7 @@ import asyncio
 import contextlib
 import os
 import sys
+import threading
 from collections import deque
 from collections.abc import Callable
 from typing import Final
@@ -49,7 +56,24 @@ _HOLD_READ: Final = 64 * 1024
 three more system calls, per read)."""
 
 
-class _Protocol(asyncio.Protocol):
+_READ_SIZE: Final = 256 * 1024
+"""Bytes one read of the socket takes at most (asyncio's own read size)."""
+
+_scratch = threading.local()
+
+
+def _read_buffer() -> memoryview:
+    """This thread's read buffer (:data:`_READ_SIZE` bytes): the event loop
+    reads into it and :meth:`_Protocol.buffer_updated` copies the bytes out
+    at once, so every connection of the thread's loop shares it."""
+    try:
+        buf: memoryview = _scratch.buf
+    except AttributeError:
+        buf = _scratch.buf = memoryview(bytearray(_READ_SIZE))
+    return buf
+
+
+class _Protocol(asyncio.BufferedProtocol):
     """The asyncio side of one :class:`ProtocolStream`: what the event loop
     calls fills the buffer and wakes the waiting reader or writers. Its
     attributes and :meth:`wake_reader`/:meth:`wake_drainers` are internal,
@@ -69,10 +93,26 @@ class _Protocol(asyncio.Protocol):
         self.write_paused = False
         self.drainers: list[asyncio.Future[None]] = []
         self.inline: Callable[[bytes], int] | None = None
+        # ProtocolStream.receive_into: where the next read lands, and how
+        # many bytes it brought (until receive_into takes the count)
+        self.target: memoryview | None = None
+        self.target_filled = 0
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
+
+    def get_buffer(self, sizehint: int) -> memoryview:
+        target = self.target
+        return target if target is not None else _read_buffer()
+
+    def buffer_updated(self, nbytes: int) -> None:
+        if self.target is not None:  # the read landed in receive_into's buffer
+            self.target = None
+            self.target_filled = nbytes
+            self.wake_reader()
+        else:
+            self.data_received(bytes(_read_buffer()[:nbytes]))
 
     def data_received(self, data: bytes) -> None:
         inline = self.inline
@@ -180,6 +220,62 @@ class ProtocolStream(anyio.abc.ByteStream):
             p.read_paused = False
             self._transport.resume_reading()
         return data
+
+    async def receive_into(self, view: memoryview) -> int:
+        """Read up to ``len(view)`` bytes (at least one) into ``view``; returns
+        how many. Bytes already buffered are copied in first; otherwise the
+        next read of the socket lands in ``view`` itself. Same exceptions as
+        :meth:`receive`. A call cancelled after its read landed returns that
+        read's count from the next call, which must then pass a view
+        starting at the same place."""
+        p = self._protocol
+        while True:
+            n = p.target_filled
+            if n:  # (before the buffer: later reads may have been buffered)
+                p.target_filled = 0
+                return n
+            if p.chunks:
+                break
+            if self._closed:
+                raise anyio.ClosedResourceError
+            if p.eof:
+                if p.error is not None:
+                    raise anyio.BrokenResourceError from p.error
+                raise anyio.EndOfStream
+            if p.reader is not None:
+                raise RuntimeError("another task is already reading from this stream")
+            if p.held:
+                self._resume_held()
+            p.target = view
+            p.reader = waiter = p.loop.create_future()
+            try:
+                await waiter
+            finally:
+                p.target = None
+                if p.reader is waiter:
+                    p.reader = None
+        data = p.chunks.popleft()
+        n = len(data)
+        if n > len(view):
+            p.chunks.appendleft(data[len(view) :])
+            n = len(view)
+            view[:] = memoryview(data)[:n]
+        else:
+            view[:n] = data
+        p.buffered -= n
+        self._resume_below_low_water()
+        return n
+
+    def _resume_below_low_water(self) -> None:
+        p = self._protocol
+        if (
+            p.read_paused
+            and not p.held
+            and p.buffered < _LOW_WATER
+            and not self._transport.is_closing()
+        ):
+            p.read_paused = False
+            self._transport.resume_reading()
 
     @property
     def inline(self) -> Callable[[bytes], int] | None:

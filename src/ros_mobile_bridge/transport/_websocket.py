@@ -43,6 +43,13 @@ now, or return False (having done nothing) to leave it to the reader."""
 
 READ_CHUNK: Final = 1 << 20
 """The most bytes one read of the stream asks for (the handshake's reads too)."""
+_TRIO_READ: Final = 64 * 1024
+"""The most bytes one read of trio's plain TCP socket asks for. trio's read
+allocates a buffer of the size asked and shrinks it to what came: 1 MiB is
+above the C allocator's threshold for a fresh mapping of memory, so each such
+read faulted in every page it filled (about 180 page faults per camera image);
+64 KiB is reused memory. A large frame's rest is read straight into its
+buffer (:data:`_DIRECT_MAX`), whatever this size."""
 _FEED_STEP: Final = 16 * 1024
 """Bytes handed to the WebSocket parser at a time. The parser turns all it is
 given into frame objects at once (about 150 bytes of memory each): a 1 MiB
@@ -65,6 +72,14 @@ and joined once, when its last byte arrives, into one ``bytes`` of its exact
 size: one copy and one buffer of the frame's size per frame, where growing the
 unparsed-bytes buffer and cutting the frame out of it cost two copies, a
 buffer regrown to the frame's size and shrunk again, per camera image."""
+_DIRECT_MAX: Final = 8 * 1024 * 1024
+"""On a plain TCP socket (asyncio's :class:`~._asyncio_stream.ProtocolStream`,
+trio's socket) a large data frame (see :data:`_ASSEMBLE_FROM`) up to this many
+bytes is read straight from the socket into one buffer the connection keeps
+for the next one (:meth:`WebSocket._read_direct`), then copied once into its
+``bytes``: no fresh read buffer per socket read (each new memory to fault
+in). The kept buffer is the largest such frame's size, so at most this many
+bytes per connection; a larger frame is gathered chunk by chunk."""
 _OP_TEXT: Final = 0x1
 _OP_BINARY: Final = 0x2
 _OP_PONG: Final = 0xA
@@ -129,6 +144,14 @@ class WebSocket:
         self._parts: list[bytes | bytearray | memoryview] | None = None
         self._missing = 0
         self._parts_text = False
+        # trio: the large frame being read straight into _direct_buf, as a
+        # view of its exact size, and how much of it is filled
+        self._direct: memoryview | None = None
+        self._direct_buf = bytearray()
+        self._filled = 0
+        self.direct_frames = 0
+        """Large frames read straight into the connection's kept buffer
+        (trio's plain TCP socket; see :data:`_DIRECT_MAX`)."""
         self._inline: InlineHandler | None = None
         self.inline_messages = 0
         """Messages taken by the :meth:`handle_inline` handler so far."""
@@ -154,6 +177,8 @@ class WebSocket:
             self._trio_sleep = _trio_wait.sleep
             if isinstance(stream, anyio.abc.SocketStream):
                 self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
+        self._read_size = READ_CHUNK if self._held_sock is None else _TRIO_READ
+        self._direct_reads = self._held_sock is not None or self._protocol_stream is not None
         self._steady = False  # read coalescing is on for the next read
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
@@ -224,6 +249,8 @@ class WebSocket:
             or self._buf
             or self._messages
             or self._more
+            or self._parts is not None  # the read continues a large frame
+            or self._direct is not None
             or self._fragment is not None
             or self._closed_reason is not None
             or self._proto.state is not State.OPEN
@@ -290,11 +317,17 @@ class WebSocket:
             if self._closed_reason is not None:
                 await self._finish_closing()
                 raise self._closed_reason
-            held = await self._coalesce() if self._steady else False
+            if self._direct is not None:
+                held = False
+            else:
+                held = await self._coalesce() if self._steady else False
             try:
+                if self._direct is not None:
+                    await self._read_direct()
+                    continue
                 data = self._read_held() if held and self._held_sock is not None else b""
                 if not data:
-                    data = await self._stream.receive(READ_CHUNK)
+                    data = await self._stream.receive(self._read_size)
             except (
                 anyio.EndOfStream,
                 anyio.ClosedResourceError,
@@ -392,6 +425,47 @@ class WebSocket:
             return b""
         self._held_reads += bool(data)
         return data
+
+    async def _read_direct(self) -> None:
+        """One read of the large frame being read straight into its buffer
+        (see :data:`_DIRECT_MAX`); queues it as one ``bytes`` once whole.
+        Waits for the socket when it has nothing; on trio it otherwise yields
+        to the scheduler after the read, as anyio's ``receive`` does. Raises
+        as the stream's ``receive`` does (``EndOfStream`` at the end of the
+        stream, ``OSError`` on an error)."""
+        view = self._direct
+        assert view is not None
+        filled = self._filled
+        stream = self._protocol_stream
+        waited = True
+        if stream is not None:
+            n = await stream.receive_into(view[filled:])
+        else:
+            sock = self._held_sock
+            assert sock is not None
+            waited = False
+            while True:
+                try:
+                    n = sock.recv_into(view[filled:])
+                    break
+                except (BlockingIOError, InterruptedError):
+                    await anyio.wait_readable(sock)
+                    waited = True
+            if not n:
+                raise anyio.EndOfStream
+        self.reads += 1
+        self.bytes_received += n
+        filled += n
+        if filled == len(view):
+            self._direct = None
+            self._filled = 0
+            self.direct_frames += 1
+            self._messages.append((self._parts_text, bytes(view)))  # its one copy
+            view.release()
+        else:
+            self._filled = filled
+        if not waited:
+            await anyio.lowlevel.checkpoint()
 
     @property
     def held_reads(self) -> int:
@@ -501,11 +575,16 @@ class WebSocket:
                     if stop > end:  # the rest of the frame is still on its way
                         if length < _ASSEMBLE_FROM:
                             break
+                        self._parts_text = opcode == _OP_TEXT
+                        if self._direct_reads and length <= _DIRECT_MAX:
+                            # read straight into its buffer from here
+                            self._start_direct(length, view, start, end)
+                            buf.clear()
+                            return b""
                         # gathered chunk by chunk from here (see _ASSEMBLE_FROM)
                         first = view[start:] if view is buf else memoryview(view)[start:]
                         self._parts = [first]
                         self._missing = stop - end
-                        self._parts_text = opcode == _OP_TEXT
                         buf.clear()
                         return b""
                     messages.append((opcode == _OP_TEXT, view[start:stop]))
@@ -542,6 +621,18 @@ class WebSocket:
         else:
             buf += view[pos:]
         return b""
+
+    def _start_direct(self, length: int, data: bytes | bytearray, start: int, end: int) -> None:
+        """Begin reading a large frame of ``length`` bytes straight into the
+        kept buffer (grown to ``length`` when smaller), its first bytes
+        ``data[start:end]`` copied in."""
+        if len(self._direct_buf) < length:
+            self._direct_buf = bytearray()  # (free the old one before the new)
+            self._direct_buf = bytearray(length)
+        view = memoryview(self._direct_buf)[:length]
+        view[: end - start] = memoryview(data)[start:end]
+        self._direct = view
+        self._filled = end - start
 
     def _gather(self, data: bytes) -> int:
         """Add ``data`` to the large frame being gathered; once it is whole,

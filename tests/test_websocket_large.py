@@ -1,0 +1,202 @@
+"""Large data frames (64 KiB and more: camera images) over a real socket, on
+both loops: whatever the reads are cut into, each arrives whole, as one
+``bytes`` of its size, in order with the small frames and control frames
+around it. On a plain TCP socket a large frame's rest is read straight into
+a buffer the connection keeps (``WebSocket.direct_frames`` counts them),
+at most ``_DIRECT_MAX`` bytes (a larger frame is gathered chunk by chunk, and
+the kept buffer never grows past the bound); the end of the stream or a
+cancelled read in the middle of such a frame loses nothing it must not."""
+
+from __future__ import annotations
+
+import os
+import struct
+from collections.abc import Iterator
+
+import anyio
+import numpy as np
+import pytest
+
+import ros_mobile_bridge as rmb
+from peers.foxglove_sdk import TYPESTORE, SdkServer, cdr
+from peers.scripted import Peer, scripted_server
+from ros_mobile_bridge.transport import ConnectionLost, _websocket, connect_websocket
+
+IMAGE = 640 * 480 * 3 + 52
+
+
+def frame(opcode: int, payload: bytes) -> bytes:
+    n = len(payload)
+    if n < 126:
+        head = bytes([0x80 | opcode, n])
+    elif n < 1 << 16:
+        head = bytes([0x80 | opcode, 126]) + struct.pack("!H", n)
+    else:
+        head = bytes([0x80 | opcode, 127]) + struct.pack("!Q", n)
+    return head + payload
+
+
+def on_trio() -> bool:
+    import sniffio
+
+    return sniffio.current_async_library() == "trio"
+
+
+@pytest.fixture
+def small_bound() -> Iterator[int]:
+    """``_DIRECT_MAX`` lowered to 300,000 bytes, so a 500 KB frame is over it."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(_websocket, "_DIRECT_MAX", 300_000)
+        yield 300_000
+
+
+@pytest.mark.parametrize("chunk", [4096, 100_003, 1 << 21])
+async def test_large_frames_arrive_whole_as_bytes_in_order(chunk: int, small_bound: int) -> None:
+    sent: list[tuple[bool, bytes]] = [
+        (True, b"hello"),
+        (False, os.urandom(IMAGE)),  # over 64 KiB and the bound: chunk by chunk
+        (False, os.urandom(200_000)),  # under the bound: read straight in (trio)
+        (True, b"x" * 70_000),  # a large text message
+        (False, b"\x82\x02ab" * 30_000),  # bytes that look like small frames
+        (False, os.urandom(100)),
+        (False, os.urandom(250_000)),
+    ]
+    wire = b""
+    for i, (text, data) in enumerate(sent):
+        wire += frame(0x1 if text else 0x2, data)
+        if i == 2:
+            wire += frame(0x9, b"ping")
+    pongs: list[bytes] = []
+
+    async def script(peer: Peer) -> None:
+        assert await peer.recv() == "go"
+        for start in range(0, len(wire), chunk):
+            await peer.send_raw(wire[start : start + chunk])
+            await anyio.sleep(0)
+        await peer.send_raw(frame(0x8, struct.pack("!H", 1000)))
+        while peer.proto.close_rcvd is None:
+            peer.proto.receive_data(await peer.stream.receive())
+            for event in peer.proto.events_received():
+                if getattr(event, "opcode", None) is not None and event.opcode.name == "PONG":
+                    pongs.append(bytes(event.data))
+
+    got: list[tuple[bool, bytes | bytearray]] = []
+    async with scripted_server(script) as url:
+        ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",), max_size=None)
+        # the inline handler takes every whole small frame a read starts with
+        ws.handle_inline(lambda text, data, a, b: got.append((text, bytes(data[a:b]))) is None)
+        await ws.send("go")
+        with pytest.raises(ConnectionLost), anyio.fail_after(20):
+            while True:
+                got.append(await ws.receive_raw())
+        await ws.aclose(timeout=0.5)
+    assert got == sent
+    assert [type(data) for _, data in got] == [bytes] * len(sent)
+    assert pongs == [b"ping"]
+    under = sum(1 for _, data in sent if 64 * 1024 <= len(data) <= small_bound)
+    if on_trio():
+        # trio reads at most 64 KiB at a time: every large frame arrives in
+        # pieces, and each one under the bound is read straight in
+        assert ws.direct_frames == under == 4
+        assert 250_000 <= len(ws._direct_buf) <= small_bound
+    else:  # asyncio reads up to 256 KiB: a frame may come whole in one read
+        assert ws.direct_frames <= under
+        assert len(ws._direct_buf) <= small_bound
+
+
+async def test_the_end_of_the_stream_inside_a_large_frame_ends_the_connection() -> None:
+    first = os.urandom(1000)
+
+    async def script(peer: Peer) -> None:
+        assert await peer.recv() == "go"
+        large = frame(0x2, os.urandom(IMAGE))
+        await peer.send_raw(frame(0x2, first) + large[: IMAGE // 2])
+        await anyio.sleep(0.05)
+        await peer.send_raw(large[IMAGE // 2 : -1000])
+        await peer.stream.send_eof()  # the TCP stream ends, the frame never will
+        await anyio.sleep(1)
+
+    async with scripted_server(script) as url:
+        ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",), max_size=None)
+        await ws.send("go")
+        with anyio.fail_after(10):
+            assert await ws.receive_raw() == (False, first)
+            with pytest.raises(ConnectionLost, match="closed by peer"):
+                await ws.receive_raw()
+        assert ws.closed
+        await ws.aclose(timeout=0.5)
+
+
+async def test_a_read_cancelled_inside_a_large_frame_loses_nothing() -> None:
+    payload = os.urandom(IMAGE)
+    wire = frame(0x2, payload) + frame(0x1, b"after")
+
+    async def script(peer: Peer) -> None:
+        assert await peer.recv() == "go"
+        await peer.send_raw(wire[:300_000])
+        assert await peer.recv() == "more"
+        await peer.send_raw(wire[300_000:])
+        await anyio.sleep(1)
+
+    async with scripted_server(script) as url:
+        ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",), max_size=None)
+        await ws.send("go")
+        with anyio.move_on_after(0.3) as scope:
+            await ws.receive_raw()  # waits inside the frame until cancelled
+        assert scope.cancelled_caught
+        await ws.send("more")
+        with anyio.fail_after(10):
+            assert await ws.receive_raw() == (False, payload)
+            assert await ws.receive_raw() == (True, b"after")
+        assert ws.direct_frames == 1
+        await ws.aclose(timeout=0.5)
+
+
+@pytest.fixture
+def server() -> Iterator[SdkServer]:
+    with SdkServer() as srv:
+        yield srv
+
+
+async def test_camera_images_arrive_whole_and_read_only(server: SdkServer) -> None:
+    """Images from the official Foxglove SDK server: every one arrives, its
+    pixels intact, as a read-only numpy array (the bytes it views); each
+    was read straight into the connection's kept buffer."""
+    cam = server.channel("/camera", "sensor_msgs/msg/Image")
+    t = TYPESTORE.types
+    count = 12
+    images = [np.full(640 * 480 * 3, i, dtype=np.uint8) for i in range(count)]
+    for i, pixels in enumerate(images):
+        pixels[i * 1000 : i * 1000 + 4] = (0x82, 0x02, 0x81, 0x05)
+    header = t["std_msgs/msg/Header"](
+        stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="cam"
+    )
+    options = rmb.ClientOptions(zero_twist_on_exit=False, keepalive_interval=0)
+    async with rmb.connect(server.url, options=options) as robot:
+        async with robot.subscribe("/camera", buffer=count, adaptive=False) as sub:
+            with anyio.fail_after(10):
+                while "/camera" not in server.subscribed():
+                    await anyio.sleep(0.01)
+            for pixels in images:
+                cam.log(
+                    cdr(
+                        "sensor_msgs/msg/Image",
+                        header=header,
+                        height=480,
+                        width=640,
+                        encoding="rgb8",
+                        is_bigendian=0,
+                        step=640 * 3,
+                        data=pixels,
+                    )
+                )
+            got = []
+            with anyio.fail_after(20):
+                async for msg in sub:
+                    got.append(msg.data["data"])
+                    if len(got) == count:
+                        break
+            ws = robot._conn.adapter._ws  # type: ignore[attr-defined]
+            assert ws.direct_frames == count  # larger than any one read
+    assert all(np.array_equal(a, b) for a, b in zip(got, images, strict=True))
+    assert not any(a.flags.writeable for a in got)
