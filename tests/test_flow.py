@@ -8,9 +8,12 @@ never with sleeps."""
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import itertools
 import logging
 import math
+import pickle
 
 import anyio
 import anyio.lowlevel
@@ -1066,6 +1069,35 @@ def test_the_fast_message_constructor_builds_the_same_frozen_message() -> None:
     assert hash(fast.topic) == hash("/t")
     with pytest.raises(FrozenInstanceError):
         fast.topic = "/other"  # type: ignore[misc]
+    assert pickle.loads(pickle.dumps(fast)) == fast
+    assert copy.copy(fast) == fast
+    assert dataclasses.replace(fast, topic="/u") == Message("/u", *args[1:])
+
+
+def test_an_unfrozen_twin_needs_a_slotted_class_deriving_from_object_alone() -> None:
+    from ros_mobile_bridge._slots import unfrozen_twin
+
+    class Plain:
+        pass
+
+    @dataclasses.dataclass(frozen=True, slots=True)
+    class Base:
+        a: int
+
+    @dataclasses.dataclass(frozen=True, slots=True)
+    class Derived(Base):
+        b: int
+
+    for cls in (Plain, Derived):
+        with pytest.raises(TypeError, match="not a slotted class"):
+            unfrozen_twin(cls)
+    twin = unfrozen_twin(Base)
+    built = object.__new__(twin)
+    built.a = 3
+    built.__class__ = Base
+    assert built == Base(3)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        built.a = 4  # type: ignore[misc]
 
 
 async def test_values_holding_numpy_arrays_are_stored_not_compared_into_an_error() -> None:
