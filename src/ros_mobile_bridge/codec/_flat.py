@@ -110,22 +110,23 @@ class _Writer:
         return offset
 
     def _string(self, target: str) -> None:
+        # ``e``: the payload index of the string's terminating NUL
         if self.static is not None:
             offset = self._lead_read("I", 4, "n")
             self.static = None
             start = f"{offset + 8}"
-            self.lines.append(f"e = {start} + n")
+            self.lines.append(f"e = {offset + 7} + n")
         else:
             start = "b + 8"
             self.lines += [
                 "b = (b + 3) & -4",
                 f"n = {self.unpack('<I')}(p, b + 4)[0]",
-                "e = b + 8 + n",
+                "e = b + 7 + n",
             ]
         self.lines += [
-            "if n < 1 or e > size or p[e - 1] != 0: raise _Fallback",
-            f"{target} = str(p[{start} : e - 1], 'utf-8')",
-            "b = e - 4",
+            "if n < 1 or e >= size or p[e] != 0: raise _Fallback",
+            f"{target} = str(p[{start} : e], 'utf-8')",
+            "b = e - 3",
         ]
 
     def message(self, key: str) -> str:
@@ -159,6 +160,9 @@ class _Writer:
         """The check that nothing but padding follows the last field."""
         if self.static is not None:
             return f"if size > {self.static + 7}: raise _Fallback"
+        if self.lines[-1] == "b = e - 3":  # a string came last
+            self.lines.pop()
+            return "if e + 4 < size: raise _Fallback"
         return "if b + 7 < size: raise _Fallback"
 
 
@@ -173,12 +177,13 @@ def build_flat_decoder(
     writer = _Writer(defs)
     result = writer.message(key)
     lead = writer.unpack(writer.lead)
+    end = writer.end()  # before the lines: it may drop the last one
     lines = [
         f"{', '.join(writer.lead_targets)} = {lead}(p, 0)",
         "if h != 256 or p.itemsize != 1: raise _Fallback",  # CDR, little endian
         "size = len(p)",
         *writer.lines,
-        writer.end(),
+        end,
     ]
     body = "\n".join("        " + line for line in lines)
     source = (
