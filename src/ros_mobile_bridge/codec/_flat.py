@@ -75,7 +75,10 @@ class _Writer:
     Up to the first string the offsets are known when generating: those
     fields, the encapsulation header and the first string's length are read
     by one ``unpack_from`` at the top (:attr:`lead`), and no ``b`` is kept
-    for them (:attr:`static` is the known offset; None once past a string)."""
+    for them (:attr:`static` is the known offset; None once past a string).
+    After a string, each run of scalars whose alignments divide the first's
+    is read by one ``unpack_from`` too (:attr:`run`): aligned to the first,
+    ``b`` makes the rest's offsets known."""
 
     def __init__(self, defs: Mapping[str, MsgDef]) -> None:
         self.defs = defs
@@ -86,6 +89,11 @@ class _Writer:
         """The format of the first read: the header, then the body's leading fields."""
         self.lead_targets = ["h"]
         self.static: int | None = 0
+        self.run = "<"
+        """The format of the open run of scalars after a string (``"<"``: none)."""
+        self.run_targets: list[str] = []
+        self.run_align = 1
+        self.run_size = 0
 
     def _local(self) -> str:
         self.names += 1
@@ -109,6 +117,32 @@ class _Writer:
         self.static = offset + align
         return offset
 
+    def _run_read(self, fmt: str, align: int, target: str) -> None:
+        """Add a scalar after a string to the open run, or open one."""
+        if self.run_targets and align > self.run_align:
+            self._flush()
+        if not self.run_targets:
+            self.run_align = align
+        offset = (self.run_size + align - 1) & -align
+        if offset > self.run_size:
+            self.run += f"{offset - self.run_size}x"
+        self.run += fmt
+        self.run_targets.append(target)
+        self.run_size = offset + align
+
+    def _flush(self) -> None:
+        """Emit the open run's read, if any."""
+        if not self.run_targets:
+            return
+        align = self.run_align
+        if align > 1:
+            self.lines.append(f"b = (b + {align - 1}) & -{align}")
+        self.lines += [
+            f"{', '.join(self.run_targets)}, = {self.unpack(self.run)}(p, b + 4)",
+            f"b += {self.run_size}",
+        ]
+        self.run, self.run_targets, self.run_size = "<", [], 0
+
     def _string(self, target: str) -> None:
         # ``e``: the payload index of the string's terminating NUL
         if self.static is not None:
@@ -117,6 +151,7 @@ class _Writer:
             start = f"{offset + 8}"
             self.lines.append(f"e = {offset + 7} + n")
         else:
+            self._flush()
             start = "b + 8"
             self.lines += [
                 "b = (b + 3) & -4",
@@ -145,19 +180,15 @@ class _Writer:
             elif self.static is not None:
                 self._lead_read(*_FORMATS[field.base], target)
             else:
-                fmt, align = _FORMATS[field.base]
-                if align > 1:
-                    self.lines.append(f"b = (b + {align - 1}) & -{align}")
-                self.lines += [
-                    f"{target} = {self.unpack('<' + fmt)}(p, b + 4)[0]",
-                    f"b += {align}",
-                ]
+                self._run_read(*_FORMATS[field.base], target)
             if field.name != DUMMY_FIELD or visible:
                 items.append(f"{field.name!r}: {target}")
         return "{" + ", ".join(items) + "}"
 
     def end(self) -> str:
-        """The check that nothing but padding follows the last field."""
+        """The check that nothing but padding follows the last field (call
+        it once every field is written)."""
+        self._flush()
         if self.static is not None:
             return f"if size > {self.static + 7}: raise _Fallback"
         if self.lines[-1] == "b = e - 3":  # a string came last
