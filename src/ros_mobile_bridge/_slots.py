@@ -1,13 +1,13 @@
 """Building frozen slotted dataclasses on hot paths.
 
 A frozen dataclass's ``__init__`` sets each field through
-``object.__setattr__``, about four times the cost of a plain slotted
+``object.__setattr__``, several times the cost of a plain slotted
 class's. Objects built once per received frame (``Message``) are made as an
 instance of the class's :func:`unfrozen_twin` instead, their fields written as
 plain attributes, and then turned into the frozen class by assigning
 ``__class__``: the same frozen object, with every field set, for about half
 the cost of writing each slot through its descriptor's ``__set__``
-(:func:`slot_setter`, as ``MessageData`` is still built), and a third of
+(:func:`slot_setter`, as ``MessageData`` is still built), and a quarter of
 ``__init__``'s. Only for classes whose ``__init__`` does
 nothing but store its arguments (no ``__post_init__``, no validation)."""
 
