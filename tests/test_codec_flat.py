@@ -160,3 +160,21 @@ def test_a_string_is_read_straight_from_the_payload() -> None:
     decode = REG.decoder("std_msgs/msg/String", "cdr")
     assert decode(memoryview(payload)) == {"data": "héllo"}
     assert decode(memoryview(payload + b"\x00\x00\x00")) == {"data": "héllo"}  # CDR padding
+
+
+def test_a_fixed_size_type_is_read_in_one_go_with_up_to_3_bytes_of_padding() -> None:
+    decode = REG.decoder("geometry_msgs/msg/Twist", "cdr")
+    payload = b"\x00\x01\x00\x00" + struct.pack("<6d", 1, 2, 3, 4, 5, 6)
+    namespace = decode.__globals__
+    slow = namespace["_general"]
+    namespace["_general"] = no_fallback
+    try:
+        for padding in (b"", b"\x00", b"\x00\x00\x00"):
+            assert decode(memoryview(payload + padding)) == {
+                "linear": {"x": 1.0, "y": 2.0, "z": 3.0},
+                "angular": {"x": 4.0, "y": 5.0, "z": 6.0},
+            }
+    finally:
+        namespace["_general"] = slow
+    for damaged in (payload + b"\x00" * 4, payload[:-1], b"\x00\x00" + payload[2:]):
+        assert outcome(decode, damaged) == outcome(slow, damaged)

@@ -8,9 +8,12 @@ never with sleeps."""
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import itertools
 import logging
 import math
+import pickle
 
 import anyio
 import anyio.lowlevel
@@ -18,7 +21,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ros_mobile_bridge import DecodeError, NotConnected, ServiceError
+from ros_mobile_bridge import DecodeError, Message, NotConnected, ServiceError
 from ros_mobile_bridge.flow import (
     FrameQueue,
     Outbox,
@@ -633,8 +636,9 @@ async def messages_between_yields(
 async def test_the_consumer_yields_every_32_small_messages(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    # the first call after a wait counts as the first of 32
-    assert await messages_between_yields(monkeypatch, 100, 200) == [31] + [32] * 5 + [9]
+    # the first call counts as the first of 32, and so does the message
+    # taken at a yield (the yield took a pending cancellation)
+    assert await messages_between_yields(monkeypatch, 100, 200) == [32] * 6 + [8]
 
 
 async def test_the_consumer_yields_after_about_4_mib_of_images(
@@ -644,6 +648,79 @@ async def test_the_consumer_yields_after_about_4_mib_of_images(
     turns of the loop, not 1 (the reader then ran ahead with one fresh image
     buffer per turn) nor 32 (120 MB decoded without a turn)."""
     assert await messages_between_yields(monkeypatch, 921_652, 20) == [4] * 5 + [0]
+
+
+async def test_a_drain_of_waiting_messages_checks_for_cancellation_at_its_yields_only(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # the first call checks alone; after that every check is a yield's (none
+    # right after one)
+    q = FrameQueue(clock=FakeClock(), buffer=200)
+    sub = Subscription("/t", q, logger=LOGGER)
+    decoder = CountingDecoder()
+    for i in range(200):
+        q.offer(frame(i, decoder))
+    q.close()
+    checks: list[int] = []
+    check = anyio.lowlevel.checkpoint_if_cancelled
+
+    async def counted_check() -> None:
+        checks.append(q.delivered)
+        await check()
+
+    monkeypatch.setattr(anyio.lowlevel, "checkpoint_if_cancelled", counted_check)
+    assert [m.data async for m in sub] == list(range(200))
+    assert checks == [0]
+
+
+def mixed_frames(q: FrameQueue) -> None:
+    """Good frames 0..9, with 3 undecodable and 6 without a decoder."""
+    for i in range(10):
+        decode: object = CountingDecoder()
+        if i == 3:
+            decode = _raise_value_error
+        elif i == 6:
+            decode = None
+        q.offer(frame(i, decode))
+
+
+@pytest.mark.parametrize("form", ["async for", "batches"])
+async def test_both_forms_deliver_the_same_messages_and_count_them(form: str) -> None:
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER)
+    mixed_frames(q)
+    q.close()
+    if form == "async for":
+        got = [m async for m in sub]
+    else:
+        batches = [b async for b in sub.batches(max_size=4)]
+        assert [len(b) for b in batches] == [4, 4, 2]
+        got = [m for b in batches for m in b]
+    assert [bytes(m.data) if m.decode_error else m.data for m in got] == [
+        0, 1, 2, b"3", 4, 5, b"6", 7, 8, 9,
+    ]  # fmt: skip
+    assert [m.receive_time_ns for m in got] == list(range(10))
+    assert [m.byte_size for m in got] == [1] * 10
+    assert all(type(m) is Message and m.topic == "/t" for m in got)
+    assert ["codec bug" in (m.decode_error or "") for m in got].count(True) == 1
+    stats = sub.stats
+    assert (stats.delivered, stats.decode_failures) == (10, 2)
+
+
+@pytest.mark.parametrize("form", ["async for", "batches"])
+async def test_a_raw_subscription_delivers_payloads_in_both_forms(form: str) -> None:
+    q = FrameQueue(clock=FakeClock())
+    sub = Subscription("/t", q, logger=LOGGER, decode=False)
+    mixed_frames(q)
+    q.close()
+    if form == "async for":
+        got = [m async for m in sub]
+    else:
+        got = [m async for b in sub.batches(max_size=3) for m in b]
+    assert [bytes(m.data) for m in got] == [str(i).encode() for i in range(10)]
+    assert all(m.decode_error is None for m in got)
+    stats = sub.stats
+    assert (stats.delivered, stats.decode_failures) == (10, 0)
 
 
 # -- FrameQueue: argument validation ------------------------------------------------------
@@ -1066,6 +1143,35 @@ def test_the_fast_message_constructor_builds_the_same_frozen_message() -> None:
     assert hash(fast.topic) == hash("/t")
     with pytest.raises(FrozenInstanceError):
         fast.topic = "/other"  # type: ignore[misc]
+    assert pickle.loads(pickle.dumps(fast)) == fast
+    assert copy.copy(fast) == fast
+    assert dataclasses.replace(fast, topic="/u") == Message("/u", *args[1:])
+
+
+def test_an_unfrozen_twin_needs_a_slotted_class_deriving_from_object_alone() -> None:
+    from ros_mobile_bridge._slots import unfrozen_twin
+
+    class Plain:
+        pass
+
+    @dataclasses.dataclass(frozen=True, slots=True)
+    class Base:
+        a: int
+
+    @dataclasses.dataclass(frozen=True, slots=True)
+    class Derived(Base):
+        b: int
+
+    for cls in (Plain, Derived):
+        with pytest.raises(TypeError, match="not a slotted class"):
+            unfrozen_twin(cls)
+    twin = unfrozen_twin(Base)
+    built = object.__new__(twin)
+    built.a = 3
+    built.__class__ = Base
+    assert built == Base(3)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        built.a = 4  # type: ignore[misc]
 
 
 async def test_values_holding_numpy_arrays_are_stored_not_compared_into_an_error() -> None:

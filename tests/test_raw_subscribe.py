@@ -28,15 +28,24 @@ STRING = "std_msgs/msg/String"
 
 @pytest.fixture
 def decodes(monkeypatch: pytest.MonkeyPatch) -> list[str]:
-    """The topics of every message that went through the decoding step."""
+    """The topics of every message whose decoder was called: each frame a
+    subscription's queue is offered carries a counting wrapper of its
+    decoder (the decoding step calls it, wherever it runs)."""
     seen: list[str] = []
-    original = _subscription.Subscription._decode
+    original = _subscription.FrameQueue.offer
 
-    def spy(self: Any, frame: Any) -> rmb.Message:
-        seen.append(frame.topic)
-        return original(self, frame)
+    def spy(self: Any, frame: Any) -> None:
+        decode = frame.decode
+        if decode is not None:
 
-    monkeypatch.setattr(_subscription.Subscription, "_decode", spy)
+            def counted(payload: memoryview, topic: str = frame.topic) -> Any:
+                seen.append(topic)
+                return decode(payload)
+
+            frame.decode = counted
+        original(self, frame)
+
+    monkeypatch.setattr(_subscription.FrameQueue, "offer", spy)
     return seen
 
 

@@ -70,23 +70,99 @@ def _flat(key: str, defs: Mapping[str, MsgDef], depth: int = 0) -> bool:
 
 class _Writer:
     """Generates the statements reading one type's fields, nested types
-    inline; ``b`` is the offset in the CDR body (alignment counts from it)."""
+    inline; ``b`` is the offset in the CDR body (alignment counts from it).
+
+    Up to the first string the offsets are known when generating: those
+    fields, the encapsulation header and the first string's length are read
+    by one ``unpack_from`` at the top (:attr:`lead`), and no ``b`` is kept
+    for them (:attr:`static` is the known offset; None once past a string).
+    After a string, each run of scalars whose alignments divide the first's
+    is read by one ``unpack_from`` too (:attr:`run`): aligned to the first,
+    ``b`` makes the rest's offsets known."""
 
     def __init__(self, defs: Mapping[str, MsgDef]) -> None:
         self.defs = defs
         self.lines: list[str] = []
         self.names = 0
         self.structs: dict[str, str] = {}
+        self.lead = "<H2x"
+        """The format of the first read: the header, then the body's leading fields."""
+        self.lead_targets = ["h"]
+        self.static: int | None = 0
+        self.run = "<"
+        """The format of the open run of scalars after a string (``"<"``: none)."""
+        self.run_targets: list[str] = []
+        self.run_align = 1
+        self.run_size = 0
 
     def _local(self) -> str:
         self.names += 1
         return f"x{self.names}"
 
-    def _unpack(self, fmt: str) -> str:
+    def unpack(self, fmt: str) -> str:
         name = self.structs.get(fmt)
         if name is None:
             name = self.structs[fmt] = f"_s{len(self.structs)}"
         return name
+
+    def _lead_read(self, fmt: str, align: int, target: str) -> int:
+        """Add a field at the next offset aligned to ``align`` to the first
+        read; return that offset."""
+        assert self.static is not None
+        offset = (self.static + align - 1) & -align
+        if offset > self.static:
+            self.lead += f"{offset - self.static}x"
+        self.lead += fmt
+        self.lead_targets.append(target)
+        self.static = offset + align
+        return offset
+
+    def _run_read(self, fmt: str, align: int, target: str) -> None:
+        """Add a scalar after a string to the open run, or open one."""
+        if self.run_targets and align > self.run_align:
+            self._flush()
+        if not self.run_targets:
+            self.run_align = align
+        offset = (self.run_size + align - 1) & -align
+        if offset > self.run_size:
+            self.run += f"{offset - self.run_size}x"
+        self.run += fmt
+        self.run_targets.append(target)
+        self.run_size = offset + align
+
+    def _flush(self) -> None:
+        """Emit the open run's read, if any."""
+        if not self.run_targets:
+            return
+        align = self.run_align
+        if align > 1:
+            self.lines.append(f"b = (b + {align - 1}) & -{align}")
+        self.lines += [
+            f"{', '.join(self.run_targets)}, = {self.unpack(self.run)}(p, b + 4)",
+            f"b += {self.run_size}",
+        ]
+        self.run, self.run_targets, self.run_size = "<", [], 0
+
+    def _string(self, target: str) -> None:
+        # ``e``: the payload index of the string's terminating NUL
+        if self.static is not None:
+            offset = self._lead_read("I", 4, "n")
+            self.static = None
+            start = f"{offset + 8}"
+            self.lines.append(f"e = {offset + 7} + n")
+        else:
+            self._flush()
+            start = "b + 8"
+            self.lines += [
+                "b = (b + 3) & -4",
+                f"n = {self.unpack('<I')}(p, b + 4)[0]",
+                "e = b + 7 + n",
+            ]
+        self.lines += [
+            "if n < 1 or e >= size or p[e] != 0: raise _Fallback",
+            f"{target} = str(p[{start} : e], 'utf-8')",
+            "b = e - 3",
+        ]
 
     def message(self, key: str) -> str:
         """Emit the reads of ``key``'s fields; return its dict expression."""
@@ -100,25 +176,25 @@ class _Writer:
             assert field.base is not None
             target = self._local()
             if field.base == "string":
-                self.lines += [
-                    "b = (b + 3) & -4",
-                    f"n = {self._unpack('<I')}(p, b + 4)[0]",
-                    "e = b + 8 + n",
-                    "if n < 1 or e > size or p[e - 1] != 0: raise _Fallback",
-                    f"{target} = str(p[b + 8 : e - 1], 'utf-8')",
-                    "b = e - 4",
-                ]
+                self._string(target)
+            elif self.static is not None:
+                self._lead_read(*_FORMATS[field.base], target)
             else:
-                fmt, align = _FORMATS[field.base]
-                if align > 1:
-                    self.lines.append(f"b = (b + {align - 1}) & -{align}")
-                self.lines += [
-                    f"{target} = {self._unpack('<' + fmt)}(p, b + 4)[0]",
-                    f"b += {align}",
-                ]
+                self._run_read(*_FORMATS[field.base], target)
             if field.name != DUMMY_FIELD or visible:
                 items.append(f"{field.name!r}: {target}")
         return "{" + ", ".join(items) + "}"
+
+    def end(self) -> str:
+        """The check that nothing but padding follows the last field (call
+        it once every field is written)."""
+        self._flush()
+        if self.static is not None:
+            return f"if size > {self.static + 7}: raise _Fallback"
+        if self.lines[-1] == "b = e - 3":  # a string came last
+            self.lines.pop()
+            return "if e + 4 < size: raise _Fallback"
+        return "if b + 7 < size: raise _Fallback"
 
 
 def build_flat_decoder(
@@ -131,15 +207,20 @@ def build_flat_decoder(
         return None
     writer = _Writer(defs)
     result = writer.message(key)
-    body = "\n".join("        " + line for line in writer.lines)
+    lead = writer.unpack(writer.lead)
+    end = writer.end()  # before the lines: it may drop the last one
+    lines = [
+        f"{', '.join(writer.lead_targets)} = {lead}(p, 0)",
+        "if h != 256 or p.itemsize != 1: raise _Fallback",  # CDR, little endian
+        "size = len(p)",
+        *writer.lines,
+        end,
+    ]
+    body = "\n".join("        " + line for line in lines)
     source = (
         "def decode(p):\n"
         "    try:\n"
-        "        if p.itemsize != 1 or p[0] != 0 or p[1] != 1: raise _Fallback\n"
-        "        size = len(p)\n"
-        "        b = 0\n"
         f"{body}\n"
-        "        if b + 7 < size: raise _Fallback\n"
         f"        return {result}\n"
         "    except Exception:\n"
         "        return _general(p)\n"
