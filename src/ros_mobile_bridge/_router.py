@@ -85,8 +85,8 @@ class Router:
         self.logger = self._log
         """The client's logger (``options.logger``)."""
         self._presets = presets
-        mode = options.throttle_mode
-        self._mode: Callable[[], ThrottleMode] = mode if callable(mode) else (lambda: mode)
+        # a fixed mode or the user's callable, read per message (see AdaptiveThrottle)
+        self._mode: ThrottleMode | Callable[[], ThrottleMode] = options.throttle_mode
         self._status = status
         self._outbound = outbound
         self.topics: Watchable[list[TopicInfo]] = Watchable(adapter.topics)
