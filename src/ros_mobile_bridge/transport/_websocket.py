@@ -143,11 +143,16 @@ class WebSocket:
         that several frames are read and handed over at one wake-up
         (:meth:`receive_raw`); 0 reads as soon as anything arrives."""
         self._last_read = 0.0  # time.monotonic() when the last read returned
-        # trio's socket under anyio's plain TCP stream: a read that waited
-        # first takes the socket's bytes directly (no scheduling round)
+        # trio's socket under anyio's plain TCP stream: the reader waits for
+        # it to be readable and reads it directly (_receive_sock), and a read
+        # that waited first takes the socket's bytes at once (_read_held)
         self._held_sock: socket.socket | None = None
         if isinstance(stream, anyio.abc.SocketStream) and _on_trio():
             self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
+            import trio  # (on trio, so installed)
+
+            self._wait_readable = trio.lowlevel.wait_readable
+            self._trio_closed = trio.ClosedResourceError
         self._steady = False  # read coalescing is on for the next read
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
@@ -285,10 +290,14 @@ class WebSocket:
                 await self._finish_closing()
                 raise self._closed_reason
             held = await self._coalesce() if self._steady else False
+            sock = self._held_sock
             try:
-                data = self._read_held() if held and self._held_sock is not None else b""
+                data = self._read_held() if held and sock is not None else b""
                 if not data:
-                    data = await self._stream.receive(READ_CHUNK)
+                    if sock is not None:
+                        data = await self._receive_sock(sock)
+                    else:
+                        data = await self._stream.receive(READ_CHUNK)
             except (
                 anyio.EndOfStream,
                 anyio.ClosedResourceError,
@@ -371,6 +380,29 @@ class WebSocket:
             self.coalesced += 1
             await anyio.sleep(delay)  # anyio's streams read only when asked
         return True
+
+    async def _receive_sock(self, sock: socket.socket) -> bytes:
+        """On trio, plain TCP: the stream's ``receive(READ_CHUNK)`` without
+        its layers (a cancellation check, a non-blocking read that usually
+        finds nothing, then the wait): wait until trio reports the socket
+        readable (always a checkpoint), then read it once. Raises as the
+        stream does: ``EndOfStream`` at the peer's EOF,
+        ``ClosedResourceError`` once the socket is closed (also while
+        waiting), ``OSError`` when the read fails."""
+        while True:
+            if sock.fileno() < 0:
+                raise anyio.ClosedResourceError
+            try:
+                await self._wait_readable(sock)
+            except self._trio_closed as exc:  # closed while waiting
+                raise anyio.ClosedResourceError from exc
+            try:
+                data = sock.recv(READ_CHUNK)
+            except (BlockingIOError, InterruptedError):
+                continue  # readable, then not (another reader took it): wait again
+            if not data:
+                raise anyio.EndOfStream
+            return data
 
     def _read_held(self) -> bytes:
         """After a wait on trio: what the socket holds, read at once (b""
