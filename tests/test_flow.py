@@ -234,6 +234,34 @@ def test_trailing_delivery_releases_the_newest_frame_of_a_burst_when_the_window_
     assert q.received == 4
 
 
+def test_the_adaptive_interval_is_read_once_per_window_not_per_frame() -> None:
+    clock = FakeClock()
+    reads: list[float] = []
+    adaptive = 0.0
+
+    def interval() -> float:
+        reads.append(clock.now)
+        return adaptive
+
+    q = FrameQueue(max_hz=4, adaptive=interval, clock=clock)  # 0.25 s windows
+    for i in range(16):  # 64 Hz for 0.25 s: the first delivered, 15 replace each other
+        clock.set(i / 64)
+        q.offer(frame(i))
+    assert reads == [0.0, 1 / 64]  # opening the window, then holding the first replaced
+    adaptive = 1.0  # the throttle tightened: read when the window ends
+    clock.set(0.25)
+    q.offer(frame(16))
+    assert reads[-1] == 0.25
+    assert q.interval == 1.0
+    assert take_all(q) == [0]  # the held frame's window is now 1 s
+    clock.set(0.5)
+    q.offer(frame(17))  # inside the longer window: replaced, no read
+    assert len(reads) == 3
+    clock.set(1.0)
+    assert take_all(q) == [17]
+    assert (q.received, q.dropped_throttle, len(q)) == (18, 16, 0)
+
+
 async def test_a_consumer_waiting_on_a_held_frame_gets_it_when_the_window_ends() -> None:
     # The consumer waits in get() while the rate cap holds the newest frame;
     # once the (fake) window has ended the frame is delivered without any new

@@ -209,21 +209,31 @@ async def test_lag_monitor_runs_while_a_client_is_open(server: SdkServer) -> Non
 
 
 async def test_clients_on_one_loop_share_one_tick(server: SdkServer) -> None:
-    """Each client registers one callback with the loop's one sampler (no
-    timer of its own) and removes it when it closes; a breaker still trips
-    through the shared tick."""
+    """Each client with a subscription registers one callback with the
+    loop's one sampler (no timer of its own); an idle client none, and a
+    client removes it when its last subscription ends or it closes; a
+    breaker still trips through the shared tick."""
     monitor = current_monitor()
     before = monitor.ticks
     async with (
         rmb.connect(server.url, options=options()) as a,
         rmb.connect(server.url, options=options()) as b,
     ):
-        await wait_until(lambda: monitor.ticks == before + 2, what="two ticks registered")
+        await wait_until(lambda: monitor.sampling, what="sampling")
+        await anyio.wait_all_tasks_blocked()  # every client's tasks run and wait
+        assert monitor.ticks == before  # idle clients: nothing to check
         async with a.subscribe("/log") as sub:
-            await wait_until(lambda: monitor.sampling, what="sampling")
+            assert monitor.ticks == before + 1
+            async with a.subscribe("/log") as again, b.subscribe("/log"):
+                assert monitor.ticks == before + 2  # one per client, not per subscription
+                again.close()
+            assert monitor.ticks == before + 1
             sub.breaker.disable()
             assert sub.breaker.state == "tripped_manual"
             await wait_until(lambda: sub._queue.blocked, what="the tick applied the trip")
+        assert monitor.ticks == before
+        async with b.subscribe("/log"):
+            assert monitor.ticks == before + 1
         assert b.connected
     assert monitor.ticks == before
 

@@ -247,9 +247,10 @@ def test_no_hunting_when_the_lag_oscillates_inside_the_deadband() -> None:
     assert throttle.bucket_label == "10 Hz"
 
 
-def test_no_hunting_with_the_real_monitor_and_a_lag_around_a_threshold() -> None:
+@pytest.mark.parametrize("fixed", [False, True], ids=["callable-mode", "fixed-mode"])
+def test_no_hunting_with_the_real_monitor_and_a_lag_around_a_threshold(fixed: bool) -> None:
     monitor = LagMonitor(clock=lambda: 0.0)
-    throttle = AdaptiveThrottle(DEFAULT_PRESETS, lambda: "auto", monitor)
+    throttle = AdaptiveThrottle(DEFAULT_PRESETS, "auto" if fixed else lambda: "auto", monitor)
     labels: list[str] = []
     for i in range(400):  # 20 s of samples every 50 ms, alternating 86 / 74 ms
         monitor.record(74.0 if i % 2 else 86.0, now=i * 0.05)
@@ -263,9 +264,10 @@ def test_no_hunting_with_the_real_monitor_and_a_lag_around_a_threshold() -> None
     assert set(labels[4:]) == {"10 Hz"}
 
 
-def test_a_burst_then_calm_relaxes_once_the_sustained_lag_falls() -> None:
+@pytest.mark.parametrize("fixed", [False, True], ids=["callable-mode", "fixed-mode"])
+def test_a_burst_then_calm_relaxes_once_the_sustained_lag_falls(fixed: bool) -> None:
     monitor = LagMonitor(clock=lambda: 0.0)
-    throttle = AdaptiveThrottle(DEFAULT_PRESETS, lambda: "auto", monitor)
+    throttle = AdaptiveThrottle(DEFAULT_PRESETS, "auto" if fixed else lambda: "auto", monitor)
     now = 0.0
     for _ in range(40):  # 2 s of 400 ms lag
         monitor.record(400.0, now=now)
@@ -282,6 +284,65 @@ def test_a_burst_then_calm_relaxes_once_the_sustained_lag_falls() -> None:
     assert throttle.transitions == 2
     first_relax = labels.index("full rate")
     assert set(labels[:first_relax]) == {"1 Hz"}
+
+
+class ReadCountingMonitor(LagMonitor):
+    """A real monitor that counts how often the throttle reads its signals."""
+
+    def __init__(self) -> None:
+        super().__init__(clock=lambda: 0.0)
+        self.reads = 0
+
+    def recurring_lag_ms(self) -> float:
+        self.reads += 1
+        return super().recurring_lag_ms()
+
+
+def test_a_fixed_mode_reads_the_monitor_once_per_sample_not_per_frame() -> None:
+    monitor = ReadCountingMonitor()
+    throttle = AdaptiveThrottle(DEFAULT_PRESETS, "efficient", monitor)
+    assert monitor.reads == 1  # construction
+    for _ in range(100):  # frames between two samples
+        assert throttle.interval_s() == 0.1  # efficient's first bucket
+    assert monitor.reads == 1
+    for i in range(3):  # 60 ms recurring: efficient's "2 Hz"
+        monitor.record(60.0, now=0.05 * (i + 1))
+    for _ in range(100):
+        assert throttle.interval_s() == 0.5
+    assert monitor.reads == 2  # one read for the three new samples
+    assert (throttle.bucket_label, throttle.transitions) == ("2 Hz", 1)
+    monitor.clear()  # the signals read 0.0 again: efficient relaxes to its first bucket
+    assert throttle.interval_s() == 0.1
+    assert monitor.reads == 3
+
+
+def test_a_callable_mode_is_read_on_every_call() -> None:
+    monitor = ReadCountingMonitor()
+    setting = ModeSetting("auto")
+    throttle = AdaptiveThrottle(DEFAULT_PRESETS, setting, monitor)
+    assert throttle.interval_s() == 0.0
+    setting.mode = "efficient"  # no new sample: the change applies to the next frame
+    assert throttle.interval_s() == 0.1
+    assert throttle.mode == "efficient"
+    assert monitor.reads == 3
+
+
+def test_an_unknown_fixed_mode_falls_back_to_auto_and_warns_once(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    monitor = LagMonitor(clock=lambda: 0.0)
+    with caplog.at_level(logging.WARNING, logger=LOGGER.name):
+        throttle = AdaptiveThrottle(
+            DEFAULT_PRESETS,
+            "turbo",  # type: ignore[arg-type]
+            monitor,
+            logger=LOGGER,
+        )
+        for i in range(5):
+            monitor.record(1.0, now=0.05 * i)
+            throttle.interval_s()
+    assert throttle.mode == "auto"
+    assert [r.getMessage().count("turbo") for r in caplog.records] == [1]
 
 
 def test_one_stall_of_a_second_never_tightens() -> None:

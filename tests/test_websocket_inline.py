@@ -108,3 +108,22 @@ async def test_inline_and_reader_together_keep_every_message_in_order(chunk: int
 
 async def test_a_handler_that_raises_is_removed_and_the_reader_takes_over() -> None:
     await run_case(1 << 20, raising=True)
+
+
+async def test_a_reader_waiting_when_the_keepalive_closes_the_socket_gets_connection_lost() -> None:
+    # the peer never reads, so never answers a ping: the keep-alive closes the
+    # socket while the reader waits on it (on trio, in trio's readiness wait)
+    async def silent(peer: Peer) -> None:
+        await anyio.sleep(30)
+
+    async with scripted_server(silent) as url:
+        ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",), max_size=None)
+        ws.handle_inline(lambda text, data, start, stop: True)
+        with anyio.fail_after(10):
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(ws.keepalive, 0.05, 0.1)
+                with pytest.raises(ConnectionLost, match="keep-alive"):
+                    await ws.receive_raw()
+        await ws.aclose(timeout=0.5)
+    assert ws.closed
+    assert ws.messages_received == 0

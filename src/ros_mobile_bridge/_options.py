@@ -303,8 +303,9 @@ class ClientOptions:
     """Where the library logs skipped frames, decode failures and teardown."""
     throttle_mode: ThrottleMode | Callable[[], ThrottleMode] = "auto"
     """The adaptive throttle's curve: ``"performance"``, ``"auto"`` or
-    ``"efficient"``, or a callable read on every message so a settings
-    change applies at once."""
+    ``"efficient"``, or a callable read as messages arrive, so a settings
+    change applies from the next message (under a cap, from the end of the
+    current window)."""
     preset_overrides: Mapping[str, Sequence[Bucket | tuple[float, float, str]]] | None = None
     """Replacement curves per mode (``(threshold_ms, min_interval_ms,
     label)`` buckets). A curve that fails validation is logged and that

@@ -85,8 +85,8 @@ class Router:
         self.logger = self._log
         """The client's logger (``options.logger``)."""
         self._presets = presets
-        mode = options.throttle_mode
-        self._mode: Callable[[], ThrottleMode] = mode if callable(mode) else (lambda: mode)
+        # a fixed mode or the user's callable, read per message (see AdaptiveThrottle)
+        self._mode: ThrottleMode | Callable[[], ThrottleMode] = options.throttle_mode
         self._status = status
         self._outbound = outbound
         self.topics: Watchable[list[TopicInfo]] = Watchable(adapter.topics)
@@ -102,6 +102,11 @@ class Router:
         self._breaker_topics: set[str] = set()  # topics to subscribe again at the bridge
         # the rates each topic's bridge subscription asks: (max_hz, pause_hz)
         self._forwarded_hz: dict[str, tuple[float | None, float | None]] = {}
+        # the reliability tick while run_reliability runs, the loop's monitor,
+        # and its key there while registered (see _sync_tick)
+        self._tick: Callable[[], None] | None = None
+        self._tick_monitor: LagMonitor | None = None
+        self._tick_key: int | None = None
 
     @property
     def _connected(self) -> bool:
@@ -278,6 +283,7 @@ class Router:
         topic = route.sub.topic
         self._routes.setdefault(topic, []).append(route)
         self._offers.setdefault(topic, []).append(route.queue.offer)
+        self._sync_tick()
 
     def _unlink(self, route: Route) -> list[Route] | None:
         """Stop routing to ``route``; the topic's routes left (None when it
@@ -292,6 +298,7 @@ class Router:
             del self._routes[topic]
             del self._offers[topic]
             self._forwarded_hz.pop(topic, None)
+            self._sync_tick()
         return routes
 
     async def add(self, route: Route) -> None:
@@ -407,11 +414,14 @@ class Router:
     async def run_reliability(self) -> None:
         """Apply breaker and forwarded-rate changes at the bridge. The checks
         run in :meth:`_reliability_tick`, which the event loop's shared lag
-        sampler calls every 200 ms for every client on the loop (one wake-up
-        per loop, not one per client); this task wakes only when a breaker
-        changed state and the bridge must stop or resume sending a topic."""
+        sampler calls every 200 ms for every client on the loop that has a
+        subscription (one wake-up per loop, not one per client); this task
+        wakes only when a breaker changed state and the bridge must stop or
+        resume sending a topic."""
         monitor = current_monitor()
-        key = monitor.add_tick(partial(self._reliability_tick, monitor))
+        self._tick = partial(self._reliability_tick, monitor)
+        self._tick_monitor = monitor
+        self._sync_tick()
         try:
             while True:
                 await self._breaker_changed.wait()
@@ -427,6 +437,23 @@ class Router:
                     except Exception:  # a bug must not take the user's program down
                         self._log.exception("bridge change on %s failed", topic)
         finally:
+            self._tick = None
+            self._sync_tick()
+
+    def _sync_tick(self) -> None:
+        """Keep the reliability tick registered with the loop's shared
+        sampler exactly while :meth:`run_reliability` runs and a subscription
+        is routed: with none the tick has nothing to do, so a thousand idle
+        clients on a loop add nothing to its ticks."""
+        monitor = self._tick_monitor
+        if monitor is None:
+            return
+        key = self._tick_key
+        if self._tick is not None and self._routes:
+            if key is None:
+                self._tick_key = monitor.add_tick(self._tick)
+        elif key is not None:
+            self._tick_key = None
             monitor.remove_tick(key)
 
     def _offered(self, topic: str) -> bool:

@@ -151,6 +151,10 @@ class LagMonitor:
         self._max_lag_ms = 0.0
         self._recurring_lag_ms = 0.0
         self._sustained_lag_ms = 0.0
+        self.generation = 0
+        """Moves on every :meth:`record` and :meth:`clear` (the only times
+        the signals change): a reader may keep what it derived from them
+        while it stays the same (the adaptive throttles do, per frame)."""
         self._participants = 0
         self._sampling = False
         self._handover = anyio.Event()
@@ -229,6 +233,7 @@ class LagMonitor:
         else:
             rank = min(-(-_SUSTAINED_PERCENTILE * n // 100), n - RECURRING_SAMPLES + 1)
             self._sustained_lag_ms = ordered[rank - 1]
+        self.generation += 1
 
     def clear(self) -> None:
         """Forget every sample; both signals read 0.0 until the next one."""
@@ -240,6 +245,7 @@ class LagMonitor:
         self._max_lag_ms = 0.0
         self._recurring_lag_ms = 0.0
         self._sustained_lag_ms = 0.0
+        self.generation += 1
 
     # -- diagnostics -----------------------------------------------------------
     def __len__(self) -> int:

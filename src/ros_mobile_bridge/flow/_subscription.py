@@ -110,6 +110,7 @@ class FrameQueue:
         self._queue: deque[RawFrame] = deque()
         self._held: RawFrame | None = None
         self._last_release: float | None = None
+        self._due = 0.0  # when the held frame's window ends (set with _held by offer)
         self._wakeup: anyio.Event | None = None
         self._closed = False
         self.error: Exception | None = None
@@ -132,7 +133,8 @@ class FrameQueue:
     def interval(self) -> float:
         """The effective minimum interval between delivered frames, seconds:
         the larger of the ``max_hz`` cap and the adaptive interval, as of the
-        last frame."""
+        last frame that was not replaced inside a window (the adaptive
+        interval is read once per window, when a frame arrives after it)."""
         return self._interval
 
     @property
@@ -162,6 +164,13 @@ class FrameQueue:
         if self.blocked:
             self.dropped_breaker += 1
             return
+        if self._held is not None and now + _DUE_SLACK < self._due:
+            # inside the window of a held frame (the common case of a rate
+            # cap): the newer frame replaces it, released at the same time.
+            # The interval is read again when the window ends, not per frame
+            self.dropped_throttle += 1
+            self._held = frame
+            return
         interval = self._cap
         if self._adaptive is not None:
             adaptive = self._adaptive()
@@ -178,12 +187,14 @@ class FrameQueue:
         if last is None or now - last >= interval:
             self._last_release = now
             self._enqueue(frame)
-        elif self._held is not None:
+            return
+        if self._held is not None:
             self.dropped_throttle += 1  # the newer frame replaces it; same release time
             self._held = frame
         else:
             self._held = frame
             self._wake()  # a waiting consumer arms its timer for the release
+        self._due = last + interval
 
     def replayed(self, size: int) -> None:
         """A frame of ``size`` payload bytes reached the client and was the

@@ -40,6 +40,8 @@ from collections.abc import Callable, Mapping, Sequence
 from types import MappingProxyType
 from typing import Final, Literal, NamedTuple, Protocol, get_args
 
+from ._lag import LagMonitor
+
 __all__ = [
     "DEFAULT_PRESETS",
     "THROTTLE_MODES",
@@ -205,9 +207,10 @@ class AdaptiveThrottle:
     loop's lag.
 
     ``presets`` maps every mode to a valid curve (from
-    :func:`resolve_presets`). ``mode`` is read on every :meth:`interval_s`
-    call, so a settings change applies to the next message; an unknown mode
-    value falls back to ``"auto"`` (warned once per value on ``logger``).
+    :func:`resolve_presets`). ``mode`` is a mode, or a callable read on
+    every :meth:`interval_s` call, so a settings change applies to the next
+    message; an unknown mode value falls back to ``"auto"`` (warned once per
+    value on ``logger``).
 
     The rules, where a curve's bucket *justified* by a lag is the deepest
     whose threshold is at most that lag:
@@ -232,14 +235,16 @@ class AdaptiveThrottle:
     change of bucket or mode.
 
     :meth:`interval_s` is O(1) in the common case (the lag signals change
-    about every 50 ms; between changes the last answer is reused). The
-    properties describe the state as of the last :meth:`interval_s` call
-    (or construction)."""
+    about every 50 ms; between changes the last answer is reused). With a
+    fixed mode over a :class:`~ros_mobile_bridge.flow._lag.LagMonitor` it
+    reads nothing until the monitor's ``generation`` moves (a new
+    sample): one comparison per call. The properties describe the state as
+    of the last :meth:`interval_s` call (or construction)."""
 
     def __init__(
         self,
         presets: Mapping[ThrottleMode, Sequence[Bucket]],
-        mode: Callable[[], ThrottleMode],
+        mode: ThrottleMode | Callable[[], ThrottleMode],
         lag: LagSource,
         *,
         deadband_ms: float = 10.0,
@@ -262,8 +267,15 @@ class AdaptiveThrottle:
         self._thresholds = {
             key: tuple(bucket.threshold_ms for bucket in curve) for key, curve in curves.items()
         }
-        self._mode_fn = mode
+        # a fixed mode is not read again; a callable is read on every call
+        self._mode_fn: Callable[[], object] | None = mode if callable(mode) else None
+        fixed: object = None if callable(mode) else mode
         self._lag = lag
+        # the monitor whose generation tells when the signals moved (None:
+        # another source, read on every call), and its generation at the
+        # last evaluation
+        self._monitor = lag if isinstance(lag, LagMonitor) else None
+        self._generation = -1
         self._deadband = deadband
         self._logger = logger or logging.getLogger("ros_mobile_bridge")
         self._warned_modes: set[str] = set()
@@ -276,7 +288,10 @@ class AdaptiveThrottle:
         self._curve = curves["auto"]
         self._index = 0
         self._interval = 0.0
-        self._evaluate(mode(), lag.recurring_lag_ms(), lag.sustained_lag_ms(), initial=True)
+        if self._monitor is not None:
+            self._generation = self._monitor.generation
+        raw = fixed if self._mode_fn is None else self._mode_fn()
+        self._evaluate(raw, lag.recurring_lag_ms(), lag.sustained_lag_ms(), initial=True)
 
     @property
     def interval(self) -> float:
@@ -288,7 +303,17 @@ class AdaptiveThrottle:
         """The minimum interval between delivered messages now, in seconds
         (0.0 = no cap). Call it for every received frame: it reads the mode
         and the lag signals and moves the bucket by the rules above."""
-        raw_mode = self._mode_fn()
+        mode_fn = self._mode_fn
+        monitor = self._monitor
+        if mode_fn is None:
+            if monitor is not None:
+                generation = monitor.generation
+                if generation == self._generation:
+                    return self._interval  # no new sample since the last call
+                self._generation = generation
+            raw_mode = self._raw_mode
+        else:
+            raw_mode = mode_fn()
         lag = self._lag
         recurring = lag.recurring_lag_ms()
         sustained = lag.sustained_lag_ms()

@@ -43,13 +43,6 @@ now, or return False (having done nothing) to leave it to the reader."""
 
 READ_CHUNK: Final = 1 << 20
 """The most bytes one read of the stream asks for (the handshake's reads too)."""
-_TRIO_READ: Final = 64 * 1024
-"""The most bytes one read of trio's plain TCP socket asks for. trio's read
-allocates a buffer of the size asked and shrinks it to what came: 1 MiB is
-above the C allocator's threshold for a fresh mapping of memory, so each such
-read faulted in every page it filled (about 180 page faults per camera image);
-64 KiB is reused memory. A large frame's rest is read straight into its
-buffer (:data:`_DIRECT_MAX`), whatever this size."""
 _FEED_STEP: Final = 16 * 1024
 """Bytes handed to the WebSocket parser at a time. The parser turns all it is
 given into frame objects at once (about 150 bytes of memory each): a 1 MiB
@@ -166,18 +159,25 @@ class WebSocket:
         that several frames are read and handed over at one wake-up
         (:meth:`receive_raw`); 0 reads as soon as anything arrives."""
         self._last_read = 0.0  # time.monotonic() when the last read returned
-        # trio's socket under anyio's plain TCP stream: a read that waited
-        # first takes the socket's bytes directly (no scheduling round)
+        # trio's socket under anyio's plain TCP stream: the reader waits for
+        # it to be readable and reads it directly (_receive_sock), and a read
+        # that waited first takes the socket's bytes at once (_read_held)
         self._held_sock: socket.socket | None = None
-        # on trio, read coalescing's waits end without an exception (_trio_wait)
+        # on trio, read coalescing's waits end without an exception, and the
+        # plain socket is read without anyio's stream layers (_trio_io)
         self._trio_sleep: Callable[[float], Awaitable[None]] | None = None
+        self._trio_receive: Callable[[socket.socket], Awaitable[bytes]] | None = None
+        self._trio_receive_into: (
+            Callable[[socket.socket, memoryview], Awaitable[tuple[int, bool]]] | None
+        ) = None
         if self._protocol_stream is None and _on_trio():
-            from . import _trio_wait  # (trio is optional: imported once it runs)
+            from . import _trio_io  # (imports trio: installed, since it runs)
 
-            self._trio_sleep = _trio_wait.sleep
+            self._trio_sleep = _trio_io.sleep
             if isinstance(stream, anyio.abc.SocketStream):
                 self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
-        self._read_size = READ_CHUNK if self._held_sock is None else _TRIO_READ
+                self._trio_receive = _trio_io.receive
+                self._trio_receive_into = _trio_io.receive_into
         self._direct_reads = self._held_sock is not None or self._protocol_stream is not None
         self._steady = False  # read coalescing is on for the next read
         self.reads = 0
@@ -321,13 +321,17 @@ class WebSocket:
                 held = False
             else:
                 held = await self._coalesce() if self._steady else False
+            sock = self._held_sock
             try:
                 if self._direct is not None:
                     await self._read_direct()
                     continue
-                data = self._read_held() if held and self._held_sock is not None else b""
+                data = self._read_held() if held and sock is not None else b""
                 if not data:
-                    data = await self._stream.receive(self._read_size)
+                    if sock is not None and self._trio_receive is not None:
+                        data = await self._trio_receive(sock)
+                    else:
+                        data = await self._stream.receive(READ_CHUNK)
             except (
                 anyio.EndOfStream,
                 anyio.ClosedResourceError,
@@ -443,16 +447,8 @@ class WebSocket:
         else:
             sock = self._held_sock
             assert sock is not None
-            waited = False
-            while True:
-                try:
-                    n = sock.recv_into(view[filled:])
-                    break
-                except (BlockingIOError, InterruptedError):
-                    await anyio.wait_readable(sock)
-                    waited = True
-            if not n:
-                raise anyio.EndOfStream
+            assert self._trio_receive_into is not None
+            n, waited = await self._trio_receive_into(sock, view[filled:])
         self.reads += 1
         self.bytes_received += n
         filled += n

@@ -1,4 +1,4 @@
-"""The trio-only sleep of read coalescing (``transport/_trio_wait.py``): its
+"""The trio-only sleep of read coalescing (``transport/_trio_io.py``): its
 deadline ends it with a plain return, not a ``Cancelled`` raised and caught,
 and a cancellation from outside is never lost. trio's virtual clock
 (``MockClock``, jumping ahead whenever every task waits) makes the times
@@ -13,7 +13,7 @@ import pytest
 trio = pytest.importorskip("trio")
 trio_testing = pytest.importorskip("trio.testing")
 
-from ros_mobile_bridge.transport import _trio_wait  # noqa: E402
+from ros_mobile_bridge.transport import _trio_io  # noqa: E402
 
 
 def run(fn: object) -> None:
@@ -26,10 +26,10 @@ def test_the_deadline_ends_the_sleep_with_a_return() -> None:
     async def main() -> None:
         start = trio.current_time()
         with trio.CancelScope() as outer:
-            await _trio_wait.sleep_until(start + 2.5)
+            await _trio_io.sleep_until(start + 2.5)
             seen.append(trio.current_time() - start)
             seen.append(sys.exc_info()[1])  # no exception in flight
-            await _trio_wait.sleep(0.5)
+            await _trio_io.sleep(0.5)
             seen.append(trio.current_time() - start)
         seen.append(outer.cancelled_caught)
 
@@ -42,8 +42,8 @@ def test_a_deadline_already_past_returns_at_once() -> None:
 
     async def main() -> None:
         start = trio.current_time()
-        await _trio_wait.sleep_until(start - 1.0)
-        await _trio_wait.sleep(0.0)
+        await _trio_io.sleep_until(start - 1.0)
+        await _trio_io.sleep(0.0)
         seen.append(trio.current_time() - start)
 
     run(main)
@@ -56,14 +56,14 @@ def test_a_cancellation_from_outside_raises_cancelled() -> None:
     async def main() -> None:
         start = trio.current_time()
         with trio.move_on_after(1.0) as outer:
-            await _trio_wait.sleep(10.0)
+            await _trio_io.sleep(10.0)
             seen.append("not cancelled")
         seen.append((outer.cancelled_caught, trio.current_time() - start))
         async with trio.open_nursery() as nursery:  # by another task
 
             async def sleeper() -> None:
                 try:
-                    await _trio_wait.sleep(10.0)
+                    await _trio_io.sleep(10.0)
                 except trio.Cancelled:
                     seen.append(("cancelled", trio.current_time() - start))
                     raise
@@ -88,7 +88,7 @@ def test_a_cancellation_at_the_deadline_is_not_lost() -> None:
 
     async def sleeper(deadline: float) -> None:
         try:
-            await _trio_wait.sleep_until(deadline)
+            await _trio_io.sleep_until(deadline)
         except trio.Cancelled:
             outcomes.append("cancelled in the sleep")
             raise
