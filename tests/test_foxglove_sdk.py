@@ -19,7 +19,7 @@ from foxglove import Schema
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
-from peers.foxglove_sdk import SdkServer, cdr, decode, ros2_service, string_msg
+from peers.foxglove_sdk import SdkServer, cdr, decode, image_msg, ros2_service, string_msg
 
 
 @pytest.fixture
@@ -139,24 +139,10 @@ async def test_subscribe_json_topic(server: SdkServer) -> None:
 
 
 async def test_image_data_is_a_numpy_array(server: SdkServer) -> None:
-    from peers.foxglove_sdk import TYPESTORE
 
     cam = server.channel("/camera", "sensor_msgs/msg/Image")
     pixels = np.arange(640 * 480 * 3, dtype=np.uint64).astype(np.uint8)
-    t = TYPESTORE.types
-    header = t["std_msgs/msg/Header"](
-        stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="cam"
-    )
-    payload = cdr(
-        "sensor_msgs/msg/Image",
-        header=header,
-        height=480,
-        width=640,
-        encoding="rgb8",
-        is_bigendian=0,
-        step=640 * 3,
-        data=pixels,
-    )
+    payload = image_msg(pixels=pixels, stamp=(1, 2), frame_id="cam")
     async with rmb.connect(server.url, options=options()) as robot:
         async with robot.subscribe("/camera") as sub:
             await wait_until(lambda: "/camera" in server.subscribed())

@@ -12,19 +12,9 @@ import struct
 import anyio
 import pytest
 
+from peers.hostile_server import frame
 from peers.scripted import Peer, scripted_server
 from ros_mobile_bridge.transport import ConnectionLost, connect_websocket
-
-
-def frame(opcode: int, payload: bytes) -> bytes:
-    n = len(payload)
-    if n < 126:
-        head = bytes([0x80 | opcode, n])
-    elif n < 1 << 16:
-        head = bytes([0x80 | opcode, 126]) + struct.pack("!H", n)
-    else:
-        head = bytes([0x80 | opcode, 127]) + struct.pack("!Q", n)
-    return head + payload
 
 
 def messages(count: int, *, plain: bool) -> list[tuple[bool, bytes]]:

@@ -18,22 +18,12 @@ import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
-from peers.foxglove_sdk import TYPESTORE, SdkServer, cdr
+from peers.foxglove_sdk import SdkServer, image_msg
+from peers.hostile_server import frame
 from peers.scripted import Peer, scripted_server
 from ros_mobile_bridge.transport import ConnectionLost, _websocket, connect_websocket
 
 IMAGE = 640 * 480 * 3 + 52
-
-
-def frame(opcode: int, payload: bytes) -> bytes:
-    n = len(payload)
-    if n < 126:
-        head = bytes([0x80 | opcode, n])
-    elif n < 1 << 16:
-        head = bytes([0x80 | opcode, 126]) + struct.pack("!H", n)
-    else:
-        head = bytes([0x80 | opcode, 127]) + struct.pack("!Q", n)
-    return head + payload
 
 
 def on_trio() -> bool:
@@ -152,25 +142,15 @@ async def test_a_read_cancelled_inside_a_large_frame_loses_nothing() -> None:
         await ws.aclose(timeout=0.5)
 
 
-@pytest.fixture
-def server() -> Iterator[SdkServer]:
-    with SdkServer() as srv:
-        yield srv
-
-
 async def test_camera_images_arrive_whole_and_read_only(server: SdkServer) -> None:
     """Images from the official Foxglove SDK server: every one arrives, its
     pixels intact, as a read-only numpy array (the bytes it views); each
     was read straight into the connection's kept buffer."""
     cam = server.channel("/camera", "sensor_msgs/msg/Image")
-    t = TYPESTORE.types
     count = 12
     images = [np.full(640 * 480 * 3, i, dtype=np.uint8) for i in range(count)]
     for i, pixels in enumerate(images):
         pixels[i * 1000 : i * 1000 + 4] = (0x82, 0x02, 0x81, 0x05)
-    header = t["std_msgs/msg/Header"](
-        stamp=t["builtin_interfaces/msg/Time"](sec=1, nanosec=2), frame_id="cam"
-    )
     options = rmb.ClientOptions(zero_twist_on_exit=False, keepalive_interval=0)
     async with rmb.connect(server.url, options=options) as robot:
         async with robot.subscribe("/camera", buffer=count, adaptive=False) as sub:
@@ -178,18 +158,7 @@ async def test_camera_images_arrive_whole_and_read_only(server: SdkServer) -> No
                 while "/camera" not in server.subscribed():
                     await anyio.sleep(0.01)
             for pixels in images:
-                cam.log(
-                    cdr(
-                        "sensor_msgs/msg/Image",
-                        header=header,
-                        height=480,
-                        width=640,
-                        encoding="rgb8",
-                        is_bigendian=0,
-                        step=640 * 3,
-                        data=pixels,
-                    )
-                )
+                cam.log(image_msg(pixels=pixels, stamp=(1, 2), frame_id="cam"))
             got = []
             with anyio.fail_after(20):
                 async for msg in sub:

@@ -47,20 +47,29 @@ def string_msg(text: str) -> bytes:
     return cdr("std_msgs/msg/String", data=text)
 
 
-def image_msg(width: int = 640, height: int = 480) -> bytes:
-    """A zero-filled ``sensor_msgs/msg/Image`` (rgb8), stamp 0, as CDR."""
+def image_msg(
+    width: int = 640,
+    height: int = 480,
+    *,
+    pixels: Any = None,
+    stamp: tuple[int, int] = (0, 0),
+    frame_id: str = "",
+) -> bytes:
+    """A ``sensor_msgs/msg/Image`` (rgb8) as CDR: ``pixels`` (a uint8 array of
+    ``width * height * 3``; zeros by default), ``stamp`` as (sec, nanosec)."""
     t = TYPESTORE.types
     return cdr(
         "sensor_msgs/msg/Image",
         header=t["std_msgs/msg/Header"](
-            stamp=t["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id=""
+            stamp=t["builtin_interfaces/msg/Time"](sec=stamp[0], nanosec=stamp[1]),
+            frame_id=frame_id,
         ),
         height=height,
         width=width,
         encoding="rgb8",
         is_bigendian=0,
         step=width * 3,
-        data=np.zeros(width * height * 3, dtype=np.uint8),
+        data=np.zeros(width * height * 3, dtype=np.uint8) if pixels is None else pixels,
     )
 
 

@@ -190,16 +190,7 @@ class ProtocolStream(anyio.abc.ByteStream):
     async def receive(self, max_bytes: int = 65536) -> bytes:
         p = self._protocol
         while not p.chunks:
-            if self._closed:
-                raise anyio.ClosedResourceError
-            if p.eof:
-                if p.error is not None:
-                    raise anyio.BrokenResourceError from p.error
-                raise anyio.EndOfStream
-            if p.reader is not None:
-                raise RuntimeError("another task is already reading from this stream")
-            if p.held:
-                self._resume_held()
+            self._ready_to_wait()
             p.reader = waiter = p.loop.create_future()
             try:
                 await waiter
@@ -211,14 +202,7 @@ class ProtocolStream(anyio.abc.ByteStream):
             p.chunks.appendleft(data[max_bytes:])
             data = data[:max_bytes]
         p.buffered -= len(data)
-        if (
-            p.read_paused
-            and not p.held
-            and p.buffered < _LOW_WATER
-            and not self._transport.is_closing()
-        ):
-            p.read_paused = False
-            self._transport.resume_reading()
+        self._resume_below_low_water()
         return data
 
     async def receive_into(self, view: memoryview) -> int:
@@ -236,16 +220,7 @@ class ProtocolStream(anyio.abc.ByteStream):
                 return n
             if p.chunks:
                 break
-            if self._closed:
-                raise anyio.ClosedResourceError
-            if p.eof:
-                if p.error is not None:
-                    raise anyio.BrokenResourceError from p.error
-                raise anyio.EndOfStream
-            if p.reader is not None:
-                raise RuntimeError("another task is already reading from this stream")
-            if p.held:
-                self._resume_held()
+            self._ready_to_wait()
             p.target = view
             p.reader = waiter = p.loop.create_future()
             try:
@@ -265,6 +240,21 @@ class ProtocolStream(anyio.abc.ByteStream):
         p.buffered -= n
         self._resume_below_low_water()
         return n
+
+    def _ready_to_wait(self) -> None:
+        """Before a read waits for the socket: raise what the stream's state
+        says (closed, ended, failed, another reader), and end a hold."""
+        p = self._protocol
+        if self._closed:
+            raise anyio.ClosedResourceError
+        if p.eof:
+            if p.error is not None:
+                raise anyio.BrokenResourceError from p.error
+            raise anyio.EndOfStream
+        if p.reader is not None:
+            raise RuntimeError("another task is already reading from this stream")
+        if p.held:
+            self._resume_held()
 
     def _resume_below_low_water(self) -> None:
         p = self._protocol
