@@ -3,7 +3,7 @@ subscription each (stand-alone script).
 
     .venv/bin/python bench/bench_scale.py [--backend asyncio|trio|both]
         [--sizes 10,100,1000] [--seconds 5] [--rate 20] [--max-hz 5] [--json PATH]
-        [--strict] [--no-bare] [--profile]
+        [--strict] [--no-bare] [--profile] [--save-bandwidth]
 
 The server is the official Foxglove SDK server in its own process
 (``bench/_peer.py scale RATE``) on 127.0.0.1, with one ``std_msgs/String``
@@ -42,6 +42,11 @@ loop's lag.
 
 ``--profile`` samples the library's subscribed window at the largest size
 with a SIGPROF sampler (CPU time) and prints each function's share.
+
+``--save-bandwidth`` subscribes with ``save_bandwidth=True``: each client
+unsubscribes after every message it takes and subscribes again when the
+next is due, so the server sends about MAX_HZ frames a second per client
+instead of RATE (the bare baseline still reads every frame).
 
 With ``--backend both`` each backend runs in its own process (memory one
 run freed stays in the process and would hide the next one's growth).
@@ -202,6 +207,7 @@ async def run_size(
     rate: float,
     max_hz: float,
     sampler: Sampler | None = None,
+    save_bandwidth: bool = False,
 ) -> dict[str, Any]:
     rss_before = rss_bytes()
     connected = 0
@@ -219,7 +225,9 @@ async def run_size(
                 if connected == n:
                     all_connected.set()
                 await go.wait()
-                async with client.subscribe(SCALE_TOPIC, max_hz=max_hz) as sub:
+                async with client.subscribe(
+                    SCALE_TOPIC, max_hz=max_hz, save_bandwidth=save_bandwidth
+                ) as sub:
                     subs.append(sub)
                     async for msg in sub:
                         msg.data["data"]
@@ -249,8 +257,11 @@ async def run_size(
 
         go.set()
         with anyio.fail_after(120):
+            if save_bandwidth:  # paused clients leave the server's count
+                while min(delivered) == 0:  # noqa: ASYNC110
+                    await anyio.sleep(0.2)
             # the server is another process: its count can only be polled
-            while await anyio.to_thread.run_sync(peer.subscribers) < n:  # noqa: ASYNC110
+            while not save_bandwidth and await anyio.to_thread.run_sync(peer.subscribers) < n:  # noqa: ASYNC110
                 await anyio.sleep(0.2)
         await anyio.sleep(2.0)
         count0, cpu0, t0 = sum(delivered), time.process_time(), time.perf_counter()
@@ -270,12 +281,15 @@ async def run_size(
         result["sub_rss_mb_per_conn"] = (rss_bytes() - rss_before) / n / 1e6
         totals: collections.Counter[str] = collections.Counter()
         problems: list[str] = []
+        may_drop: tuple[str, ...] = ("dropped_throttle", "dropped_breaker")
+        if save_bandwidth:  # a replay is skipped (none expected: each tick differs)
+            may_drop += ("dropped_replay",)
         for sub in subs:
             counts = subscription_counts(sub)
             totals.update(counts)
             # the breaker may trip under overload: counted, and it shows in
             # the delivered rate
-            problems += check_fates(counts, may_drop=("dropped_throttle", "dropped_breaker"))
+            problems += check_fates(counts, may_drop=may_drop)
         result["fates"] = dict(totals)
         result["problems"] = problems[:5] + (
             [f"... {len(problems) - 5} more"] if len(problems) > 5 else []
@@ -386,7 +400,9 @@ async def run_backend(args: argparse.Namespace) -> list[dict[str, Any]]:
         results = []
         for n in args.sizes:
             sampler = Sampler() if args.profile and n == max(args.sizes) else None
-            r = await run_size(peer, n, args.seconds, args.rate, args.max_hz, sampler)
+            r = await run_size(
+                peer, n, args.seconds, args.rate, args.max_hz, sampler, args.save_bandwidth
+            )
             results.append(r)
             if sampler is not None:
                 r["profile"] = sampler
@@ -432,6 +448,8 @@ def run_each_backend(args: argparse.Namespace) -> int:
             argv.append("--no-bare")
         if args.profile:
             argv.append("--profile")
+        if args.save_bandwidth:
+            argv.append("--save-bandwidth")
         part = args.json.with_suffix(f".{backend}.json") if args.json else None
         if part is not None:
             argv += ["--json", str(part)]
@@ -455,6 +473,9 @@ def main() -> int:
     parser.add_argument("--json", type=Path)
     parser.add_argument("--strict", action="store_true", help="a missed target fails the run")
     parser.add_argument("--no-bare", action="store_true", help="skip the bare websockets baseline")
+    parser.add_argument(
+        "--save-bandwidth", action="store_true", help="subscribe with save_bandwidth=True"
+    )
     parser.add_argument(
         "--profile", action="store_true", help="profile the subscribed window at the largest size"
     )
