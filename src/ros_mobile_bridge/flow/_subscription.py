@@ -354,10 +354,6 @@ class Subscription:
         self.topic = topic
         self._queue = queue
         self._decoding = decode
-        if not decode:
-            # the raw form replaces the decoder on this instance only: a
-            # decoded subscription's path is untouched
-            self._decode = self._raw  # type: ignore[method-assign]
         self._throttle = throttle
         self.breaker: CircuitBreaker = breaker if breaker is not None else CircuitBreaker()
         """This subscription's circuit breaker: ``state``, ``next_retry_at``
@@ -446,7 +442,7 @@ class Subscription:
         undecoded = self._undecoded
         delivered = 0
         try:
-            # what ``_decode`` does, inline, for each frame: one call less
+            # each frame decoded here, as ``__anext__`` does: one call less
             while True:
                 delivered += 1
                 payload = frame.payload
@@ -527,11 +523,12 @@ class Subscription:
         if size >= _LARGE_PAYLOAD:
             since += size >> _LARGE_WEIGHT  # about 4 MiB between two yields
         self._since_yield = since
-        decode = frame.decode
-        if decode is None or not self._decoding:
-            return self._decode(frame)
-        # what ``_decode`` does, inline: one call less per message
+        if not self._decoding:
+            return self._raw(frame)
         self._queue.delivered += 1
+        decode = frame.decode
+        if decode is None:
+            return self._undecoded(frame, None)
         try:
             data = decode(payload)
         except Exception as exc:  # a codec bug must not end the subscription
@@ -547,28 +544,6 @@ class Subscription:
             None,
             frame.sequence,
         )
-
-    def _decode(self, frame: RawFrame) -> Message:
-        self._queue.delivered += 1
-        payload = frame.payload
-        decode = frame.decode
-        if decode is not None:
-            try:
-                data = decode(payload)
-            except Exception as exc:  # a codec bug must not end the subscription
-                return self._undecoded(frame, exc)
-            return new_message(
-                frame.topic,
-                frame.schema_name,
-                frame.encoding,
-                data,
-                frame.receive_time_ns,
-                frame.log_time_ns,
-                payload.nbytes,
-                None,
-                frame.sequence,
-            )
-        return self._undecoded(frame, None)
 
     def _undecoded(self, frame: RawFrame, exc: Exception | None) -> Message:
         """A delivered frame whose payload did not decode (``exc``; None: no

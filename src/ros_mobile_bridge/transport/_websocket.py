@@ -137,14 +137,15 @@ class WebSocket:
         self._parts: list[bytes | bytearray | memoryview] | None = None
         self._missing = 0
         self._parts_text = False
-        # trio: the large frame being read straight into _direct_buf, as a
-        # view of its exact size, and how much of it is filled
+        # the large frame being read straight into _direct_buf (a plain TCP
+        # socket, either loop), as a view of its exact size, and how much of
+        # it is filled
         self._direct: memoryview | None = None
         self._direct_buf = bytearray()
         self._filled = 0
         self.direct_frames = 0
         """Large frames read straight into the connection's kept buffer
-        (trio's plain TCP socket; see :data:`_DIRECT_MAX`)."""
+        (a plain TCP socket; see :data:`_DIRECT_MAX`)."""
         self._inline: InlineHandler | None = None
         self.inline_messages = 0
         """Messages taken by the :meth:`handle_inline` handler so far."""
@@ -160,8 +161,8 @@ class WebSocket:
         (:meth:`receive_raw`); 0 reads as soon as anything arrives."""
         self._last_read = 0.0  # time.monotonic() when the last read returned
         # trio's socket under anyio's plain TCP stream: the reader waits for
-        # it to be readable and reads it directly (_receive_sock), and a read
-        # that waited first takes the socket's bytes at once (_read_held)
+        # it to be readable and reads it directly (_trio_io.receive), and a
+        # read that waited first takes the socket's bytes at once (_read_held)
         self._held_sock: socket.socket | None = None
         # on trio, read coalescing's waits end without an exception, and the
         # plain socket is read without anyio's stream layers (_trio_io)
@@ -317,13 +318,11 @@ class WebSocket:
             if self._closed_reason is not None:
                 await self._finish_closing()
                 raise self._closed_reason
-            if self._direct is not None:
-                held = False
-            else:
-                held = await self._coalesce() if self._steady else False
+            direct = self._direct is not None
+            held = not direct and self._steady and await self._coalesce()
             sock = self._held_sock
             try:
-                if self._direct is not None:
+                if direct:
                     await self._read_direct()
                     continue
                 data = self._read_held() if held and sock is not None else b""
