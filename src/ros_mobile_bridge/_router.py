@@ -150,6 +150,20 @@ class Router:
                 offer(frame)
         return True
 
+    def quiet_until(self, now: float) -> float:
+        """:meth:`EventSink.quiet_until`: the earliest
+        :meth:`FrameQueue.quiet_until` of this client's subscriptions (0.0
+        with none, or when one can take a frame now)."""
+        until = 0.0
+        for routes in self._routes.values():
+            for route in routes:
+                t = route.queue.quiet_until(now)
+                if t <= now:
+                    return 0.0
+                if t < until or not until:
+                    until = t
+        return until
+
     async def _send_control(self) -> None:
         with contextlib.suppress(ConnectError):  # the reader's next read reports it
             await self._outbound.send_control()

@@ -280,6 +280,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         engine = self._engine
         saving = self._pauses.rates  # (updated in place)
         ws.handle_inline(self._take_inline)
+        ws.hold_reads(self._quiet_until)
         try:
             while True:
                 text, message = await ws.receive_raw()
@@ -304,6 +305,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
                 await sink.deliver(pending)  # (self._deliver, inlined on the hot path)
         finally:
             ws.handle_inline(None)
+            ws.hold_reads(None)
 
     def _take_inline(self, text: bool, data: bytes, start: int, stop: int) -> bool:
         """The WebSocket's inline handler: a message-data frame of a live
@@ -335,6 +337,21 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             entry[1],
         )
         return sink.deliver_now(frame)
+
+    def _quiet_until(self, now: float) -> float:
+        """The WebSocket's :meth:`~WebSocket.hold_reads` callable: the sink's
+        :meth:`~EventSink.quiet_until`, unless a request waits for its answer
+        or a topic saves bandwidth (its pauses are timed by the reader)."""
+        sink = self._sink
+        if sink is None or self._calls or self._params or self._pauses.rates:
+            return 0.0
+        return sink.quiet_until(now)
+
+    async def _send_request(self, message: bytes | str) -> None:
+        """Send a request whose answer must be read as it comes: a hold of
+        the reads ends first (see :meth:`_quiet_until`)."""
+        self._ws.end_hold()
+        await self._ws.send(message)
 
     def _frame(self, event: fx.MessageData, received_ns: int) -> RawFrame:
         channel = event.channel
@@ -658,7 +675,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         call_id = next(self._call_ids)
         request_frame = self._engine.service_call_request(svc.id, call_id, encoding, payload)
         response: fx.ServiceCallResponse = await self._calls.request(
-            call_id, lambda: self._ws.send(request_frame)
+            call_id, lambda: self._send_request(request_frame)
         )
         decode = self._response_decoder(svc, response.encoding)
         if decode is None:
@@ -694,7 +711,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
     async def _parameter_request(self, build: Any) -> dict[str, Any]:
         self._check_pending("parameters")
         request_id = f"rmb-{next(self._param_ids)}"
-        return await self._params.request(request_id, lambda: self._ws.send(build(request_id)))
+        return await self._params.request(request_id, lambda: self._send_request(build(request_id)))
 
     async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
         self._require("parameters")

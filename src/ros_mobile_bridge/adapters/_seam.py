@@ -153,6 +153,14 @@ class EventSink(Protocol):
         nothing, when it must go through :meth:`deliver` instead (control
         frames wait to be written first)."""
 
+    def quiet_until(self, now: float) -> float:
+        """The monotonic time before which no subscription can take a new
+        frame (each is inside its rate cap's window), given the time ``now``;
+        0.0 when one can take a frame now, or there is none. Until then the
+        adapter may leave its socket unread: what arrives meanwhile is read
+        together when it ends, and each capped subscription delivers the
+        newest of it, as its cap would have."""
+
 
 class Adapter(Protocol):
     """One connection to one bridge. Built connected by the adapter's

@@ -21,7 +21,6 @@ task switch when frames are already waiting."""
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import time
 from collections import deque
@@ -30,10 +29,10 @@ from typing import Final
 
 import anyio
 import anyio.lowlevel
-import sniffio
 
 from .._errors import DecodeError, NotConnected
 from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats, new_message
+from .._wakeup import Wakeup, new_wakeup
 from ._breaker import CircuitBreaker
 from ._frame import RawFrame
 from ._throttle import AdaptiveThrottle
@@ -45,22 +44,18 @@ _YIELD_EVERY: Final = 32
 _LARGE_PAYLOAD: Final = 64 * 1024
 _LARGE_WEIGHT: Final = 17  # a large payload counts as one message more per 128 KiB
 _DUE_SLACK: Final = 1e-6
-
-
-async def _wait_at_most(event: anyio.Event, delay: float) -> None:
-    """``event.wait()``, for at most ``delay`` seconds. On asyncio a loop
-    timer sets the event: a cancel scope with a deadline costs about 20 us
-    there when it expires (4x an event's wake-up), once per rate-capped
-    delivery. Elsewhere (trio) ``move_on_after``."""
-    if sniffio.current_async_library() == "asyncio":
-        handle = asyncio.get_running_loop().call_later(delay, event.set)
-        try:
-            await event.wait()
-        finally:
-            handle.cancel()
-    else:
-        with anyio.move_on_after(delay):
-            await event.wait()
+_READ_TOGETHER: Final = 1e-3
+"""Seconds after a rate-capped release at the end of a read hold (see
+:meth:`FrameQueue.quiet_until`) within which a newer frame replaces the
+released one while no consumer has taken it yet: the frames the hold
+gathered deliver the newest, as the cap would have, not the oldest."""
+_CADENCE_GRACE: Final = 0.25
+"""A capped release up to this share of the interval after its window ended
+starts the next window at that end, not at the release."""
+HOLD_BYTES: Final = 64 * 1024
+"""Payload bytes a subscription lets wait in the kernel while its reads are
+held (:meth:`FrameQueue.quiet_until`): below a socket's default receive
+buffer, so the server is never slowed by a hold."""
 
 
 class FrameQueue:
@@ -111,7 +106,17 @@ class FrameQueue:
         self._held: RawFrame | None = None
         self._last_release: float | None = None
         self._due = 0.0  # when the held frame's window ends (set with _held by offer)
-        self._wakeup: anyio.Event | None = None
+        # the consumer's wait (built at its first, on its loop), and whether
+        # it waits with no time limit (a frame the cap holds must then wake
+        # it, to arm its timer for the release)
+        self._wakeup: Wakeup | None = None
+        self._untimed = False
+        self._holding = False  # a frame was held since the last release
+        # the reader was told it may hold its reads (quiet_until); then the
+        # frame the cap released after the hold, and when (_READ_TOGETHER)
+        self._quiet = False
+        self._released: RawFrame | None = None
+        self._released_at = 0.0
         self._closed = False
         self.error: Exception | None = None
         """Why the subscription ended (the connection was lost), once it did."""
@@ -185,16 +190,60 @@ class FrameQueue:
         self._release_due(now)
         last = self._last_release
         if last is None or now - last >= interval:
-            self._last_release = now
+            # a frame taken a little after the window ended (read after a
+            # hold, or late under load) keeps the cap's cadence: the next
+            # window starts where this one ended, so such delays do not add up
+            due = now if last is None else last + interval
+            self._last_release = due if now - due < interval * _CADENCE_GRACE else now
+            if self._quiet:  # the first frame read after a hold
+                self._quiet = False
+                self._released = frame
+                self._released_at = now
             self._enqueue(frame)
+            return
+        released = self._released
+        queue = self._queue
+        if (
+            released is not None
+            and now - self._released_at < _READ_TOGETHER
+            and queue
+            and queue[-1] is released
+        ):
+            # read together with the frame just released, which no consumer
+            # has taken yet: the newer one is delivered in its place
+            self.dropped_throttle += 1
+            queue[-1] = self._released = frame
+            self._bytes += size - released.payload.nbytes
             return
         if self._held is not None:
             self.dropped_throttle += 1  # the newer frame replaces it; same release time
             self._held = frame
         else:
             self._held = frame
-            self._wake()  # a waiting consumer arms its timer for the release
+            self._holding = True
+            if self._untimed:
+                self._wake()  # the waiting consumer arms its timer for the release
         self._due = last + interval
+
+    def quiet_until(self, now: float) -> float:
+        """The monotonic time before which this subscription cannot take a
+        new frame: the end of its rate cap's current window (a frame arriving
+        before it would only be held by the cap, and replaced by any newer
+        one), or sooner when :data:`HOLD_BYTES` would arrive before it at the
+        rate of the last second. 0.0 when it can take one now: no cap, no
+        frame released yet, closed, or its breaker tripped. The connection's
+        reader may leave the socket unread until then and read what came
+        meanwhile at once (see ``WebSocket.hold_reads``)."""
+        last = self._last_release
+        interval = self._interval
+        if last is None or interval <= 0.0 or self._closed or self.blocked:
+            return 0.0
+        until = last + interval
+        rate = self._arrival_rate
+        if rate > 0.0 and now + HOLD_BYTES / rate < until:
+            until = now + HOLD_BYTES / rate
+        self._quiet = True
+        return until
 
     def replayed(self, size: int) -> None:
         """A frame of ``size`` payload bytes reached the client and was the
@@ -214,6 +263,10 @@ class FrameQueue:
             if now + _DUE_SLACK >= due:
                 self._held = None
                 self._last_release = due
+                if self._quiet:
+                    self._quiet = False
+                    self._released = held
+                    self._released_at = now
                 self._enqueue(held)
 
     def _enqueue(self, frame: RawFrame) -> None:
@@ -234,7 +287,6 @@ class FrameQueue:
     def _wake(self) -> None:
         wakeup = self._wakeup
         if wakeup is not None:
-            self._wakeup = None
             wakeup.set()
 
     def close(self) -> None:
@@ -325,12 +377,30 @@ class FrameQueue:
                     raise anyio.EndOfStream
                 self._held = None
                 return held
-            wakeup = self._wakeup = anyio.Event()
-            if held is not None and self._last_release is not None:
-                delay = self._last_release + self._interval - self._clock()
-                await _wait_at_most(wakeup, max(delay, 0.0))
+            wakeup = self._wakeup
+            if wakeup is None:
+                wakeup = self._wakeup = new_wakeup()
+            last = self._last_release
+            if last is not None and (held is not None or self._holding):
+                # a held frame is released when its window ends; and where the
+                # cap held one in the last window (a stream faster than the
+                # cap), the next window's end is armed now: its frames are held
+                # without waking this task to arm it
+                self._holding = False
+                interval = self._interval
+                delay = last + interval - self._clock()
+                if self._quiet:
+                    # the reader holds its reads until the window ends, then
+                    # offers what came meanwhile (which releases the newest);
+                    # this timer releases the held frame only if it does not
+                    delay += interval * _CADENCE_GRACE
+                await wakeup.wait(delay if delay > 0.0 else 0.0)
             else:
-                await wakeup.wait()
+                self._untimed = True
+                try:
+                    await wakeup.wait()
+                finally:
+                    self._untimed = False
 
 
 class Subscription:

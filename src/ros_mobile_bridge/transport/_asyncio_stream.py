@@ -44,6 +44,8 @@ from typing import Final
 import anyio
 import anyio.abc
 
+from .._wakeup import resolve
+
 __all__ = ["ProtocolStream", "connect_tcp"]
 
 _HIGH_WATER: Final = 4 * 1024 * 1024
@@ -87,6 +89,7 @@ class _Protocol(asyncio.BufferedProtocol):
         self.buffered = 0
         self.read_paused = False
         self.held = False  # read_paused by ProtocolStream.hold, not by back-pressure
+        self.hold_waiter: asyncio.Future[None] | None = None  # a hold's, while it waits
         self.eof = False
         self.error: BaseException | None = None
         self.reader: asyncio.Future[None] | None = None
@@ -166,11 +169,6 @@ class _Protocol(asyncio.BufferedProtocol):
         for fut in drainers:
             if not fut.done():
                 fut.set_result(None)
-
-
-def _set_done(fut: asyncio.Future[None]) -> None:
-    if not fut.done():
-        fut.set_result(None)
 
 
 class ProtocolStream(anyio.abc.ByteStream):
@@ -304,8 +302,8 @@ class ProtocolStream(anyio.abc.ByteStream):
         if not p.read_paused and not self._transport.is_closing():
             p.read_paused = p.held = True
             self._transport.pause_reading()
-        waiter = p.loop.create_future()  # (asyncio.sleep without its loop lookup)
-        timer = p.loop.call_later(seconds, _set_done, waiter)
+        waiter = p.hold_waiter = p.loop.create_future()  # (asyncio.sleep without its loop lookup)
+        timer = p.loop.call_later(seconds, resolve, waiter)
         try:
             await waiter
         except BaseException:
@@ -313,8 +311,18 @@ class ProtocolStream(anyio.abc.ByteStream):
             if p.held:
                 self._resume_held()
             raise
+        finally:
+            p.hold_waiter = None
+        timer.cancel()  # (ended early by end_hold)
         if p.held:
             self._read_held()
+
+    def end_hold(self) -> None:
+        """End the current :meth:`hold` now, if one waits (it then reads as
+        at its end)."""
+        waiter = self._protocol.hold_waiter
+        if waiter is not None:
+            resolve(waiter)
 
     def _read_held(self) -> None:
         """Read the paused socket once (see :meth:`hold`)."""

@@ -1,16 +1,6 @@
-"""The WebSocket reader's trio side (imported on trio only): a sleep that ends
-without an exception, and reads of trio's plain TCP socket without anyio's
-stream layers.
-
-``trio.sleep`` is a cancel scope around a wait that never ends: the scope's
-deadline cancels the wait, and the sleep ends by raising ``Cancelled`` through
-the waiting frames and catching it at the scope's exit (an exception object,
-an outcome wrapping it, a traceback). The WebSocket reader sleeps once per
-read under read coalescing (hundreds of times a second under a steady
-stream), so that is a share of every message's cost. :func:`sleep_until`
-keeps the scope (trio's only timer is a scope's deadline) but, when its own
-deadline is what interrupts the wait, resumes the task with a plain value
-instead. A cancellation from outside still raises ``Cancelled`` as usual.
+"""The WebSocket reader's trio side (imported on trio only): reads of trio's
+plain TCP socket without anyio's stream layers. (Its waits between reads are
+a :class:`.._trio_wakeup.TrioWakeup`.)
 """
 
 from __future__ import annotations
@@ -22,7 +12,7 @@ import anyio
 import trio
 import trio.lowlevel
 
-__all__ = ["READ_SIZE", "receive", "receive_into", "sleep", "sleep_until"]
+__all__ = ["READ_SIZE", "receive", "receive_into"]
 
 READ_SIZE: Final = 64 * 1024
 """The most bytes one :func:`receive` asks for. trio's own read allocates a
@@ -31,32 +21,6 @@ allocator's threshold for a fresh mapping of memory, so each such read
 faulted in every page it filled (about 180 page faults per camera image);
 64 KiB is reused memory. A large frame's rest is read straight into its
 buffer (:func:`receive_into`), whatever this size."""
-
-_FAILED = trio.lowlevel.Abort.FAILED
-_SUCCEEDED = trio.lowlevel.Abort.SUCCEEDED
-
-
-async def sleep(seconds: float) -> None:
-    """Sleep ``seconds``, as :func:`trio.sleep` does, and end without raising
-    when the deadline ends the sleep. Cancelled from outside before the
-    deadline, it raises ``Cancelled``; a cancellation from outside that comes
-    once the deadline has passed is taken at the caller's next checkpoint."""
-    task = trio.lowlevel.current_task()
-    scope = trio.CancelScope(deadline=trio.current_time() + seconds)
-
-    def abort(_raise_cancel: trio.lowlevel.RaiseCancelT) -> trio.lowlevel.Abort:
-        if scope.cancel_called:  # the deadline passed: wake with a value
-            trio.lowlevel.reschedule(task)
-            return _FAILED
-        return _SUCCEEDED  # cancelled from outside: Cancelled, as any sleep
-
-    with scope:
-        await trio.lowlevel.wait_task_rescheduled(abort)
-
-
-async def sleep_until(deadline: float) -> None:
-    """:func:`sleep` until ``deadline`` (:func:`trio.current_time`)."""
-    await sleep(deadline - trio.current_time())
 
 
 async def receive(sock: socket.socket) -> bytes:

@@ -29,6 +29,7 @@ from websockets.frames import Frame, Opcode
 from websockets.protocol import State
 
 from .._errors import ConnectError
+from .._wakeup import Wakeup, new_wakeup
 from . import _asyncio_stream
 
 __all__ = [
@@ -80,6 +81,12 @@ _FIN_TEXT: Final = 0x81
 _FIN_BINARY: Final = 0x82
 _INLINE_BATCH: Final = 64
 """Messages one read may hand to the inline handler (:meth:`WebSocket.handle_inline`)."""
+_HOLD_MIN: Final = 0.002
+"""Seconds below which :meth:`WebSocket.hold_reads` does not hold a read (a
+hold costs a timer: shorter ones save nothing)."""
+_HOLD_MAX: Final = 1.0
+"""Seconds one hold lasts at most: longer quiet windows are held in parts,
+so a close or a graph change waits at most this long to be read."""
 _CONTROL_OPCODES: Final = (0x8, 0x9, 0xA)
 """Close, ping, pong: the control frames websockets accepts."""
 
@@ -164,9 +171,14 @@ class WebSocket:
         # it to be readable and reads it directly (_trio_io.receive), and a
         # read that waited first takes the socket's bytes at once (_read_held)
         self._held_sock: socket.socket | None = None
-        # on trio, read coalescing's waits end without an exception, and the
-        # plain socket is read without anyio's stream layers (_trio_io)
-        self._trio_sleep: Callable[[float], Awaitable[None]] | None = None
+        # read holds (hold_reads) and read coalescing's waits, off asyncio's
+        # protocol stream: a Wakeup (ended early by end_hold; on trio it
+        # ends without an exception), built by the reader on its loop
+        self._quiet: Callable[[float], float] | None = None
+        self._hold_wakeup: Wakeup | None = None
+        self.quiet_holds = 0
+        """Reads held by :meth:`hold_reads` (the subscriptions' caps)."""
+        # on trio the plain socket is read without anyio's stream layers (_trio_io)
         self._trio_receive: Callable[[socket.socket], Awaitable[bytes]] | None = None
         self._trio_receive_into: (
             Callable[[socket.socket, memoryview], Awaitable[tuple[int, bool]]] | None
@@ -174,7 +186,6 @@ class WebSocket:
         if self._protocol_stream is None and _on_trio():
             from . import _trio_io  # (imports trio: installed, since it runs)
 
-            self._trio_sleep = _trio_io.sleep
             if isinstance(stream, anyio.abc.SocketStream):
                 self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
                 self._trio_receive = _trio_io.receive
@@ -228,11 +239,14 @@ class WebSocket:
         and its read coalescing gathers several frames per wake-up). A read
         taken whole counts in :attr:`reads`."""
         window = self.read_coalesce
+        quiet = self._quiet
         now = 0.0
-        if window:
+        if window or quiet is not None:
             now = time.monotonic()
-            if now - self._last_read < window:
+            if window and now - self._last_read < window:
                 return 0
+            if quiet is not None and quiet(now) - now >= _HOLD_MIN and not self._pongs:
+                return 0  # the reader takes it, and then holds its reads
         taken = self._take_inline(data)
         self.bytes_received += taken  # (the rest is counted by the reader's read)
         if taken == len(data):
@@ -319,7 +333,9 @@ class WebSocket:
                 await self._finish_closing()
                 raise self._closed_reason
             direct = self._direct is not None
-            held = not direct and self._steady and await self._coalesce()
+            held = (
+                not direct and (self._steady or self._quiet is not None) and await self._coalesce()
+            )
             sock = self._held_sock
             try:
                 if direct:
@@ -390,32 +406,70 @@ class WebSocket:
         return stream is not None and stream.has_data
 
     async def _coalesce(self) -> bool:
-        """Under a steady stream, wait until :attr:`read_coalesce` seconds
-        after the last read returned before reading again (not at all when
-        handling that read took longer), so the frames that arrive meanwhile
-        are read and handed over together. True when it waited.
+        """Wait before the next read, so the frames that arrive meanwhile are
+        read and handed over together; True when it waited.
 
+        Under a steady stream, until :attr:`read_coalesce` seconds after the
+        last read returned (not at all when handling that read took longer).
         Coalescing starts when two reads come less than the window apart,
         and stops when a read that waited brought one message or none (the
         stream is too slow to gather several) or a read brings
         :data:`_COALESCE_BELOW` bytes or more (the socket is saturated and
-        reading already batches). Each frame waits at most the window."""
-        delay = self._last_read + self.read_coalesce - time.monotonic()
+        reading already batches). Each frame waits at most the window.
+
+        Longer while :meth:`hold_reads`' callable says nobody can take a
+        frame before a later time (at most :data:`_HOLD_MAX` per wait; not
+        while a ping waits for its pong)."""
+        now = time.monotonic()
+        delay = self._last_read + self.read_coalesce - now if self._steady else 0.0
+        quiet = self._quiet
+        holding = False
+        if quiet is not None and not self._pongs:
+            wait = quiet(now) - now
+            if wait > delay and wait >= _HOLD_MIN:
+                delay = wait if wait < _HOLD_MAX else _HOLD_MAX
+                holding = True
         if delay <= 0:
             return False
         stream = self._protocol_stream
         if stream is not None:
             if stream.has_data:
                 return False  # bytes that arrived before the wait are read at once
-            self.coalesced += 1
             await stream.hold(delay)  # reading paused: no wake-up per arriving segment
         else:  # anyio's streams read only when asked
+            wakeup = self._hold_wakeup
+            if wakeup is None:
+                wakeup = self._hold_wakeup = new_wakeup()
+            await wakeup.wait(delay)  # (on trio no Cancelled raised and caught)
+        if holding:
+            self.quiet_holds += 1
+        else:
             self.coalesced += 1
-            if self._trio_sleep is not None:
-                await self._trio_sleep(delay)  # (no Cancelled raised and caught)
-            else:
-                await anyio.sleep(delay)
         return True
+
+    def hold_reads(self, quiet: Callable[[float], float] | None) -> None:
+        """Leave the socket unread while nobody needs what it brings (None:
+        stop). ``quiet(now)`` (monotonic seconds) returns the time before
+        which no reader of this connection can take a new message, or 0.0;
+        the reader asks it before each read (and on asyncio before taking a
+        read inline). When that is :data:`_HOLD_MIN` or more ahead, the next
+        read waits until then, at most :data:`_HOLD_MAX` (counted in
+        :attr:`quiet_holds`): what arrives meanwhile waits in the kernel and
+        is read and handed over together. Never while a ping waits for its
+        pong; :meth:`end_hold` ends a hold at once (the owner calls it when
+        it sends a request whose answer must be read)."""
+        self._quiet = quiet
+        if quiet is None:
+            self.end_hold()
+
+    def end_hold(self) -> None:
+        """End the reader's current wait before a read (a hold or read
+        coalescing), if it waits: it reads now."""
+        stream = self._protocol_stream
+        if stream is not None:
+            stream.end_hold()
+        elif self._hold_wakeup is not None:
+            self._hold_wakeup.set()
 
     def _read_held(self) -> bytes:
         """After a wait on trio: what the socket holds, read at once (b""
@@ -817,6 +871,7 @@ class WebSocket:
         payload = os.urandom(4)
         event = anyio.Event()
         self._pongs[payload] = event
+        self.end_hold()  # the pong is read as it comes
         try:
             async with self._send_lock:
                 if self._closed_reason is not None or self._proto.state is not State.OPEN:

@@ -1,0 +1,81 @@
+"""One consumer task's wait for its producer, at the event loop's own cost.
+
+A subscription's consumer waits once per delivery (thousands of times a
+second across a fleet of connections). ``anyio.Event`` builds an event object
+(on asyncio an ``asyncio.Event`` and its waiter list) per wait, and a timed
+wait adds a cancel scope or a loop timer around it. :class:`Wakeup` is built
+once per consumer and waits on what the loop itself offers: a future (and a
+loop timer for a time limit) on asyncio; on trio the task is parked and
+rescheduled directly, with a cancel scope's deadline as the time limit (trio's
+only timer) that resumes the task with a value instead of raising
+``Cancelled`` through the waiting frames.
+
+Single waiter: one task waits at a time. :meth:`Wakeup.set` from the loop's
+thread (a callback or another task) resumes it, or does nothing when nobody
+waits. A cancellation from outside ends the wait as any checkpoint does.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Protocol
+
+import sniffio
+
+__all__ = ["Wakeup", "new_wakeup", "resolve"]
+
+
+class Wakeup(Protocol):
+    def set(self) -> None:
+        """Resume the waiting task, if one waits; else nothing."""
+
+    async def wait(self, timeout: float | None = None) -> None:
+        """Wait until :meth:`set`, or ``timeout`` seconds (None: no limit)
+        pass; always suspends the task once (a checkpoint)."""
+
+
+def new_wakeup() -> Wakeup:
+    """A :class:`Wakeup` for the running event loop (asyncio or trio)."""
+    if sniffio.current_async_library() == "asyncio":
+        return _AsyncioWakeup(asyncio.get_running_loop())
+    from ._trio_wakeup import TrioWakeup  # (imports trio: installed, since it runs)
+
+    return TrioWakeup()
+
+
+def resolve(future: asyncio.Future[None]) -> None:
+    """Set ``future``'s result to None unless it is done (a loop timer's
+    callback: the waiter may have been cancelled meanwhile)."""
+    if not future.done():
+        future.set_result(None)
+
+
+class _AsyncioWakeup:
+    __slots__ = ("_future", "_loop")
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self._future: asyncio.Future[None] | None = None
+
+    def set(self) -> None:
+        future = self._future
+        if future is not None:
+            self._future = None
+            if not future.done():
+                future.set_result(None)
+
+    async def wait(self, timeout: float | None = None) -> None:
+        loop = self._loop
+        future = self._future = loop.create_future()
+        if timeout is None:
+            try:
+                await future
+            finally:
+                self._future = None
+            return
+        timer = loop.call_later(timeout, resolve, future)
+        try:
+            await future
+        finally:
+            timer.cancel()
+            self._future = None
