@@ -65,3 +65,17 @@ async def routed(session: Any, key: str, timeout: float = 10.0) -> None:
         )
     finally:
         publisher.undeclare()
+
+
+def fast_options(**kw: Any) -> rmb.ClientOptions:
+    """Client options for a local test server: no wait for advertisements to
+    settle, a 5 s connect timeout; ``kw`` overrides."""
+    kw.setdefault("advertise_settle", 0.0)
+    kw.setdefault("connect_timeout", 5.0)
+    return rmb.ClientOptions(**kw)
+
+
+def websocket_of(robot: rmb.Client) -> Any:
+    """The WebSocket of a Foxglove or rosbridge client's connection (its
+    counters: reads, inline_messages, quiet_holds)."""
+    return robot._conn.adapter._ws  # type: ignore[attr-defined]

@@ -342,7 +342,19 @@ def test_flow_knows_no_protocol(path: Path) -> None:
 # -- the house: layers, each importing only what stands below it ------------------------
 
 LAYERS: tuple[frozenset[str], ...] = (
-    frozenset({"_errors", "_types", "_slots", "_limits", "_version", "_checks", "_jsonable"}),
+    frozenset(
+        {
+            "_errors",
+            "_types",
+            "_slots",
+            "_limits",
+            "_version",
+            "_checks",
+            "_jsonable",
+            "_wakeup",
+            "_trio_wakeup",
+        }
+    ),
     frozenset({"wire", "codec", "flow", "transport", "_signals"}),
     frozenset({"_options", "lag"}),
     frozenset({"adapters"}),

@@ -5,23 +5,12 @@ loops; a burst read in one go keeps its order and loses nothing."""
 
 from __future__ import annotations
 
-from typing import Any
-
 import anyio
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import fast_options as options
+from _util import wait_until, websocket_of
 from peers.foxglove_sdk import SdkServer, string_msg
-
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 5.0)
-    return rmb.ClientOptions(**kw)
-
-
-def websocket_of(robot: rmb.Client) -> Any:
-    return robot._conn.adapter._ws  # type: ignore[attr-defined]
 
 
 async def test_frames_arriving_one_by_one_are_taken_inline_in_order(server: SdkServer) -> None:

@@ -18,6 +18,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import fast_options as options
 from _util import wait_until
 from peers.foxglove_legacy import LegacyServer
 from peers.foxglove_sdk import SdkServer, decode, string_msg
@@ -38,12 +39,6 @@ def server() -> Iterator[LegacyServer]:
         # nothing the client sent made the server fail
         if not srv.errors_expected:
             assert srv.errors() == []
-
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 5.0)
-    return rmb.ClientOptions(**kw)
 
 
 def add_chatter(srv: LegacyServer, topic: str = "/chatter") -> int:

@@ -18,6 +18,7 @@ import pytest
 from foxglove import Schema
 
 import ros_mobile_bridge as rmb
+from _util import fast_options as options
 from _util import wait_until
 from peers.foxglove_sdk import SdkServer, cdr, decode, image_msg, ros2_service, string_msg
 
@@ -26,12 +27,6 @@ from peers.foxglove_sdk import SdkServer, cdr, decode, image_msg, ros2_service, 
 def server() -> Iterator[SdkServer]:
     with SdkServer(parameters={"max_speed": 1.5, "name": "robot", "enabled": True}) as srv:
         yield srv
-
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 5.0)
-    return rmb.ClientOptions(**kw)
 
 
 # -- connection and discovery -------------------------------------------------

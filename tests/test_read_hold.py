@@ -14,13 +14,13 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import fast_options as options
+from _util import wait_until, websocket_of
 from peers.foxglove_sdk import SdkServer, string_msg
 from ros_mobile_bridge.flow import FrameQueue, RawFrame
 
@@ -89,6 +89,19 @@ def test_quiet_until_is_shortened_by_the_byte_budget() -> None:
     assert until == pytest.approx(1.0 + HOLD_BYTES / rate)  # 0.2 s, not the 1 s window
 
 
+def test_a_large_first_frame_bounds_the_hold_at_once() -> None:
+    from ros_mobile_bridge.flow._subscription import HOLD_BYTES
+
+    clock = FakeClock()
+    q = FrameQueue(max_hz=1, clock=clock)
+    clock.now = 0.01
+    q.offer(frame(0, HOLD_BYTES * 4))  # a camera image, before a second has passed
+    assert ids(q) == [0]
+    # the rate so far (over at least 50 ms) bounds the hold, not the 1 s window
+    rate = HOLD_BYTES * 4 / 0.05
+    assert q.quiet_until(0.01) == pytest.approx(0.01 + HOLD_BYTES / rate)
+
+
 def test_frames_read_together_after_a_hold_deliver_the_newest() -> None:
     clock = FakeClock()
     q = FrameQueue(max_hz=5, buffer=64, clock=clock)
@@ -136,16 +149,6 @@ def test_a_release_a_little_late_keeps_the_cadence() -> None:
 
 
 # -- the connection's side (the Foxglove SDK server) -------------------------------
-
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 5.0)
-    return rmb.ClientOptions(**kw)
-
-
-def websocket_of(robot: rmb.Client) -> Any:
-    return robot._conn.adapter._ws  # type: ignore[attr-defined]
 
 
 class Ticker:
@@ -280,3 +283,25 @@ async def test_no_hold_while_a_subscription_takes_every_frame(server: SdkServer)
                         break
             assert ws.quiet_holds == 0
             assert capped.stats.received == every.stats.received
+
+
+async def test_a_new_subscription_ends_a_hold(server: SdkServer) -> None:
+    ticker = Ticker(server, 20.0)
+    async with rmb.connect(server.url, options=options()) as robot:
+        ws = websocket_of(robot)
+        async with robot.subscribe("/tick", max_hz=0.5, adaptive=False) as capped:
+            await wait_until(lambda: "/tick" in server.subscribed())
+            with ticker.running():
+                with anyio.fail_after(10):
+                    await capped.__anext__()
+                    await wait_until(lambda: ws.quiet_holds >= 1)
+                async with robot.subscribe("/tick", adaptive=False) as every:
+                    with anyio.fail_after(0.5):  # a hold lasts up to 1 s
+                        await every.__anext__()
+                    before = ws.quiet_holds
+                    n = 0
+                    async for _ in every:
+                        n += 1
+                        if n == 10:
+                            break
+                    assert ws.quiet_holds == before  # none while it takes every frame

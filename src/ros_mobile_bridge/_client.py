@@ -235,7 +235,12 @@ class Client:
         ``pending`` and becomes ``active`` when the server offers it.
         ``max_hz`` caps the delivery rate (frames in between are dropped
         before decoding; the newest one is delivered at the end of the
-        window). ``adaptive`` lets the event loop's lag widen that interval
+        window). Over Foxglove, while every subscription of the connection
+        is inside its window, the socket is not read until the earliest
+        window ends (then what came meanwhile is read together, and the
+        newest delivered), unless a request waits for its answer or a
+        window's messages would exceed 64 KiB (see "Subscriptions" in the
+        concepts page). ``adaptive`` lets the event loop's lag widen that interval
         (``options.throttle_mode``); the effective interval is the larger of
         the two, and a subscription with ``adaptive=False`` ignores the lag
         (and its breaker never trips on its own). ``dispatch="latest"`` keeps only the newest undelivered

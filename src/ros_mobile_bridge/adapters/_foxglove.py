@@ -547,6 +547,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
 
     # -- subscriptions ------------------------------------------------------
     async def subscribe(self, topic: str, hints: SubscribeHints) -> None:
+        self._ws.end_hold()  # a new subscription may want every frame: decide again
         self._wanted[topic] = hints
         self._pauses.set_rate(topic, hints.pause_hz)
         if hints.pause_hz is None and (paused := self._pauses.unpause(topic)) is not None:

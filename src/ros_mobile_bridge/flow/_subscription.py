@@ -239,7 +239,11 @@ class FrameQueue:
         if last is None or interval <= 0.0 or self._closed or self.blocked:
             return 0.0
         until = last + interval
-        rate = self._arrival_rate
+        # bytes a second: the last full second's, or (higher, in the first
+        # second) what came since, over at least 50 ms
+        rate = self._rate_bytes / max(now - self._rate_start, 0.05)
+        if self._arrival_rate > rate:
+            rate = self._arrival_rate
         if rate > 0.0 and now + HOLD_BYTES / rate < until:
             until = now + HOLD_BYTES / rate
         self._quiet = True

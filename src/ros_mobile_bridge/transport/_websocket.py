@@ -81,7 +81,7 @@ _FIN_TEXT: Final = 0x81
 _FIN_BINARY: Final = 0x82
 _INLINE_BATCH: Final = 64
 """Messages one read may hand to the inline handler (:meth:`WebSocket.handle_inline`)."""
-_HOLD_MIN: Final = 0.002
+_HOLD_MIN: Final = 0.005
 """Seconds below which :meth:`WebSocket.hold_reads` does not hold a read (a
 hold costs a timer: shorter ones save nothing)."""
 _HOLD_MAX: Final = 1.0
