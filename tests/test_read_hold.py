@@ -305,3 +305,25 @@ async def test_a_new_subscription_ends_a_hold(server: SdkServer) -> None:
                         if n == 10:
                             break
                     assert ws.quiet_holds == before  # none while it takes every frame
+
+
+async def test_a_saturated_socket_is_read_at_once(server: SdkServer) -> None:
+    """A burst larger than a hold's read (64 KiB) is read at once, not 64 KiB
+    per window: holding then would only slow the server."""
+    burst = server.channel("/burst", "std_msgs/msg/String")
+    n = 1000  # about 1 MB, within the server's per-client backlog (1024 messages)
+    async with rmb.connect(server.url, options=options()) as robot:
+        ws = websocket_of(robot)
+        async with robot.subscribe("/burst", max_hz=1, adaptive=False) as sub:
+            await wait_until(lambda: "/burst" in server.subscribed())
+            burst.log(string_msg("first"))
+            with anyio.fail_after(10):
+                await sub.__anext__()  # a 1 s window starts: the reads may be held
+            holds = ws.quiet_holds
+            for i in range(n):
+                burst.log(string_msg(f"{i:04d}" + "x" * 1000))
+            await wait_until(lambda: sub.stats.received == n + 1, timeout=15)
+            assert ws.quiet_holds - holds <= 5
+            with anyio.fail_after(5):
+                last = await sub.__anext__()
+            assert last.data["data"].startswith(f"{n - 1:04d}")

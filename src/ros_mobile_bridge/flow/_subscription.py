@@ -44,11 +44,12 @@ _YIELD_EVERY: Final = 32
 _LARGE_PAYLOAD: Final = 64 * 1024
 _LARGE_WEIGHT: Final = 17  # a large payload counts as one message more per 128 KiB
 _DUE_SLACK: Final = 1e-6
-_READ_TOGETHER: Final = 1e-3
-"""Seconds after a rate-capped release at the end of a read hold (see
-:meth:`FrameQueue.quiet_until`) within which a newer frame replaces the
-released one while no consumer has taken it yet: the frames the hold
-gathered deliver the newest, as the cap would have, not the oldest."""
+_READ_TOGETHER: Final = 0.25
+"""The share of the interval after a rate-capped release at the end of a
+read hold (see :meth:`FrameQueue.quiet_until`) within which a newer frame
+replaces the released one while no consumer has taken it yet: the frames
+the hold gathered (read and handed over together) deliver the newest, as
+the cap would have, not the oldest."""
 _CADENCE_GRACE: Final = 0.25
 """A capped release up to this share of the interval after its window ended
 starts the next window at that end, not at the release."""
@@ -205,7 +206,7 @@ class FrameQueue:
         queue = self._queue
         if (
             released is not None
-            and now - self._released_at < _READ_TOGETHER
+            and now - self._released_at < interval * _READ_TOGETHER
             and queue
             and queue[-1] is released
         ):

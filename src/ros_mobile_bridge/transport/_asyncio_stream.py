@@ -58,6 +58,8 @@ _HOLD_READ: Final = 64 * 1024
 three more system calls, per read)."""
 
 
+_HOLD_DRAIN: Final = 1024 * 1024
+"""Bytes the reads after one :meth:`ProtocolStream.hold` take at most."""
 _READ_SIZE: Final = 256 * 1024
 """Bytes one read of the socket takes at most (asyncio's own read size)."""
 
@@ -325,21 +327,28 @@ class ProtocolStream(anyio.abc.ByteStream):
             resolve(waiter)
 
     def _read_held(self) -> None:
-        """Read the paused socket once (see :meth:`hold`)."""
+        """Read the paused socket (see :meth:`hold`): again while each read
+        fills its buffer, up to :data:`_HOLD_DRAIN` bytes, so what waited
+        during the hold is handed over together."""
         p = self._protocol
-        data = b""
-        if self._fd >= 0 and not p.eof and not self._transport.is_closing():
+        taken = 0
+        while self._fd >= 0 and not p.eof and not self._transport.is_closing():
             try:
                 data = os.read(self._fd, _HOLD_READ)
             except (BlockingIOError, InterruptedError):
-                pass  # nothing arrived: the transport waits for it
+                break  # nothing (more) arrived: the transport waits for it
             except OSError as exc:  # the transport meets the error or EOF on resuming
                 p.error = p.error or exc
-        if data:
+                break
+            if not data:
+                break
             self.held_reads += 1
             p.chunks.append(data)
             p.buffered += len(data)
-        else:
+            taken += len(data)
+            if len(data) < _HOLD_READ or taken >= _HOLD_DRAIN:
+                break
+        if not taken:
             self._resume_held()
 
     def _resume_held(self) -> None:

@@ -84,6 +84,9 @@ _INLINE_BATCH: Final = 64
 _HOLD_MIN: Final = 0.005
 """Seconds below which :meth:`WebSocket.hold_reads` does not hold a read (a
 hold costs a timer: shorter ones save nothing)."""
+_HOLD_DRAIN: Final = 1024 * 1024
+"""Bytes the reads right after a wait (:meth:`WebSocket._read_held`) take
+at most: what waited is handed over together."""
 _HOLD_MAX: Final = 1.0
 """Seconds one hold lasts at most: longer quiet windows are held in parts,
 so a close or a graph change waits at most this long to be read."""
@@ -178,6 +181,7 @@ class WebSocket:
         self._hold_wakeup: Wakeup | None = None
         self.quiet_holds = 0
         """Reads held by :meth:`hold_reads` (the subscriptions' caps)."""
+        self._saturated = False  # the last read brought _COALESCE_BELOW bytes or more
         # on trio the plain socket is read without anyio's stream layers (_trio_io)
         self._trio_receive: Callable[[socket.socket], Awaitable[bytes]] | None = None
         self._trio_receive_into: (
@@ -245,7 +249,12 @@ class WebSocket:
             now = time.monotonic()
             if window and now - self._last_read < window:
                 return 0
-            if quiet is not None and quiet(now) - now >= _HOLD_MIN and not self._pongs:
+            if (
+                quiet is not None
+                and len(data) < _COALESCE_BELOW
+                and quiet(now) - now >= _HOLD_MIN
+                and not self._pongs
+            ):
                 return 0  # the reader takes it, and then holds its reads
         taken = self._take_inline(data)
         self.bytes_received += taken  # (the rest is counted by the reader's read)
@@ -363,6 +372,7 @@ class WebSocket:
                 raise self._closed_reason from exc  # type: ignore[misc]
             self.reads += 1
             self.bytes_received += len(data)
+            self._saturated = len(data) >= _COALESCE_BELOW
             inline = self.inline_messages
             if self._inline is not None and (taken := self._take_inline(data)):
                 data = data[taken:]
@@ -419,12 +429,14 @@ class WebSocket:
 
         Longer while :meth:`hold_reads`' callable says nobody can take a
         frame before a later time (at most :data:`_HOLD_MAX` per wait; not
-        while a ping waits for its pong)."""
+        while a ping waits for its pong, nor after a read of
+        :data:`_COALESCE_BELOW` bytes or more: more waits, and holding would
+        slow the server)."""
         now = time.monotonic()
         delay = self._last_read + self.read_coalesce - now if self._steady else 0.0
         quiet = self._quiet
         holding = False
-        if quiet is not None and not self._pongs:
+        if quiet is not None and not self._pongs and not self._saturated:
             wait = quiet(now) - now
             if wait > delay and wait >= _HOLD_MIN:
                 delay = wait if wait < _HOLD_MAX else _HOLD_MAX
@@ -456,7 +468,8 @@ class WebSocket:
         read waits until then, at most :data:`_HOLD_MAX` (counted in
         :attr:`quiet_holds`): what arrives meanwhile waits in the kernel and
         is read and handed over together. Never while a ping waits for its
-        pong; :meth:`end_hold` ends a hold at once (the owner calls it when
+        pong, nor after a read of :data:`_COALESCE_BELOW` bytes or more (the
+        socket holds more: it is read at once, until a read is smaller); :meth:`end_hold` ends a hold at once (the owner calls it when
         it sends a request whose answer must be read)."""
         self._quiet = quiet
         if quiet is None:
@@ -472,16 +485,26 @@ class WebSocket:
             self._hold_wakeup.set()
 
     def _read_held(self) -> bytes:
-        """After a wait on trio: what the socket holds, read at once (b""
-        when nothing, or the end of the stream: the stream's own receive
+        """After a wait on trio: what the socket holds, read at once (again
+        while each read fills its buffer, up to :data:`_HOLD_DRAIN` bytes;
+        b"" when nothing, or the end of the stream: the stream's own receive
         then waits or reports it). Other errors raise ``OSError``."""
         assert self._held_sock is not None
-        try:
-            data = self._held_sock.recv(_COALESCE_BELOW)  # (no fresh memory mapping per read)
-        except (BlockingIOError, InterruptedError):
-            return b""
-        self._held_reads += bool(data)
-        return data
+        parts: list[bytes] = []
+        taken = 0
+        while True:
+            try:
+                data = self._held_sock.recv(_COALESCE_BELOW)  # (no fresh memory mapping per read)
+            except (BlockingIOError, InterruptedError):
+                break
+            if not data:
+                break
+            parts.append(data)
+            taken += len(data)
+            if len(data) < _COALESCE_BELOW or taken >= _HOLD_DRAIN:
+                break
+        self._held_reads += bool(parts)
+        return parts[0] if len(parts) == 1 else b"".join(parts)
 
     async def _read_direct(self) -> None:
         """One read of the large frame being read straight into its buffer
