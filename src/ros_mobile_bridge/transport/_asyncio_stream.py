@@ -285,7 +285,7 @@ class ProtocolStream(anyio.abc.ByteStream):
         """Bytes are buffered: :meth:`receive` returns without waiting."""
         return bool(self._protocol.chunks)
 
-    async def hold(self, seconds: float) -> None:
+    async def hold(self, seconds: float, *, drain: bool = False) -> None:
         """Leave the socket unread for ``seconds``: reading is paused, so what
         arrives meanwhile waits in the kernel and is then read in one go
         (one wake-up of the loop instead of one per arriving segment).
@@ -299,7 +299,10 @@ class ProtocolStream(anyio.abc.ByteStream):
         When the read finds nothing, the end of the stream or an error,
         reading resumes and the transport sees the same. Not on Windows
         (reading resumes after the wait). Cancellable; reading resumes on a
-        cancelled hold."""
+        cancelled hold. ``drain``: read the socket again while each read
+        fills its buffer, up to :data:`_HOLD_DRAIN` bytes (what waited is
+        handed over together; not for a stream of large frames, which are
+        read straight into their buffers)."""
         p = self._protocol
         if not p.read_paused and not self._transport.is_closing():
             p.read_paused = p.held = True
@@ -317,7 +320,7 @@ class ProtocolStream(anyio.abc.ByteStream):
             p.hold_waiter = None
         timer.cancel()  # (ended early by end_hold)
         if p.held:
-            self._read_held()
+            self._read_held(_HOLD_DRAIN if drain else _HOLD_READ)
 
     def end_hold(self) -> None:
         """End the current :meth:`hold` now, if one waits (it then reads as
@@ -326,10 +329,9 @@ class ProtocolStream(anyio.abc.ByteStream):
         if waiter is not None:
             resolve(waiter)
 
-    def _read_held(self) -> None:
+    def _read_held(self, most: int) -> None:
         """Read the paused socket (see :meth:`hold`): again while each read
-        fills its buffer, up to :data:`_HOLD_DRAIN` bytes, so what waited
-        during the hold is handed over together."""
+        fills its buffer, up to ``most`` bytes."""
         p = self._protocol
         taken = 0
         while self._fd >= 0 and not p.eof and not self._transport.is_closing():
@@ -346,7 +348,7 @@ class ProtocolStream(anyio.abc.ByteStream):
             p.chunks.append(data)
             p.buffered += len(data)
             taken += len(data)
-            if len(data) < _HOLD_READ or taken >= _HOLD_DRAIN:
+            if len(data) < _HOLD_READ or taken >= most:
                 break
         if not taken:
             self._resume_held()

@@ -182,6 +182,7 @@ class WebSocket:
         self.quiet_holds = 0
         """Reads held by :meth:`hold_reads` (the subscriptions' caps)."""
         self._saturated = False  # the last read brought _COALESCE_BELOW bytes or more
+        self._drain = False  # the last wait was a hold: read all that waited (_read_held)
         # on trio the plain socket is read without anyio's stream layers (_trio_io)
         self._trio_receive: Callable[[socket.socket], Awaitable[bytes]] | None = None
         self._trio_receive_into: (
@@ -447,12 +448,14 @@ class WebSocket:
         if stream is not None:
             if stream.has_data:
                 return False  # bytes that arrived before the wait are read at once
-            await stream.hold(delay)  # reading paused: no wake-up per arriving segment
+            # reading paused: no wake-up per arriving segment
+            await stream.hold(delay, drain=holding)
         else:  # anyio's streams read only when asked
             wakeup = self._hold_wakeup
             if wakeup is None:
                 wakeup = self._hold_wakeup = new_wakeup()
             await wakeup.wait(delay)  # (on trio no Cancelled raised and caught)
+        self._drain = holding
         if holding:
             self.quiet_holds += 1
         else:
@@ -485,13 +488,15 @@ class WebSocket:
             self._hold_wakeup.set()
 
     def _read_held(self) -> bytes:
-        """After a wait on trio: what the socket holds, read at once (again
-        while each read fills its buffer, up to :data:`_HOLD_DRAIN` bytes;
-        b"" when nothing, or the end of the stream: the stream's own receive
-        then waits or reports it). Other errors raise ``OSError``."""
+        """After a wait on trio: what the socket holds, read at once (after
+        a hold again while each read fills its buffer, up to
+        :data:`_HOLD_DRAIN` bytes; b"" when nothing, or the end of the
+        stream: the stream's own receive then waits or reports it). Other
+        errors raise ``OSError``."""
         assert self._held_sock is not None
         parts: list[bytes] = []
         taken = 0
+        most = _HOLD_DRAIN if self._drain else _COALESCE_BELOW
         while True:
             try:
                 data = self._held_sock.recv(_COALESCE_BELOW)  # (no fresh memory mapping per read)
@@ -501,7 +506,7 @@ class WebSocket:
                 break
             parts.append(data)
             taken += len(data)
-            if len(data) < _COALESCE_BELOW or taken >= _HOLD_DRAIN:
+            if len(data) < _COALESCE_BELOW or taken >= most:
                 break
         self._held_reads += bool(parts)
         return parts[0] if len(parts) == 1 else b"".join(parts)
