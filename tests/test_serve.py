@@ -334,6 +334,9 @@ async def test_a_serve_cancelled_while_confirming_answers_its_calls_and_unadvert
             with anyio.fail_after(10):
                 await confirming.wait()
             (requests,) = handlers
+            # the bridge routes a call only once its service is on the ROS
+            # graph; a call sent before that may never reach the server
+            await caller.wait_for_service(name, timeout=10)
             tg.start_soon(call)
             await wait_until(lambda: requests.stats.received == 1, 10, "the call routed here")
             entering.cancel()
