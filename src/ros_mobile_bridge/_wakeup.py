@@ -67,15 +67,10 @@ class _AsyncioWakeup:
     async def wait(self, timeout: float | None = None) -> None:
         loop = self._loop
         future = self._future = loop.create_future()
-        if timeout is None:
-            try:
-                await future
-            finally:
-                self._future = None
-            return
-        timer = loop.call_later(timeout, resolve, future)
+        timer = None if timeout is None else loop.call_later(timeout, resolve, future)
         try:
             await future
         finally:
-            timer.cancel()
+            if timer is not None:
+                timer.cancel()
             self._future = None
