@@ -12,7 +12,7 @@ import anyio
 import trio
 import trio.lowlevel
 
-__all__ = ["READ_SIZE", "receive", "receive_into"]
+__all__ = ["READ_SIZE", "read_ready", "receive", "receive_into"]
 
 READ_SIZE: Final = 64 * 1024
 """The most bytes one :func:`receive` asks for. trio's own read allocates a
@@ -67,3 +67,26 @@ async def receive_into(sock: socket.socket, view: memoryview) -> tuple[int, bool
         if not n:
             raise anyio.EndOfStream
         return n, waited
+
+
+def read_ready(sock: socket.socket, most: int) -> bytes:
+    """What ``sock`` holds now, without waiting (after the reader's wait
+    before a read: the bytes that gathered meanwhile): reads of
+    :data:`READ_SIZE` bytes, again while each fills its buffer, up to
+    ``most`` bytes; b"" when it holds nothing or at the end of the stream
+    (:func:`receive` then waits or reports it). Other errors raise
+    ``OSError``."""
+    parts: list[bytes] = []
+    taken = 0
+    while True:
+        try:
+            data = sock.recv(READ_SIZE)  # (no fresh memory mapping per read)
+        except (BlockingIOError, InterruptedError):
+            break
+        if not data:
+            break
+        parts.append(data)
+        taken += len(data)
+        if len(data) < READ_SIZE or taken >= most:
+            break
+    return parts[0] if len(parts) == 1 else b"".join(parts)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 import socket
-import time
 from collections import deque
 from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
@@ -29,8 +28,8 @@ from websockets.frames import Frame, Opcode
 from websockets.protocol import State
 
 from .._errors import ConnectError
-from .._wakeup import Wakeup, new_wakeup
 from . import _asyncio_stream
+from ._read_pacing import COALESCE_BELOW, HOLD_DRAIN, ReadPacer
 
 __all__ = [
     "ConnectionLost",
@@ -56,9 +55,6 @@ objects (~3 MB) parsed at once whatever follows it."""
 _FAST_FRAMES: Final = 1024
 """Data frames the fast path parses before the reader handles them: a 1 MiB
 read of empty frames is parsed 1024 at a time, never 500,000 at once."""
-_COALESCE_BELOW: Final = 64 * 1024
-"""A read of this many bytes or more ends read coalescing until the next
-small read: the stream is saturated, and waiting could only slow it."""
 _ASSEMBLE_FROM: Final = 64 * 1024
 """A data frame of this many bytes or more that is not complete in the bytes
 at hand is gathered as the chunks that carry it (kept as they came, no copy)
@@ -81,15 +77,6 @@ _FIN_TEXT: Final = 0x81
 _FIN_BINARY: Final = 0x82
 _INLINE_BATCH: Final = 64
 """Messages one read may hand to the inline handler (:meth:`WebSocket.handle_inline`)."""
-_HOLD_MIN: Final = 0.005
-"""Seconds below which :meth:`WebSocket.hold_reads` does not hold a read (a
-hold costs a timer: shorter ones save nothing)."""
-_HOLD_DRAIN: Final = 1024 * 1024
-"""Bytes the reads right after a wait (:meth:`WebSocket._read_held`) take
-at most: what waited is handed over together."""
-_HOLD_MAX: Final = 1.0
-"""Seconds one hold lasts at most: longer quiet windows are held in parts,
-so a close or a graph change waits at most this long to be read."""
 _CONTROL_OPCODES: Final = (0x8, 0x9, 0xA)
 """Close, ping, pong: the control frames websockets accepts."""
 
@@ -165,29 +152,18 @@ class WebSocket:
         self._stream_closed = False
         self.send_timeout = 10.0
         """Seconds one send may take before the connection is declared lost."""
-        self.read_coalesce = 0.0
-        """Seconds a read may wait under a steady stream of small reads so
-        that several frames are read and handed over at one wake-up
-        (:meth:`receive_raw`); 0 reads as soon as anything arrives."""
-        self._last_read = 0.0  # time.monotonic() when the last read returned
+        # when the reader reads: read coalescing and read holds
+        self._pacer = ReadPacer(self._protocol_stream)
         # trio's socket under anyio's plain TCP stream: the reader waits for
         # it to be readable and reads it directly (_trio_io.receive), and a
-        # read that waited first takes the socket's bytes at once (_read_held)
+        # read that waited first takes the socket's bytes at once (_trio_io.read_ready)
         self._held_sock: socket.socket | None = None
-        # read holds (hold_reads) and read coalescing's waits, off asyncio's
-        # protocol stream: a Wakeup (ended early by end_hold; on trio it
-        # ends without an exception), built by the reader on its loop
-        self._quiet: Callable[[float], float] | None = None
-        self._hold_wakeup: Wakeup | None = None
-        self.quiet_holds = 0
-        """Reads held by :meth:`hold_reads` (the subscriptions' caps)."""
-        self._saturated = False  # the last read brought _COALESCE_BELOW bytes or more
-        self._drain = False  # the last wait was a hold: read all that waited (_read_held)
         # on trio the plain socket is read without anyio's stream layers (_trio_io)
         self._trio_receive: Callable[[socket.socket], Awaitable[bytes]] | None = None
         self._trio_receive_into: (
             Callable[[socket.socket, memoryview], Awaitable[tuple[int, bool]]] | None
         ) = None
+        self._trio_read_ready: Callable[[socket.socket, int], bytes] | None = None
         if self._protocol_stream is None and _on_trio():
             from . import _trio_io  # (imports trio: installed, since it runs)
 
@@ -195,12 +171,10 @@ class WebSocket:
                 self._held_sock = stream.extra(anyio.abc.SocketAttribute.raw_socket, None)
                 self._trio_receive = _trio_io.receive
                 self._trio_receive_into = _trio_io.receive_into
+                self._trio_read_ready = _trio_io.read_ready
         self._direct_reads = self._held_sock is not None or self._protocol_stream is not None
-        self._steady = False  # read coalescing is on for the next read
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
-        self.coalesced = 0
-        """Reads that waited for :attr:`read_coalesce` first."""
         self._held_reads = 0
         self.bytes_received = 0
         """Bytes read from the socket so far (WebSocket framing included; the
@@ -239,29 +213,19 @@ class WebSocket:
             stream.inline = None if handler is None else self._take_read
 
     def _take_read(self, data: bytes) -> int:
-        """:attr:`ProtocolStream.inline`: :meth:`_take_inline`, unless reads
-        come faster than :attr:`read_coalesce` (then the reader takes them,
-        and its read coalescing gathers several frames per wake-up). A read
+        """:attr:`ProtocolStream.inline`: :meth:`_take_inline`, unless the
+        reader must take the read (see :meth:`.ReadPacer.inline_time`: reads
+        come faster than :attr:`read_coalesce`, or a hold is due). A read
         taken whole counts in :attr:`reads`."""
-        window = self.read_coalesce
-        quiet = self._quiet
-        now = 0.0
-        if window or quiet is not None:
-            now = time.monotonic()
-            if window and now - self._last_read < window:
-                return 0
-            if (
-                quiet is not None
-                and len(data) < _COALESCE_BELOW
-                and quiet(now) - now >= _HOLD_MIN
-                and not self._pongs
-            ):
-                return 0  # the reader takes it, and then holds its reads
+        pacer = self._pacer
+        now = pacer.inline_time(len(data), bool(self._pongs))
+        if now is None:
+            return 0
         taken = self._take_inline(data)
         self.bytes_received += taken  # (the rest is counted by the reader's read)
         if taken == len(data):
             self.reads += 1
-            self._last_read = now
+            pacer.read_taken(now)
         return taken
 
     def _take_inline(self, data: bytes) -> int:
@@ -343,15 +307,20 @@ class WebSocket:
                 await self._finish_closing()
                 raise self._closed_reason
             direct = self._direct is not None
-            held = (
-                not direct and (self._steady or self._quiet is not None) and await self._coalesce()
-            )
+            pacer = self._pacer
+            held = not direct and pacer.active and await pacer.wait(bool(self._pongs))
             sock = self._held_sock
             try:
                 if direct:
                     await self._read_direct()
                     continue
-                data = self._read_held() if held and sock is not None else b""
+                data = b""
+                if held and sock is not None:
+                    assert self._trio_read_ready is not None
+                    data = self._trio_read_ready(
+                        sock, HOLD_DRAIN if pacer.drain else COALESCE_BELOW
+                    )
+                    self._held_reads += bool(data)
                 if not data:
                     if sock is not None and self._trio_receive is not None:
                         data = await self._trio_receive(sock)
@@ -373,22 +342,13 @@ class WebSocket:
                 raise self._closed_reason from exc  # type: ignore[misc]
             self.reads += 1
             self.bytes_received += len(data)
-            self._saturated = len(data) >= _COALESCE_BELOW
+            nbytes = len(data)
             inline = self.inline_messages
             if self._inline is not None and (taken := self._take_inline(data)):
                 data = data[taken:]
             if data:
                 self._feed(data)
-            window = self.read_coalesce
-            if window:
-                now = time.monotonic()
-                if held:  # keep waiting while it gathers more than one message
-                    self._steady = len(messages) + self.inline_messages - inline > 1
-                else:  # start when reads come faster than the window
-                    self._steady = now - self._last_read < window
-                if len(data) >= _COALESCE_BELOW:
-                    self._steady = False
-                self._last_read = now
+            pacer.after_read(nbytes, held, len(messages) + self.inline_messages - inline)
             if data:
                 await self._flush()  # pongs, close replies: usually nothing, and then no lock
             elif self._stream_buffered():
@@ -416,100 +376,47 @@ class WebSocket:
         stream = self._protocol_stream
         return stream is not None and stream.has_data
 
-    async def _coalesce(self) -> bool:
-        """Wait before the next read, so the frames that arrive meanwhile are
-        read and handed over together; True when it waited.
+    @property
+    def read_coalesce(self) -> float:
+        """Seconds a read may wait under a steady stream of small reads so
+        that several frames are read and handed over at one wake-up
+        (:meth:`receive_raw`); 0 reads as soon as anything arrives. See
+        :mod:`._read_pacing`."""
+        return self._pacer.window
 
-        Under a steady stream, until :attr:`read_coalesce` seconds after the
-        last read returned (not at all when handling that read took longer).
-        Coalescing starts when two reads come less than the window apart,
-        and stops when a read that waited brought one message or none (the
-        stream is too slow to gather several) or a read brings
-        :data:`_COALESCE_BELOW` bytes or more (the socket is saturated and
-        reading already batches). Each frame waits at most the window.
+    @read_coalesce.setter
+    def read_coalesce(self, seconds: float) -> None:
+        self._pacer.window = seconds
 
-        Longer while :meth:`hold_reads`' callable says nobody can take a
-        frame before a later time (at most :data:`_HOLD_MAX` per wait; not
-        while a ping waits for its pong, nor after a read of
-        :data:`_COALESCE_BELOW` bytes or more: more waits, and holding would
-        slow the server)."""
-        now = time.monotonic()
-        delay = self._last_read + self.read_coalesce - now if self._steady else 0.0
-        quiet = self._quiet
-        holding = False
-        if quiet is not None and not self._pongs and not self._saturated:
-            wait = quiet(now) - now
-            if wait > delay and wait >= _HOLD_MIN:
-                delay = wait if wait < _HOLD_MAX else _HOLD_MAX
-                holding = True
-        if delay <= 0:
-            return False
-        stream = self._protocol_stream
-        if stream is not None:
-            if stream.has_data:
-                return False  # bytes that arrived before the wait are read at once
-            # reading paused: no wake-up per arriving segment
-            await stream.hold(delay, drain=holding)
-        else:  # anyio's streams read only when asked
-            wakeup = self._hold_wakeup
-            if wakeup is None:
-                wakeup = self._hold_wakeup = new_wakeup()
-            await wakeup.wait(delay)  # (on trio no Cancelled raised and caught)
-        self._drain = holding
-        if holding:
-            self.quiet_holds += 1
-        else:
-            self.coalesced += 1
-        return True
+    @property
+    def coalesced(self) -> int:
+        """Reads that waited for :attr:`read_coalesce` first."""
+        return self._pacer.coalesced
+
+    @property
+    def quiet_holds(self) -> int:
+        """Reads held by :meth:`hold_reads` (the subscriptions' caps)."""
+        return self._pacer.quiet_holds
 
     def hold_reads(self, quiet: Callable[[float], float] | None) -> None:
         """Leave the socket unread while nobody needs what it brings (None:
         stop). ``quiet(now)`` (monotonic seconds) returns the time before
         which no reader of this connection can take a new message, or 0.0;
         the reader asks it before each read (and on asyncio before taking a
-        read inline). When that is :data:`_HOLD_MIN` or more ahead, the next
-        read waits until then, at most :data:`_HOLD_MAX` (counted in
-        :attr:`quiet_holds`): what arrives meanwhile waits in the kernel and
-        is read and handed over together. Never while a ping waits for its
-        pong, nor after a read of :data:`_COALESCE_BELOW` bytes or more (the
-        socket holds more: it is read at once, until a read is smaller); :meth:`end_hold` ends a hold at once (the owner calls it when
-        it sends a request whose answer must be read)."""
-        self._quiet = quiet
-        if quiet is None:
-            self.end_hold()
+        read inline). When that is far enough ahead, the next read waits
+        until then, at most a second (counted in :attr:`quiet_holds`; see
+        :mod:`._read_pacing`): what arrives meanwhile waits in the kernel
+        and is read and handed over together. Never while a ping waits for
+        its pong, nor after a read of 64 KiB or more (the socket holds
+        more: it is read at once, until a read is smaller). :meth:`end_hold`
+        ends a hold at once (the owner calls it when it sends a request
+        whose answer must be read)."""
+        self._pacer.set_quiet(quiet)
 
     def end_hold(self) -> None:
         """End the reader's current wait before a read (a hold or read
         coalescing), if it waits: it reads now."""
-        stream = self._protocol_stream
-        if stream is not None:
-            stream.end_hold()
-        elif self._hold_wakeup is not None:
-            self._hold_wakeup.set()
-
-    def _read_held(self) -> bytes:
-        """After a wait on trio: what the socket holds, read at once (after
-        a hold again while each read fills its buffer, up to
-        :data:`_HOLD_DRAIN` bytes; b"" when nothing, or the end of the
-        stream: the stream's own receive then waits or reports it). Other
-        errors raise ``OSError``."""
-        assert self._held_sock is not None
-        parts: list[bytes] = []
-        taken = 0
-        most = _HOLD_DRAIN if self._drain else _COALESCE_BELOW
-        while True:
-            try:
-                data = self._held_sock.recv(_COALESCE_BELOW)  # (no fresh memory mapping per read)
-            except (BlockingIOError, InterruptedError):
-                break
-            if not data:
-                break
-            parts.append(data)
-            taken += len(data)
-            if len(data) < _COALESCE_BELOW or taken >= most:
-                break
-        self._held_reads += bool(parts)
-        return parts[0] if len(parts) == 1 else b"".join(parts)
+        self._pacer.end()
 
     async def _read_direct(self) -> None:
         """One read of the large frame being read straight into its buffer
