@@ -266,6 +266,54 @@ async def test_a_hold_that_meets_the_end_of_the_stream_resumes_reading(peer: Raw
 
 
 @asyncio_only
+async def test_a_paced_hold_reads_in_its_timer_and_goes_on_while_reads_are_taken(
+    peer: RawPeer,
+) -> None:
+    """With ``paced`` set, the hold's timer reads the paused socket and offers
+    the read: a read taken whole with another wait asked for continues the
+    hold from the callback (the waiting task is not resumed); a read taken
+    in part ends the hold with the rest buffered, in order."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    offered: list[bytes] = []
+    following = {b"keep1": b"keep2", b"keep2": b"xxrest"}
+
+    def paced(data: bytes) -> tuple[int, float]:
+        offered.append(data)
+        if data in following:  # the peer sends the next part during the next wait
+            conn.sendall(following[data])
+            return len(data), 0.05  # all taken: wait again
+        return 2, 0.05  # two bytes taken: the rest is the reader's
+
+    stream.paced = paced
+
+    def send_first() -> None:
+        time.sleep(0.01)  # after the hold paused reading
+        conn.sendall(b"keep1")
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(anyio.to_thread.run_sync, send_first)
+        hold_started = time.monotonic()
+        with anyio.fail_after(5):
+            await stream.hold(0.05)
+        held_for = time.monotonic() - hold_started
+    # one hold: three timer reads, two of them taken whole (no task step)
+    assert offered == [b"keep1", b"keep2", b"xxrest"]
+    assert held_for >= 0.14, held_for  # the task slept through the first two reads
+    assert (stream.paced_reads, stream.held_reads) == (2, 3)
+    assert await stream.receive() == b"rest"
+    # nothing arrives: the timer finds nothing, the hold ends and reading resumes
+    await stream.hold(0.01)
+    assert offered == [b"keep1", b"keep2", b"xxrest"]
+    assert not stream._protocol.read_paused or not stream._protocol.held
+    await anyio.to_thread.run_sync(conn.sendall, b"after")
+    with anyio.fail_after(5):
+        assert await recv_all(stream, 5) == b"after"
+    await stream.aclose()
+
+
+@asyncio_only
 async def test_a_cancelled_hold_resumes_reading(peer: RawPeer) -> None:
     stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
     conn = await anyio.to_thread.run_sync(peer.wait)

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import take, wait_until
+from _util import take, wait_until, websocket_of
 from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph, random_domain_id
 
@@ -245,11 +245,16 @@ async def test_the_adaptive_throttle_is_forwarded_as_throttle_rate(peer: RosPeer
     assert relaxed >= 25, relaxed
 
 
-async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) -> None:
+async def test_a_steady_stream_is_read_in_batches_over_rosbridge(
+    peer: RosPeer, anyio_backend_name: str
+) -> None:
     """Read coalescing against the condition it exists for: a topic the graph
     publishes at about 1 kHz, through the bridge. Every frame received is
     delivered; with the default window the reader takes several frames per
-    read; with ``read_coalesce=0`` no read waits."""
+    read; with ``read_coalesce=0`` no read waits. Either way the frames are
+    taken where they are read (no event built); on asyncio most reads at
+    the end of a wait are taken in the loop's timer callback, with no task
+    step."""
     from ros_mobile_bridge.transport import WebSocket
 
     topic = unique("/fast")
@@ -269,6 +274,7 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) 
                 ) as sub:
                     await take(sub, 1)
                     reads, waited, received = ws.reads, ws.coalesced, sub.stats.received
+                    inline, paced = ws.inline_messages, ws.paced_reads
                     got = 0
                     with anyio.move_on_after(2.0):
                         async for _msg in sub:
@@ -278,13 +284,66 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) 
                     assert frames > 500, frames  # the stream really was fast
                     assert stats.delivered - 1 == got  # nothing dropped or kept back
                     assert stats.dropped_throttle == stats.dropped_overflow == 0
+                    assert ws.inline_messages - inline > frames * 0.9, (inline, frames)
                     if window:
                         assert ws.coalesced - waited > 0
                         assert ws.reads - reads < frames * 0.6, (ws.reads - reads, frames)
+                        if anyio_backend_name == "asyncio":
+                            in_callback = ws.paced_reads - paced
+                            assert in_callback > (ws.reads - reads) // 2, (in_callback, ws.reads)
                     else:
                         assert ws.coalesced == waited == 0
+                    if anyio_backend_name != "asyncio":
+                        assert ws.paced_reads == 0
     finally:
         await command(peer, {"cmd": "stop", "topic": topic})
+
+
+async def test_a_stream_through_the_bridge_keeps_its_order_taken_where_it_is_read(
+    peer: RosPeer,
+) -> None:
+    """Numbered messages published through the bridge by one client arrive
+    at another in order and whole, though most are taken where they are
+    read and the others (the first of the topic, anything after a frame the
+    reader must handle) by the reader: the two paths never reorder."""
+    topic = unique("/ordered")
+    n = 600
+    async with (
+        rmb.connect(peer.url, protocol="rosbridge", options=options()) as talker,
+        rmb.connect(peer.url, protocol="rosbridge", options=options()) as listener,
+    ):
+        ws = websocket_of(listener)
+        await talker.advertise(topic, "std_msgs/msg/String")
+        async with listener.subscribe(
+            topic, schema="std_msgs/msg/String", adaptive=False, buffer=10 * n
+        ) as sub:
+            with anyio.fail_after(20):  # until the bridge's publisher and subscriber match
+                while sub.stats.received == 0:
+                    await talker.publish(topic, "std_msgs/msg/String", {"data": "probe"})
+                    await anyio.sleep(0.1)
+            inline = ws.inline_messages
+            got: list[int] = []
+
+            async def talk() -> None:
+                for i in range(n):
+                    await talker.publish(topic, "std_msgs/msg/String", {"data": str(i)})
+                    if i % 4 == 3:
+                        await anyio.sleep(0.002)  # a steady stream, not one burst
+
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(talk)
+                with anyio.move_on_after(15):
+                    async for msg in sub:
+                        if msg.data["data"] != "probe":
+                            got.append(int(msg.data["data"]))
+                            if got[-1] == n - 1:
+                                break
+            assert got == sorted(got) and len(set(got)) == len(got)  # in order, no repeat
+            assert len(got) > n * 0.9, len(got)  # (the bridge's queue may drop a few)
+            assert got[-1] == n - 1
+            stats = sub.stats
+            assert stats.received == stats.delivered  # nothing lost here
+            assert ws.inline_messages - inline > len(got) // 2, (ws.inline_messages, len(got))
 
 
 async def test_the_loosest_cap_among_local_subscriptions_is_forwarded(peer: RosPeer) -> None:

@@ -322,33 +322,72 @@ class RosbridgeAdapter(
 
     async def _read(self, *, reading: bool) -> None:
         """The read loop; ``reading`` False for the bootstrap's temporary
-        reader, which answers requests only (no subscription exists yet)."""
+        reader, which answers requests only (no subscription exists yet).
+        While it reads for the sink, JSON publish frames are taken where
+        they are read when they can be (:meth:`_take_inline`)."""
         ws = self._ws
         engine = self._engine
         sink = self._sink if reading else None
-        while True:
-            first = await ws.receive_raw()
-            ready = ws.receive_ready()  # everything the same read brought: one batch
-            received_ns = time.time_ns()
-            for text, data in (first, *ready) if ready else (first,):
-                if text and sink is not None:
-                    topic = engine.publish_topic(data)
-                    if topic is not None and topic != PARAMETER_EVENTS:  # no event built
-                        self._on_publish(topic, "json", memoryview(data), received_ns)
-                        continue
-                batch = engine.receive_text(data) if text else engine.receive_binary(data)
-                for event in batch:
-                    if type(event) is rb.Publish:
-                        if sink is not None:
-                            self._on_event(event, received_ns)
-                    else:
-                        if sink is not None and self._pending:  # what came before goes first
-                            pending, self._pending = self._pending, []
-                            await sink.deliver(pending)
-                        await self._handle(event)
-            if sink is not None:  # (self._deliver, inlined on the hot path)
-                pending, self._pending = self._pending, []
-                await sink.deliver(pending)
+        if sink is not None:
+            ws.handle_inline(self._take_inline)
+        try:
+            while True:
+                first = await ws.receive_raw()
+                ready = ws.receive_ready()  # everything the same read brought: one batch
+                received_ns = time.time_ns()
+                for text, data in (first, *ready) if ready else (first,):
+                    if text and sink is not None:
+                        topic = engine.publish_topic(data)
+                        if topic is not None and topic != PARAMETER_EVENTS:  # no event built
+                            self._on_publish(topic, "json", memoryview(data), received_ns)
+                            continue
+                    batch = engine.receive_text(data) if text else engine.receive_binary(data)
+                    for event in batch:
+                        if type(event) is rb.Publish:
+                            if sink is not None:
+                                self._on_event(event, received_ns)
+                        else:
+                            if sink is not None and self._pending:  # what came before goes first
+                                pending, self._pending = self._pending, []
+                                await sink.deliver(pending)
+                            await self._handle(event)
+                if sink is not None:  # (self._deliver, inlined on the hot path)
+                    pending, self._pending = self._pending, []
+                    await sink.deliver(pending)
+        finally:
+            if sink is not None:
+                ws.handle_inline(None)
+
+    def _take_inline(self, text: bool, data: bytes, start: int, stop: int) -> bool:
+        """The WebSocket's inline handler: a plain JSON ``publish`` frame of a
+        subscription that already delivers (its topic reported live, JSON
+        asked for) goes to the sink as soon as it is read, with no event
+        built (on asyncio in the loop's callbacks, with no task step).
+        Anything else is left to the reader (False, nothing done): a binary
+        frame, a fragment, another op, a topic never subscribed (the reader
+        logs it), a message of an earlier compression still in flight,
+        ``/parameter_events`` (the parameter watch reads it), and anything
+        while events wait for the sink."""
+        if not text or self._pending:
+            return False
+        raw = data[start:stop]
+        topic = self._engine.publish_topic(raw)
+        if topic is None or topic not in self._live or topic == PARAMETER_EVENTS:
+            return False
+        wire = self._subs.get(topic)
+        sink = self._sink
+        if wire is None or wire.compression is not None or sink is None:
+            return False
+        frame = RawFrame(
+            topic,
+            wire.type or self._topics.get(topic, ""),
+            "json",
+            memoryview(raw),
+            None,
+            time.time_ns(),
+            _decode_json,
+        )
+        return sink.deliver_now(frame)
 
     def _on_event(self, event: rb.Publish, received_ns: int) -> None:
         topic = event.topic

@@ -27,7 +27,10 @@ Bytes can also be handled where they are read: :attr:`ProtocolStream.inline`,
 a synchronous callable the owner installs, gets each read made while the
 reader waits with nothing buffered, and says how many of its bytes it took;
 the rest is buffered and wakes the reader as usual. A read taken whole costs
-no task step (the WebSocket's fast path uses it for whole data frames).
+no task step (the WebSocket's fast path uses it for whole data frames). The
+same goes for the read at the end of a :meth:`ProtocolStream.hold` (a wait
+with reading paused): :attr:`ProtocolStream.paced` takes it in the timer's
+callback and may continue the hold from there.
 """
 
 from __future__ import annotations
@@ -186,6 +189,19 @@ class ProtocolStream(anyio.abc.ByteStream):
         sock = transport.get_extra_info("socket")
         # hold reads the paused socket itself where a socket is a file (not Windows)
         self._fd: int = sock.fileno() if sock is not None and sys.platform != "win32" else -1
+        self.paced: Callable[[bytes], tuple[int, float]] | None = None
+        """Called with the read a :meth:`hold`'s timer makes, in the timer's
+        callback (so it must not block, and must not raise); returns how
+        many leading bytes it took (handled for good) and, when it took
+        them all, how many seconds the hold goes on before the next read
+        (0.0: the hold ends). The rest is buffered and the hold ends. None
+        (the default): the hold ends at its timer and the waiting task
+        reads."""
+        self.paced_reads = 0
+        """Reads a hold's timer made and :attr:`paced` took whole: each one
+        a wake-up of the loop with no task step."""
+        self._hold_timer: asyncio.TimerHandle | None = None
+        self._hold_read = False  # the hold's timer read all the socket held (_hold_due)
 
     async def receive(self, max_bytes: int = 65536) -> bytes:
         p = self._protocol
@@ -302,25 +318,65 @@ class ProtocolStream(anyio.abc.ByteStream):
         cancelled hold. ``drain``: read the socket again while each read
         fills its buffer, up to :data:`_HOLD_DRAIN` bytes (what waited is
         handed over together; not for a stream of large frames, which are
-        read straight into their buffers)."""
+        read straight into their buffers).
+
+        With :attr:`paced` set, the timer's callback reads the socket and
+        offers the read to it: while it takes each read whole and asks for
+        another wait, the hold goes on from the callback, and the waiting
+        task is not resumed at all (under a steady stream the waits of read
+        coalescing cost a timer and a read each, with no task step)."""
         p = self._protocol
         if not p.read_paused and not self._transport.is_closing():
             p.read_paused = p.held = True
             self._transport.pause_reading()
         waiter = p.hold_waiter = p.loop.create_future()  # (asyncio.sleep without its loop lookup)
-        timer = p.loop.call_later(seconds, resolve, waiter)
+        self._hold_read = False
+        self._hold_timer = p.loop.call_later(seconds, self._hold_due, waiter)
         try:
             await waiter
         except BaseException:
-            timer.cancel()
+            self._hold_timer.cancel()
             if p.held:
                 self._resume_held()
             raise
         finally:
             p.hold_waiter = None
-        timer.cancel()  # (ended early by end_hold)
-        if p.held:
+        self._hold_timer.cancel()  # (ended early by end_hold)
+        if p.held and not self._hold_read:
             self._read_held(_HOLD_DRAIN if drain else _HOLD_READ)
+
+    def _hold_due(self, waiter: asyncio.Future[None]) -> None:
+        """A :meth:`hold`'s timer: end the hold, or (see :attr:`paced`) read
+        the paused socket here and go on holding while the read is taken."""
+        if waiter.done():  # (ended by end_hold, or cancelled)
+            return
+        p = self._protocol
+        paced = self.paced
+        if paced is None or not p.held or p.chunks or self._fd < 0 or p.eof:
+            resolve(waiter)
+            return
+        try:
+            data = os.read(self._fd, _HOLD_READ)
+        except OSError:  # nothing yet, or an error: the hold's own read meets it
+            resolve(waiter)
+            return
+        if not data:  # the end of the stream: likewise
+            resolve(waiter)
+            return
+        self._hold_read = len(data) < _HOLD_READ  # else more may wait: the hold reads on
+        self.held_reads += 1
+        taken, delay = paced(data)
+        if taken < len(data):
+            rest = data[taken:] if taken else data
+            p.chunks.append(rest)
+            p.buffered += len(rest)
+            resolve(waiter)
+            return
+        self.paced_reads += 1
+        if delay > 0:
+            self._hold_timer = p.loop.call_later(delay, self._hold_due, waiter)
+        else:
+            resolve(waiter)
 
     def end_hold(self) -> None:
         """End the current :meth:`hold` now, if one waits (it then reads as

@@ -147,6 +147,25 @@ class ReadPacer:
         waits for its pong (``pongs``), nor after a saturated read: more
         waits, and holding would slow the server). Ended early by
         :meth:`end`."""
+        delay, holding = self.delay(pongs)
+        if delay <= 0:
+            return False
+        stream = self._stream
+        if stream is not None and stream.has_data:
+            return False  # bytes that arrived before the wait are read at once
+        self.waited(holding)  # (counted first: a hold continued by its stream counts its own)
+        if stream is not None:
+            # reading paused: no wake-up per arriving segment
+            await stream.hold(delay, drain=holding)
+        else:
+            wakeup = self._wakeup
+            if wakeup is None:
+                wakeup = self._wakeup = new_wakeup()
+            await wakeup.wait(delay)  # (on trio no Cancelled raised and caught)
+        return True
+
+    def delay(self, pongs: bool) -> tuple[float, bool]:
+        """How long :meth:`wait` would wait now, and whether that is a hold."""
         now = time.monotonic()
         delay = self.last_read + self.window - now if self.steady else 0.0
         quiet = self.quiet
@@ -156,25 +175,16 @@ class ReadPacer:
             if wait > delay and wait >= _HOLD_MIN:
                 delay = wait if wait < _HOLD_MAX else _HOLD_MAX
                 holding = True
-        if delay <= 0:
-            return False
-        stream = self._stream
-        if stream is not None:
-            if stream.has_data:
-                return False  # bytes that arrived before the wait are read at once
-            # reading paused: no wake-up per arriving segment
-            await stream.hold(delay, drain=holding)
-        else:
-            wakeup = self._wakeup
-            if wakeup is None:
-                wakeup = self._wakeup = new_wakeup()
-            await wakeup.wait(delay)  # (on trio no Cancelled raised and caught)
+        return delay, holding
+
+    def waited(self, holding: bool) -> None:
+        """Count one wait (:meth:`wait`'s, or one its stream continued) and
+        note its kind for the read after it."""
         self.drain = holding
         if holding:
             self.quiet_holds += 1
         else:
             self.coalesced += 1
-        return True
 
     def set_quiet(self, quiet: Callable[[float], float] | None) -> None:
         """Hold reads while ``quiet(now)`` (monotonic seconds) returns a

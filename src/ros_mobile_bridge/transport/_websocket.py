@@ -194,9 +194,13 @@ class WebSocket:
         """Offer whole data messages to ``handler`` as soon as they are read,
         ahead of :meth:`receive_raw` (None: stop). On asyncio's plain TCP
         stream that is in the event loop's read callback, while the reader
-        task waits with nothing buffered: a message taken there costs no
-        task step. Elsewhere (trio, TLS) the reader offers them right after
-        its read, before any message object is built.
+        task waits with nothing buffered, and in the timer's callback that
+        ends the reader's wait before a read (read coalescing, a hold: see
+        :mod:`._read_pacing`): a message taken there costs no task step, and
+        a read taken whole at the end of a wait starts the next wait from
+        the callback (counted in :attr:`paced_reads`). Elsewhere (trio, TLS)
+        the reader offers them right after its read, before any message
+        object is built.
 
         Only an unfragmented, unmasked text or binary frame with a length
         below 64 KiB that starts a read, or follows taken ones in it, is
@@ -211,6 +215,26 @@ class WebSocket:
         stream = self._protocol_stream
         if stream is not None:
             stream.inline = None if handler is None else self._take_read
+            stream.paced = None if handler is None else self._paced_read
+
+    def _paced_read(self, data: bytes) -> tuple[int, float]:
+        """:attr:`ProtocolStream.paced`: a read made at the end of a wait
+        before a read, offered to the inline handler; the bytes taken, and
+        how long to wait before the next read when all were taken (0.0:
+        the reader reads next)."""
+        before = self.inline_messages
+        taken = self._take_inline(data)
+        self.bytes_received += taken
+        if taken < len(data):
+            return taken, 0.0
+        self.reads += 1
+        pacer = self._pacer
+        pacer.after_read(len(data), True, self.inline_messages - before)
+        delay, holding = pacer.delay(bool(self._pongs))
+        if delay <= 0:
+            return taken, 0.0
+        pacer.waited(holding)
+        return taken, delay
 
     def _take_read(self, data: bytes) -> int:
         """:attr:`ProtocolStream.inline`: :meth:`_take_inline`, unless the
@@ -450,6 +474,14 @@ class WebSocket:
             self._filled = filled
         if not waited:
             await anyio.lowlevel.checkpoint()
+
+    @property
+    def paced_reads(self) -> int:
+        """Reads made at the end of a wait before a read and taken whole by
+        the :meth:`handle_inline` handler in the loop's timer callback, with
+        no task step (asyncio's plain TCP stream; 0 elsewhere)."""
+        stream = self._protocol_stream
+        return 0 if stream is None else stream.paced_reads
 
     @property
     def held_reads(self) -> int:
