@@ -117,3 +117,69 @@ async def test_a_reader_waiting_when_the_keepalive_closes_the_socket_gets_connec
         await ws.aclose(timeout=0.5)
     assert ws.closed
     assert ws.messages_received == 0
+
+
+async def test_a_steady_stream_taken_at_the_end_of_each_wait_keeps_its_order(
+    anyio_backend_name: str,
+) -> None:
+    """Read coalescing on, a steady stream of small messages with pings, a
+    refused message now and then, and a close at the end: on asyncio most
+    reads at the end of a wait are taken in the timer's callback (the
+    reader task not resumed); a ping, a refused message or the close in
+    such a read goes to the reader with everything after it. Every message
+    arrives once, in order, every ping is answered, and the close ends the
+    reader."""
+    count = 300
+    sent = [
+        (False, (b"refuse" if i % 60 == 59 else b"take") + str(i).encode()) for i in range(count)
+    ]
+    pongs: list[bytes] = []
+    done = anyio.Event()
+
+    async def script(peer: Peer) -> None:
+        assert await peer.recv() == "go"
+        for i, (_, data) in enumerate(sent):
+            wire = frame(0x2, data)
+            if i % 50 == 49:
+                wire += frame(0x9, b"p%d" % i)
+            await peer.send_raw(wire)
+            await anyio.sleep(0.001)  # about 1 kHz: the client's reads coalesce
+        await peer.send_raw(frame(0x8, struct.pack("!H", 1000)))
+        while True:
+            data = await peer.stream.receive()
+            peer.proto.receive_data(data)
+            for event in peer.proto.events_received():
+                if getattr(event, "opcode", None) is not None and event.opcode.name == "PONG":
+                    pongs.append(bytes(event.data))
+            if peer.proto.close_rcvd is not None:
+                break
+        await done.wait()
+
+    got: list[tuple[str, bytes]] = []
+
+    def handler(text: bool, data: bytes, start: int, stop: int) -> bool:
+        body = data[start:stop]
+        if body.startswith(b"refuse"):
+            return False
+        got.append(("inline", body))
+        return True
+
+    async with scripted_server(script) as url:
+        ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",), max_size=None)
+        ws.read_coalesce = 0.004
+        ws.handle_inline(handler)
+        await ws.send("go")
+        with pytest.raises(ConnectionLost), anyio.fail_after(20):
+            while True:
+                _, data = await ws.receive_raw()
+                got.append(("reader", bytes(data)))
+        done.set()
+        await ws.aclose(timeout=0.5)
+    assert [data for _, data in got] == [data for _, data in sent]
+    assert all(how == "reader" for how, data in got if data.startswith(b"refuse"))
+    assert sorted(pongs) == sorted(b"p%d" % i for i in range(count) if i % 50 == 49)
+    assert ws.coalesced > 0
+    if anyio_backend_name == "asyncio":
+        assert ws.paced_reads > ws.coalesced // 4, (ws.paced_reads, ws.coalesced)
+    else:
+        assert ws.paced_reads == 0
