@@ -29,6 +29,18 @@ def messages(count: int, *, plain: bool) -> list[tuple[bool, bytes]]:
     return out
 
 
+async def pongs_until_close(peer: Peer) -> list[bytes]:
+    """After the server sent its close: the pongs the client answers with,
+    read until its close reply."""
+    pongs: list[bytes] = []
+    while peer.proto.close_rcvd is None:
+        peer.proto.receive_data(await peer.stream.receive())
+        for event in peer.proto.events_received():
+            if getattr(event, "opcode", None) is not None and event.opcode.name == "PONG":
+                pongs.append(bytes(event.data))
+    return pongs
+
+
 async def run_case(chunk: int, *, raising: bool = False) -> None:
     sent = messages(40, plain=raising)
     wire = b""
@@ -47,14 +59,7 @@ async def run_case(chunk: int, *, raising: bool = False) -> None:
             await anyio.sleep(0)
         await peer.send_raw(frame(0x8, struct.pack("!H", 1000)))
         # the pongs the client answered with, then its close reply
-        while True:
-            data = await peer.stream.receive()
-            peer.proto.receive_data(data)
-            for event in peer.proto.events_received():
-                if getattr(event, "opcode", None) is not None and event.opcode.name == "PONG":
-                    pongs.append(bytes(event.data))
-            if peer.proto.close_rcvd is not None:
-                break
+        pongs.extend(await pongs_until_close(peer))
         await done.wait()
 
     def handler(text: bool, data: bytes, start: int, stop: int) -> bool:
@@ -145,14 +150,7 @@ async def test_a_steady_stream_taken_at_the_end_of_each_wait_keeps_its_order(
             await peer.send_raw(wire)
             await anyio.sleep(0.001)  # about 1 kHz: the client's reads coalesce
         await peer.send_raw(frame(0x8, struct.pack("!H", 1000)))
-        while True:
-            data = await peer.stream.receive()
-            peer.proto.receive_data(data)
-            for event in peer.proto.events_received():
-                if getattr(event, "opcode", None) is not None and event.opcode.name == "PONG":
-                    pongs.append(bytes(event.data))
-            if peer.proto.close_rcvd is not None:
-                break
+        pongs.extend(await pongs_until_close(peer))
         await done.wait()
 
     got: list[tuple[str, bytes]] = []
