@@ -17,12 +17,18 @@ from contextlib import contextmanager
 
 import anyio
 import pytest
+import sniffio
 
 import ros_mobile_bridge as rmb
 from _util import fast_options as options
 from _util import wait_until, websocket_of
 from peers.foxglove_sdk import SdkServer, string_msg
 from ros_mobile_bridge.flow import FrameQueue, RawFrame
+
+try:
+    from ros_mobile_bridge._trio_timers import current_timers
+except ImportError:  # trio not installed: the asyncio cases still run
+    current_timers = None  # type: ignore[assignment]
 
 # -- the queue's side (fake clock) ----------------------------------------------
 
@@ -209,6 +215,45 @@ async def test_a_capped_subscription_reads_in_holds_and_gets_fresh_messages(
             stats = sub.stats
             queued = len(robot._conn.router._routes["/tick"][0].queue)  # type: ignore[attr-defined]
             assert stats.received == stats.delivered + stats.dropped_throttle + queued
+
+
+async def test_two_clients_holds_and_capped_waits_share_one_timer_on_trio(
+    server: SdkServer,
+) -> None:
+    """On trio the holds and the capped consumers' waits of every client on
+    the loop end on one shared timer (``_trio_timers``), run by one of the
+    clients and handed to the other when it closes; on asyncio every wait
+    keeps its loop timer. Either way the caps deliver fresh messages."""
+    trio_loop = sniffio.current_async_library() == "trio"
+    timers = current_timers() if trio_loop and current_timers else None
+    ticker = Ticker(server, 100.0)
+    with ticker.running(), anyio.fail_after(30):
+        async with rmb.connect(server.url, options=options()) as first:
+            async with rmb.connect(server.url, options=options()) as second:
+                fired = timers.fired if timers else 0
+                if timers:
+                    assert (timers.running, timers.participants) == (True, 2)
+                ws = websocket_of(second)
+                async with (
+                    first.subscribe("/tick", max_hz=5, adaptive=False) as a,
+                    second.subscribe("/tick", max_hz=5, adaptive=False) as b,
+                ):
+                    for sub in (a, b, a, b, a, b):
+                        msg = await sub.__anext__()
+                        assert ticker.sent - 1 - int(msg.data["data"]) < 20
+                holds = ws.quiet_holds
+                assert holds >= 1
+                if timers:
+                    assert timers.fired - fired >= holds  # each hold ended on it
+            if timers:  # the first client runs it alone now
+                assert (timers.running, timers.participants) == (True, 1)
+                async with first.subscribe("/tick", max_hz=5, adaptive=False) as a:
+                    fired = timers.fired
+                    for _ in range(3):
+                        await a.__anext__()
+                    assert timers.fired > fired
+    if timers:
+        assert (timers.running, timers.participants, len(timers)) == (False, 0, 0)
 
 
 async def test_a_stopping_stream_still_delivers_its_last_message(server: SdkServer) -> None:

@@ -22,6 +22,7 @@ from ._outbound import Outbound
 from ._router import Route, Router
 from ._serve import ServedServices
 from ._types import Status
+from ._wakeup import serve_timers
 from .adapters import Adapter
 from .codec import same_type_name
 from .flow import Bucket, ThrottleMode, Watchable, participate
@@ -109,6 +110,7 @@ class Connection:
             (self._writer, "rmb-writer"),
             (self._keepalive, "rmb-keepalive"),
             (participate, "rmb-lag"),
+            (serve_timers, "rmb-timers"),
             (self.router.run_reliability, "rmb-reliability"),
         ):
             scope = anyio.CancelScope(shield=True)

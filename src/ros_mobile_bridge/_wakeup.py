@@ -8,7 +8,8 @@ once per consumer and waits on what the loop itself offers: a future (and a
 loop timer for a time limit) on asyncio; on trio the task is parked and
 rescheduled directly, with a cancel scope's deadline as the time limit (trio's
 only timer) that resumes the task with a value instead of raising
-``Cancelled`` through the waiting frames.
+``Cancelled`` through the waiting frames, or for a coarse wait the loop's
+shared timer (:mod:`._trio_timers`, run by :func:`serve_timers`).
 
 Single waiter: one task waits at a time. :meth:`Wakeup.set` from the loop's
 thread (a callback or another task) resumes it, or does nothing when nobody
@@ -22,16 +23,19 @@ from typing import Protocol
 
 import sniffio
 
-__all__ = ["Wakeup", "new_wakeup", "resolve"]
+__all__ = ["Wakeup", "new_wakeup", "resolve", "serve_timers"]
 
 
 class Wakeup(Protocol):
     def set(self) -> None:
         """Resume the waiting task, if one waits; else nothing."""
 
-    async def wait(self, timeout: float | None = None) -> None:
+    async def wait(self, timeout: float | None = None, *, coarse: bool = False) -> None:
         """Wait until :meth:`set`, or ``timeout`` seconds (None: no limit)
-        pass; always suspends the task once (a checkpoint)."""
+        pass; always suspends the task once (a checkpoint). ``coarse``: the
+        wait may end up to a millisecond late, or early (trio: on the loop's
+        shared timer, :mod:`._trio_timers`); the caller checks its condition
+        again after any wake-up."""
 
 
 def new_wakeup() -> Wakeup:
@@ -41,6 +45,17 @@ def new_wakeup() -> Wakeup:
     from ._trio_wakeup import TrioWakeup  # (imports trio: installed, since it runs)
 
     return TrioWakeup()
+
+
+async def serve_timers() -> None:
+    """Take part in running the loop's shared timer of coarse waits until
+    cancelled (each client runs this as one of its tasks). On asyncio there
+    is none (a loop timer is cheap), and this returns at once."""
+    if sniffio.current_async_library() == "asyncio":
+        return
+    from ._trio_timers import participate
+
+    await participate()
 
 
 def resolve(future: asyncio.Future[None]) -> None:
@@ -64,8 +79,8 @@ class _AsyncioWakeup:
             if not future.done():
                 future.set_result(None)
 
-    async def wait(self, timeout: float | None = None) -> None:
-        loop = self._loop
+    async def wait(self, timeout: float | None = None, *, coarse: bool = False) -> None:
+        loop = self._loop  # (a loop timer is cheap: every wait is exact)
         future = self._future = loop.create_future()
         timer = None if timeout is None else loop.call_later(timeout, resolve, future)
         try:

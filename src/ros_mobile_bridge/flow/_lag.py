@@ -58,6 +58,8 @@ from typing import Final, NoReturn
 import anyio
 from anyio.lowlevel import RunVar
 
+from .._relay import Relay
+
 _log = logging.getLogger("ros_mobile_bridge.lag")
 
 __all__ = [
@@ -155,9 +157,7 @@ class LagMonitor:
         """Moves on every :meth:`record` and :meth:`clear` (the only times
         the signals change): a reader may keep what it derived from them
         while it stays the same (the adaptive throttles do, per frame)."""
-        self._participants = 0
-        self._sampling = False
-        self._handover = anyio.Event()
+        self._relay = Relay()
         self._ticks: dict[int, Callable[[], object]] = {}
         self._next_tick_key = 0
 
@@ -283,12 +283,12 @@ class LagMonitor:
     @property
     def participants(self) -> int:
         """How many :meth:`participate` calls are running."""
-        return self._participants
+        return self._relay.participants
 
     @property
     def sampling(self) -> bool:
         """Whether a participant is sampling now."""
-        return self._sampling
+        return self._relay.running
 
     # -- the shared tick ----------------------------------------------------------
     def add_tick(self, callback: Callable[[], object]) -> int:
@@ -343,21 +343,7 @@ class LagMonitor:
         samples (:meth:`run`), later ones wait; when the sampling participant
         is cancelled, a waiting one takes over at once. With no participants
         left nothing samples, and the history is kept."""
-        self._participants += 1
-        try:
-            while True:
-                if self._sampling:
-                    await self._handover.wait()
-                    continue
-                self._sampling = True
-                try:
-                    await self.run()
-                finally:
-                    self._sampling = False
-                    handover, self._handover = self._handover, anyio.Event()
-                    handover.set()
-        finally:
-            self._participants -= 1
+        await self._relay.participate(self.run)
 
 
 # -- one monitor per event loop ----------------------------------------------------

@@ -399,7 +399,8 @@ class FrameQueue:
                     # offers what came meanwhile (which releases the newest);
                     # this timer releases the held frame only if it does not
                     delay += interval * _CADENCE_GRACE
-                await wakeup.wait(delay if delay > 0.0 else 0.0)
+                # (a window's end may be taken a millisecond late)
+                await wakeup.wait(delay if delay > 0.0 else 0.0, coarse=True)
             else:
                 self._untimed = True
                 try:

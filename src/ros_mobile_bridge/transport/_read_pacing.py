@@ -161,7 +161,9 @@ class ReadPacer:
             wakeup = self._wakeup
             if wakeup is None:
                 wakeup = self._wakeup = new_wakeup()
-            await wakeup.wait(delay)  # (on trio no Cancelled raised and caught)
+            # (on trio no Cancelled raised and caught; a hold may end a
+            # millisecond late, on the loop's shared timer)
+            await wakeup.wait(delay, coarse=holding)
         return True
 
     def delay(self, pongs: bool) -> tuple[float, bool]:

@@ -1,0 +1,213 @@
+"""One timer for a trio loop's coarse waits (imported on trio only).
+
+trio's only timer is a cancel scope's deadline: entering the scope, trio
+expiring it and leaving it cost about 15-20 us of CPU per timed wait (a
+plain park and resume costs about 2 us). A fleet of rate-capped connections
+waits thousands of times a second: each WebSocket reader holds its reads
+until its subscriptions' next window (:mod:`.transport._read_pacing`), and
+each consumer waits for the end of its cap's window (:mod:`.flow._subscription`).
+
+A *coarse* wait (:meth:`._trio_wakeup.TrioWakeup.wait` with ``coarse=True``)
+may end up to :data:`GRID` late. Its deadline is rounded up to the grid and
+pushed on one heap per loop, and one task per loop, the :class:`TrioTimers`
+runner, sleeps until the earliest deadline (one cancel scope per wake-up,
+whose deadline an earlier push moves forward) and resumes every waiter whose
+deadline passed. Waits that round to the same grid point end in one wake-up
+of the runner.
+
+Ownership: every client on the loop runs :func:`participate` as one of its
+tasks (:class:`.._relay.Relay`): one runs the heap, the others wait to take
+over. While nobody runs it, coarse waits use their own cancel scope; when
+the last participant leaves, every waiter still on the heap is resumed (a
+coarse wait may end early: its caller checks its condition again, as after
+any wake-up).
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Final, NoReturn, Protocol
+
+import trio
+import trio.lowlevel
+from anyio.lowlevel import RunVar
+
+from ._relay import Relay
+
+if TYPE_CHECKING:
+    from typing import TypeAlias
+
+__all__ = ["COMPACT_ABOVE", "GRID", "TrioTimers", "current_timers", "participate"]
+
+GRID: Final = 0.001
+"""Seconds: a coarse wait's deadline is rounded up to a multiple of this, so
+waits that end within the same millisecond end in one wake-up."""
+COMPACT_ABOVE: Final = 4096
+"""Entries on the heap at which a push first rebuilds it without the entries
+whose waiter has since pushed another (an entry is left on the heap when its
+wait ends early; it is dropped when its deadline passes, or here). The next
+rebuild comes at twice what was kept, and never below this."""
+
+
+class Expiring(Protocol):
+    """A waiter on the heap (a :class:`._trio_wakeup.TrioWakeup`)."""
+
+    def expire(self, entry: Entry, now: float) -> None:
+        """``entry``'s deadline passed (``now``: trio's clock)."""
+
+    def owns(self, entry: Entry) -> bool:
+        """``entry`` is the waiter's current one (not replaced since)."""
+
+
+Entry: TypeAlias = "tuple[float, int, Expiring]"
+"""(deadline on trio's clock, push order, waiter)."""
+
+
+class TrioTimers:
+    """The heap of one trio loop's coarse waits and its runner (see the
+    module docstring)."""
+
+    __slots__ = ("_compact_at", "_heap", "_relay", "_scope", "_seq", "fired", "wakeups")
+
+    def __init__(self) -> None:
+        self._heap: list[Entry] = []
+        self._seq = 0
+        self._compact_at = COMPACT_ABOVE
+        self._scope: trio.CancelScope | None = None  # the runner's sleep
+        self._relay = Relay()
+        self.fired = 0
+        """Entries whose deadline passed while on the heap."""
+        self.wakeups = 0
+        """Times the runner woke to resume waiters (each ends every wait
+        due by then)."""
+
+    @property
+    def running(self) -> bool:
+        """A participant runs the heap: a coarse wait may use it."""
+        return self._relay.running
+
+    @property
+    def participants(self) -> int:
+        """How many :meth:`participate` calls are running (one per client on
+        the loop)."""
+        return self._relay.participants
+
+    def __len__(self) -> int:
+        return len(self._heap)
+
+    def push(self, deadline: float, waiter: Expiring) -> Entry:
+        """Call ``waiter.expire(entry, now)`` once trio's clock passes
+        ``deadline`` rounded up to :data:`GRID`; returns the entry."""
+        heap = self._heap
+        if len(heap) >= self._compact_at:
+            heap = self._compact()
+        deadline = math.ceil(deadline / GRID) * GRID
+        self._seq += 1
+        entry = (deadline, self._seq, waiter)
+        heapq.heappush(heap, entry)
+        scope = self._scope
+        if scope is not None and deadline < scope.deadline:
+            scope.deadline = deadline  # (moves the runner's wake-up forward)
+        return entry
+
+    def _compact(self) -> list[Entry]:
+        """Drop the entries their waiter replaced since (before a push: the
+        entry being pushed is not its waiter's yet)."""
+        heap = [entry for entry in self._heap if entry[2].owns(entry)]
+        heapq.heapify(heap)
+        self._heap = heap
+        self._compact_at = max(COMPACT_ABOVE, 2 * len(heap))  # (amortised: O(log n) a push)
+        return heap
+
+    def expire_due(self, now: float) -> None:
+        """Resume the waiters whose deadline is ``now`` (trio's clock) or
+        earlier."""
+        heap = self._heap
+        while heap and heap[0][0] <= now:
+            entry = heapq.heappop(heap)
+            self.fired += 1
+            entry[2].expire(entry, now)
+
+    async def run(self) -> NoReturn:
+        """The runner, until cancelled (driven by :meth:`participate`):
+        sleep until the earliest deadline on the heap, so that the loop
+        wakes then. The waiters due are resumed by the loop itself, right
+        after its wait for I/O (:class:`_AfterIoWait`): in the same batch of
+        tasks as trio's own deadlines would resume them, not one batch after
+        this task's."""
+        task = trio.lowlevel.current_task()
+        instrument = _AfterIoWait(self)
+        trio.lowlevel.add_instrument(instrument)
+        try:
+            while True:
+                heap = self._heap
+                scope = self._scope = trio.CancelScope(deadline=heap[0][0] if heap else math.inf)
+                with scope:
+                    await trio.lowlevel.wait_task_rescheduled(_waker(task, scope))
+                self._scope = None
+                self.wakeups += 1
+                self.expire_due(trio.current_time())
+        finally:
+            self._scope = None
+            trio.lowlevel.remove_instrument(instrument)
+
+    async def participate(self) -> NoReturn:
+        """Take part in running this heap until cancelled (see the module
+        docstring)."""
+        await self._relay.participate(self.run, self.release_all)
+
+    def release_all(self) -> None:
+        """Resume every waiter on the heap now (nobody runs it any more)."""
+        heap, self._heap = self._heap, []
+        for entry in heap:
+            entry[2].expire(entry, math.inf)
+
+
+class _AfterIoWait(trio.abc.Instrument):
+    """Resumes the heap's due waiters after each of the loop's waits for
+    I/O, while the heap has a runner."""
+
+    __slots__ = ("_timers",)
+
+    def __init__(self, timers: TrioTimers) -> None:
+        self._timers = timers
+
+    def after_io_wait(self, timeout: float) -> None:
+        self._timers.expire_due(trio.current_time())
+
+
+def _waker(
+    task: trio.lowlevel.Task, scope: trio.CancelScope
+) -> Callable[[trio.lowlevel.RaiseCancelT], trio.lowlevel.Abort]:
+    """The abort function of the runner's sleep: its deadline passing wakes
+    it with a value (no ``Cancelled`` raised and caught); a cancellation
+    from outside raises as usual."""
+
+    def abort(_raise_cancel: trio.lowlevel.RaiseCancelT) -> trio.lowlevel.Abort:
+        if scope.cancel_called:
+            trio.lowlevel.reschedule(task)
+            return trio.lowlevel.Abort.FAILED
+        return trio.lowlevel.Abort.SUCCEEDED
+
+    return abort
+
+
+_TIMERS: RunVar[TrioTimers] = RunVar("ros_mobile_bridge.trio_timers")
+
+
+def current_timers() -> TrioTimers:
+    """The running trio loop's :class:`TrioTimers`, created on first use."""
+    try:
+        return _TIMERS.get()
+    except LookupError:
+        timers = TrioTimers()
+        _TIMERS.set(timers)
+        return timers
+
+
+async def participate() -> NoReturn:
+    """Take part in running the current trio loop's coarse timer until
+    cancelled (see the module docstring)."""
+    await current_timers().participate()
