@@ -353,6 +353,8 @@ LAYERS: tuple[frozenset[str], ...] = (
             "_jsonable",
             "_wakeup",
             "_trio_wakeup",
+            "_trio_timers",
+            "_relay",
         }
     ),
     frozenset({"wire", "codec", "flow", "transport", "_signals"}),

@@ -9,14 +9,16 @@ each consumer waits for the end of its cap's window (:mod:`.flow._subscription`)
 
 A *coarse* wait (:meth:`._trio_wakeup.TrioWakeup.wait` with ``coarse=True``)
 may end up to :data:`GRID` late. Its deadline is rounded up to the grid and
-pushed on one heap per loop, and one task per loop, the :class:`TrioTimers`
+pushed on one heap per loop. One task per loop, the :class:`TrioTimers`
 runner, sleeps until the earliest deadline (one cancel scope per wake-up,
-whose deadline an earlier push moves forward) and resumes every waiter whose
-deadline passed. Waits that round to the same grid point end in one wake-up
-of the runner.
+whose deadline an earlier push moves forward), so that the loop wakes then;
+the loop itself resumes every waiter whose deadline passed, right after its
+wait for I/O (a trio instrument), in the same batch of tasks that trio's
+own deadline would have resumed them in. Waits that round to the same grid
+point cost one cancel scope together.
 
 Ownership: every client on the loop runs :func:`participate` as one of its
-tasks (:class:`.._relay.Relay`): one runs the heap, the others wait to take
+tasks (:class:`._relay.Relay`): one runs the heap, the others wait to take
 over. While nobody runs it, coarse waits use their own cancel scope; when
 the last participant leaves, every waiter still on the heap is resumed (a
 coarse wait may end early: its caller checks its condition again, as after
@@ -25,6 +27,7 @@ any wake-up).
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import math
 from collections.abc import Callable
@@ -151,7 +154,8 @@ class TrioTimers:
                 self.expire_due(trio.current_time())
         finally:
             self._scope = None
-            trio.lowlevel.remove_instrument(instrument)
+            with contextlib.suppress(KeyError):  # (trio drops an instrument that raised)
+                trio.lowlevel.remove_instrument(instrument)
 
     async def participate(self) -> NoReturn:
         """Take part in running this heap until cancelled (see the module
