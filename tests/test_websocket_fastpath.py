@@ -1,4 +1,5 @@
-"""The WebSocket's fast path for data frames against websockets' own parser.
+"""The WebSocket's fast path for data frames (``FrameParser``) against
+websockets' own parser.
 
 Any sequence of frames a server may send (data, fragments, pings, pongs,
 close, masked or reserved-bit frames, frames over ``max_size``, garbage), cut
@@ -19,8 +20,8 @@ from websockets.client import ClientProtocol
 from websockets.protocol import State
 from websockets.uri import parse_uri
 
-from ros_mobile_bridge.transport import _websocket
-from ros_mobile_bridge.transport._websocket import WebSocket
+from ros_mobile_bridge.transport import _ws_frames
+from ros_mobile_bridge.transport._ws_frames import FrameParser
 
 MAX_SIZE = 300
 
@@ -91,18 +92,23 @@ frame_lists = st.lists(
 )
 
 
+def parser_for(proto: ClientProtocol, max_size: int | None) -> FrameParser:
+    """A parser as a WebSocket without direct reads (TLS) builds it."""
+    return FrameParser(proto, max_size, False, lambda: None)
+
+
 def run(data: bytes, cuts: list[int], *, fast: bool) -> tuple[object, ...]:
     proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=MAX_SIZE)
-    ws = WebSocket(None, proto, MAX_SIZE)  # type: ignore[arg-type]  # never reads or writes
-    ws._fast = fast
+    parser = parser_for(proto, MAX_SIZE)
+    parser._fast = fast
     points = sorted({c % (len(data) + 1) for c in cuts} | {0, len(data)})
     for a, b in itertools.pairwise(points):
-        ws._feed(data[a:b])
-        while ws._more:
-            ws._more = False
-            ws._feed(b"")
-    messages = [(text, bytes(payload)) for text, payload in ws._messages]
-    reason = str(ws._closed_reason) if ws._closed_reason is not None else None
+        parser.feed(data[a:b])
+        while parser.more:
+            parser.more = False
+            parser.feed(b"")
+    messages = [(text, bytes(payload)) for text, payload in parser.messages]
+    reason = str(parser.closed_reason) if parser.closed_reason is not None else None
     return messages, reason, proto.state, unmask_all(b"".join(proto.data_to_send()))
 
 
@@ -158,17 +164,17 @@ def test_the_fast_path_gives_what_websockets_gives(
 
 def test_many_small_frames_are_parsed_a_bounded_number_at_a_time() -> None:
     proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=MAX_SIZE)
-    ws = WebSocket(None, proto, MAX_SIZE)  # type: ignore[arg-type]
-    count = 3 * _websocket._FAST_FRAMES + 5
-    ws._feed(frame_bytes(True, 0, 2, False, b"") * count)
-    assert len(ws._messages) == _websocket._FAST_FRAMES
-    assert ws._more
-    got = len(ws._messages)
-    while ws._more:
-        ws._messages.clear()
-        ws._more = False
-        ws._feed(b"")
-        got += len(ws._messages)
+    parser = parser_for(proto, MAX_SIZE)
+    count = 3 * _ws_frames._FAST_FRAMES + 5
+    parser.feed(frame_bytes(True, 0, 2, False, b"") * count)
+    assert len(parser.messages) == _ws_frames._FAST_FRAMES
+    assert parser.more
+    got = len(parser.messages)
+    while parser.more:
+        parser.messages.clear()
+        parser.more = False
+        parser.feed(b"")
+        got += len(parser.messages)
     assert got == count
 
 
@@ -177,12 +183,12 @@ def test_a_huge_declared_length_is_not_buffered_by_the_fast_path() -> None:
     at once (which fails the connection with 1009), not into a buffer that
     waits for the announced bytes."""
     proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=MAX_SIZE)
-    ws = WebSocket(None, proto, MAX_SIZE)  # type: ignore[arg-type]
-    ws._feed(bytes([0x82, 127]) + struct.pack("!Q", 1 << 40) + b"x" * 100)
-    assert not ws._buf
-    assert not ws._fast
-    assert ws._closed_reason is not None
-    assert "1009" in str(ws._closed_reason)
+    parser = parser_for(proto, MAX_SIZE)
+    parser.feed(bytes([0x82, 127]) + struct.pack("!Q", 1 << 40) + b"x" * 100)
+    assert not parser._buf
+    assert not parser._fast
+    assert parser.closed_reason is not None
+    assert "1009" in str(parser.closed_reason)
 
 
 @settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow], deadline=None)
@@ -199,7 +205,7 @@ def test_large_frames_gathered_chunk_by_chunk_give_what_websockets_gives(
     64 KiB) lowered so that the generated frames take that path too."""
     data = b"".join(frame_bytes(*f) for f in frames) + tail
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(_websocket, "_ASSEMBLE_FROM", gather_from)
+        patch.setattr(_ws_frames, "_ASSEMBLE_FROM", gather_from)
         fast = run(data, cuts, fast=True)
     assert fast == run(data, cuts, fast=False)
 
@@ -217,20 +223,20 @@ def test_a_large_frame_is_gathered_and_joined_once_into_bytes_of_its_size() -> N
         + frame_bytes(True, 0, 2, False, second)
     )
     proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=None)
-    ws = WebSocket(None, proto, None)  # type: ignore[arg-type]
+    parser = parser_for(proto, None)
     step = 64 * 1024
     for start in range(0, len(data), step):
-        ws._feed(data[start : start + step])
-        assert len(ws._buf) < 16  # at most a frame header waits in the buffer
-    assert [(text, type(payload)) for text, payload in ws._messages] == [
+        parser.feed(data[start : start + step])
+        assert len(parser._buf) < 16  # at most a frame header waits in the buffer
+    assert [(text, type(payload)) for text, payload in parser.messages] == [
         (False, bytes),
         (True, bytes),
         (False, bytes),
     ]
-    assert [payload for _, payload in ws._messages] == [first, b"hi", second]
-    assert ws._parts is None
-    assert not ws._buf
-    assert ws._fast
+    assert [payload for _, payload in parser.messages] == [first, b"hi", second]
+    assert parser._parts is None
+    assert not parser._buf
+    assert parser._fast
 
 
 def test_a_read_inside_a_large_frame_is_never_offered_to_the_inline_handler() -> None:
@@ -243,12 +249,12 @@ def test_a_read_inside_a_large_frame_is_never_offered_to_the_inline_handler() ->
     payload[split - 10 : split - 6] = b"\x82\x02ab"  # (10 header bytes)
     data = bytes([0x82, 127]) + struct.pack("!Q", size) + bytes(payload)
     proto = ClientProtocol(parse_uri("ws://robot.local/"), state=State.OPEN, max_size=None)
-    ws = WebSocket(None, proto, None)  # type: ignore[arg-type]
+    parser = parser_for(proto, None)
     taken: list[bytes] = []
-    ws.handle_inline(lambda text, buf, start, stop: taken.append(bytes(buf[start:stop])) is None)
-    ws._feed(data[:split])
-    assert ws._parts is not None  # gathering the large frame
-    assert ws._take_inline(data[split:]) == 0
-    ws._feed(data[split:])
+    parser.inline = lambda text, buf, start, stop: taken.append(bytes(buf[start:stop])) is None
+    parser.feed(data[:split])
+    assert parser._parts is not None  # gathering the large frame
+    assert parser.take_inline(data[split:]) == 0
+    parser.feed(data[split:])
     assert taken == []
-    assert [(text, bytes(p)) for text, p in ws._messages] == [(False, bytes(payload))]
+    assert [(text, bytes(p)) for text, p in parser.messages] == [(False, bytes(payload))]

@@ -21,7 +21,7 @@ import ros_mobile_bridge as rmb
 from peers.foxglove_sdk import SdkServer, image_msg
 from peers.hostile_server import frame
 from peers.scripted import Peer, scripted_server
-from ros_mobile_bridge.transport import ConnectionLost, _websocket, connect_websocket
+from ros_mobile_bridge.transport import ConnectionLost, _ws_frames, connect_websocket
 
 IMAGE = 640 * 480 * 3 + 52
 
@@ -36,7 +36,7 @@ def on_trio() -> bool:
 def small_bound() -> Iterator[int]:
     """``_DIRECT_MAX`` lowered to 300,000 bytes, so a 500 KB frame is over it."""
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(_websocket, "_DIRECT_MAX", 300_000)
+        patch.setattr(_ws_frames, "_DIRECT_MAX", 300_000)
         yield 300_000
 
 
@@ -88,10 +88,10 @@ async def test_large_frames_arrive_whole_as_bytes_in_order(chunk: int, small_bou
         # trio reads at most 64 KiB at a time: every large frame arrives in
         # pieces, and each one under the bound is read straight in
         assert ws.direct_frames == under == 4
-        assert 250_000 <= len(ws._direct_buf) <= small_bound
+        assert 250_000 <= len(ws._parser._direct_buf) <= small_bound
     else:  # asyncio reads up to 256 KiB: a frame may come whole in one read
         assert ws.direct_frames <= under
-        assert len(ws._direct_buf) <= small_bound
+        assert len(ws._parser._direct_buf) <= small_bound
 
 
 async def test_the_end_of_the_stream_inside_a_large_frame_ends_the_connection() -> None:
