@@ -17,7 +17,7 @@ wait for I/O (a trio instrument), in the same batch of tasks that trio's
 own deadline would have resumed them in. Waits that round to the same grid
 point cost one cancel scope together.
 
-Ownership: every client on the loop runs :func:`participate` as one of its
+Ownership: every client on the loop runs :meth:`TrioTimers.participate` as one of its
 tasks (:class:`._relay.Relay`): one runs the heap, the others wait to take
 over. While nobody runs it, coarse waits use their own cancel scope; when
 the last participant leaves, every waiter still on the heap is resumed (a
@@ -42,7 +42,7 @@ from ._relay import Relay
 if TYPE_CHECKING:
     from typing import TypeAlias
 
-__all__ = ["COMPACT_ABOVE", "GRID", "TrioTimers", "current_timers", "participate"]
+__all__ = ["COMPACT_ABOVE", "GRID", "TrioTimers", "current_timers"]
 
 GRID: Final = 0.001
 """Seconds: a coarse wait's deadline is rounded up to a multiple of this, so
@@ -209,9 +209,3 @@ def current_timers() -> TrioTimers:
         timers = TrioTimers()
         _TIMERS.set(timers)
         return timers
-
-
-async def participate() -> NoReturn:
-    """Take part in running the current trio loop's coarse timer until
-    cancelled (see the module docstring)."""
-    await current_timers().participate()

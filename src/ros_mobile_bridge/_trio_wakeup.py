@@ -93,7 +93,7 @@ class TrioWakeup:
         if self._task is None:
             return  # the wait it was pushed for ended already
         due = self._due
-        if due <= now or not self._timers.running:
+        if due <= now:  # (release_all passes an infinite now)
             self.set()
         else:  # an entry pushed for an earlier wait: push this wait's own
             self._entry = self._timers.push(due, self)

@@ -53,9 +53,9 @@ async def serve_timers() -> None:
     is none (a loop timer is cheap), and this returns at once."""
     if sniffio.current_async_library() == "asyncio":
         return
-    from ._trio_timers import participate
+    from ._trio_timers import current_timers
 
-    await participate()
+    await current_timers().participate()
 
 
 def resolve(future: asyncio.Future[None]) -> None:
