@@ -245,15 +245,14 @@ async def test_the_adaptive_throttle_is_forwarded_as_throttle_rate(peer: RosPeer
     assert relaxed >= 25, relaxed
 
 
-async def test_a_steady_stream_is_read_in_batches_over_rosbridge(
-    peer: RosPeer, anyio_backend_name: str
-) -> None:
+async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) -> None:
     """Read coalescing against the condition it exists for: a topic the graph
     publishes at about 1 kHz, through the bridge. Every frame received is
     delivered; with the default window the reader takes several frames per
     read; with ``read_coalesce=0`` no read waits. Either way the frames are
-    taken where they are read (no event built); on asyncio most reads at
-    the end of a wait are taken in the loop's timer callback, with no task
+    taken where they are read (no event built); most reads at the end of a
+    wait are taken where the loop ends the wait (asyncio: the timer's
+    callback; trio: the loop's shared timer), with no task
     step."""
     from ros_mobile_bridge.transport import WebSocket
 
@@ -288,13 +287,11 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(
                     if window:
                         assert ws.coalesced - waited > 0
                         assert ws.reads - reads < frames * 0.6, (ws.reads - reads, frames)
-                        if anyio_backend_name == "asyncio":
-                            in_callback = ws.paced_reads - paced
-                            assert in_callback > (ws.reads - reads) // 2, (in_callback, ws.reads)
+                        in_callback = ws.paced_reads - paced
+                        assert in_callback > (ws.reads - reads) // 2, (in_callback, ws.reads)
                     else:
                         assert ws.coalesced == waited == 0
-                    if anyio_backend_name != "asyncio":
-                        assert ws.paced_reads == 0
+                        assert ws.paced_reads == paced
     finally:
         await command(peer, {"cmd": "stop", "topic": topic})
 

@@ -1,18 +1,24 @@
-"""trio's shared timer of coarse waits (``_trio_timers.py``, and the coarse
-path of ``_trio_wakeup.py``): a coarse wait ends on the loop's one runner, no
-earlier than asked and at most ``GRID`` later; waits due in the same
-millisecond end in one wake-up of the runner; a wait that ended early leaves
-no trap for the next; an outside cancellation still raises; with nobody
-running the heap a coarse wait keeps its own cancel scope; when the last
-participant leaves, every waiter is resumed; another participant takes over
-from one that leaves; and the heap is bounded. trio only: on asyncio a loop
-timer is cheap and every wait is exact (``serve_timers`` returns at once, as
-the last test checks on both loops). trio's virtual clock (``MockClock``,
-jumping ahead whenever every task waits) makes the times exact."""
+"""trio's shared timer of timed waits (``_trio_timers.py``, and the heap's
+side of ``_trio_wakeup.py``): a coarse wait ends on the loop's one runner, no
+earlier than asked and at most ``GRID`` later; an exact one at its deadline;
+neither enters a cancel scope (the runner's one scope is moved on, never
+expired); waits due in the same millisecond end in one wake-up; a wait's
+callback (``then``) runs at the deadline instead of the task, and may keep
+it waiting; a wait that ended early leaves no trap for the next; an outside
+cancellation still raises; with nobody running the heap a wait keeps its
+own cancel scope; when the last participant leaves, every waiter is
+resumed; another participant takes over from one that leaves; and the heap
+is bounded. trio only: on asyncio a loop timer is cheap and every wait is
+exact (``serve_timers`` returns at once, as the last test checks on both
+loops). trio's virtual clock (``MockClock``, jumping ahead whenever every
+task waits) makes the times exact."""
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
+from collections.abc import AsyncIterator
 
 import pytest
 
@@ -22,6 +28,7 @@ trio_testing = pytest.importorskip("trio.testing")
 import anyio  # noqa: E402
 import sniffio  # noqa: E402
 
+from ros_mobile_bridge import _trio_timers  # noqa: E402
 from ros_mobile_bridge._trio_timers import (  # noqa: E402
     COMPACT_ABOVE,
     GRID,
@@ -47,6 +54,17 @@ class Runner:
     async def _run(self) -> None:
         with self.scope:
             await current_timers().participate()
+
+
+@contextlib.asynccontextmanager
+async def running_timers() -> AsyncIterator[None]:
+    """A participant runs the loop's timers for the block (it leaves at the
+    block's end)."""
+    async with trio.open_nursery() as nursery:
+        runner = Runner(nursery)
+        await trio.testing.wait_all_tasks_blocked()
+        yield
+        runner.scope.cancel()
 
 
 async def coarse_wait(timeout: float, ends: list[float]) -> None:
@@ -87,6 +105,141 @@ def test_waits_due_in_the_same_millisecond_end_in_one_wake_up() -> None:
             assert timers.wakeups == 1
             assert timers.fired == 100
             runner.scope.cancel()
+
+    run(main)
+
+
+def test_an_exact_wait_ends_on_the_heap_at_its_deadline_with_no_scope_of_its_own() -> None:
+    async def main() -> None:
+        timers = current_timers()
+        async with running_timers():
+            wakeup = TrioWakeup()
+            for timeout in (0.0043, 0.0007, 0.25):  # not on the grid
+                start = trio.current_time()
+                await wakeup.wait(timeout)
+                assert trio.current_time() - start == pytest.approx(timeout, abs=1e-9)
+            assert timers.fired == 3
+            # the runner's one scope was moved on each time, never expired
+            assert timers.rearmed == 0
+
+    run(main)
+
+
+def test_without_the_instrument_the_runners_own_scope_still_ends_every_wait(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Should trio expire the runner's scope before the instrument moves it
+    on (its deadline passing between the two clock readings; here: the
+    instrument does nothing), the runner resumes the waiters itself."""
+    monkeypatch.setattr(_trio_timers._AfterIoWait, "after_io_wait", lambda self, timeout: None)
+
+    async def main() -> None:
+        timers = current_timers()
+        async with running_timers():
+            wakeup = TrioWakeup()
+            for timeout in (0.0043, 0.25):
+                start = trio.current_time()
+                await wakeup.wait(timeout)
+                assert trio.current_time() - start == pytest.approx(timeout, abs=1e-9)
+            assert (timers.fired, timers.rearmed) == (2, 2)
+
+    run(main)
+
+
+def test_a_waits_callback_runs_at_the_deadline_and_may_keep_the_task_waiting() -> None:
+    async def main() -> None:
+        timers = current_timers()
+        async with running_timers():
+            wakeup = TrioWakeup()
+            start = trio.current_time()
+            calls: list[float] = []
+            answers = [(0.5, False), (0.25, True), (0.0, False)]
+
+            def then() -> tuple[float, bool]:
+                calls.append(round(trio.current_time() - start, 6))
+                return answers[len(calls) - 1]
+
+            await wakeup.wait(1.0, then=then)
+            # called at 1.0, 1.5 and (coarse) at 1.75 rounded up; the task
+            # resumed only after the last, which asked for no more
+            assert calls[:2] == [pytest.approx(1.0), pytest.approx(1.5)]
+            assert 1.75 <= calls[2] <= 1.75 + GRID + 1e-9
+            assert trio.current_time() - start == pytest.approx(calls[2], abs=1e-9)
+            assert (timers.fired, timers.rearmed) == (3, 0)
+
+    run(main)
+
+
+def test_a_set_ends_a_wait_its_callback_wanted_to_go_on() -> None:
+    async def main() -> None:
+        async with running_timers():
+            wakeup = TrioWakeup()
+            start = trio.current_time()
+
+            def then() -> tuple[float, bool]:
+                wakeup.set()  # (what a delivery ending a hold does)
+                return 10.0, False
+
+            await wakeup.wait(0.5, then=then)
+            assert trio.current_time() - start == pytest.approx(0.5)
+            # and nothing of it is left to end the next wait early
+            await wakeup.wait(2.0)
+            assert trio.current_time() - start == pytest.approx(2.5)
+
+    run(main)
+
+
+def test_a_callback_that_raises_is_logged_and_the_task_resumes(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    async def main() -> None:
+        timers = current_timers()
+        async with running_timers():
+            wakeup = TrioWakeup()
+
+            def then() -> tuple[float, bool]:
+                raise RuntimeError("a bug in the callback")
+
+            start = trio.current_time()
+            with caplog.at_level(logging.ERROR, logger="ros_mobile_bridge._trio_wakeup"):
+                await wakeup.wait(0.3, then=then)
+            assert trio.current_time() - start == pytest.approx(0.3)
+            assert "a timed wait's callback failed" in caplog.text
+            # the loop's timer still works (trio drops an instrument that raises)
+            await wakeup.wait(0.2, coarse=True)
+            assert timers.fired == 2
+
+    run(main)
+
+
+def test_a_callback_is_not_called_without_a_runner_nor_for_a_cancelled_wait() -> None:
+    async def main() -> None:
+        called: list[str] = []
+
+        def then() -> tuple[float, bool]:
+            called.append("called")
+            return 0.0, False
+
+        start = trio.current_time()
+        await TrioWakeup().wait(0.1, then=then)  # no runner: its own scope
+        assert trio.current_time() - start == pytest.approx(0.1)
+        ended: list[float] = []
+
+        async def wait_long() -> None:
+            await TrioWakeup().wait(5.0, then=then)
+            ended.append(trio.current_time())
+
+        async with trio.open_nursery() as nursery:
+            async with running_timers():
+                with trio.move_on_after(0.1):
+                    await TrioWakeup().wait(0.5, then=then)
+                await trio.sleep(1.0)  # past the cancelled wait's deadline
+                nursery.start_soon(wait_long)
+                await trio.testing.wait_all_tasks_blocked()
+                left = trio.current_time()
+            # the last participant left: the long wait resumed, not called
+        assert ended == [pytest.approx(left)]
+        assert called == []
 
     run(main)
 

@@ -1,28 +1,35 @@
-"""One timer for a trio loop's coarse waits (imported on trio only).
+"""One timer for a trio loop's timed waits (imported on trio only).
 
 trio's only timer is a cancel scope's deadline: entering the scope, trio
 expiring it and leaving it cost about 15-20 us of CPU per timed wait (a
 plain park and resume costs about 2 us). A fleet of rate-capped connections
 waits thousands of times a second: each WebSocket reader holds its reads
 until its subscriptions' next window (:mod:`.transport._read_pacing`), and
-each consumer waits for the end of its cap's window (:mod:`.flow._subscription`).
+each consumer waits for the end of its cap's window (:mod:`.flow._subscription`);
+a single fast stream's reader waits once per read for read coalescing.
 
-A *coarse* wait (:meth:`._trio_wakeup.TrioWakeup.wait` with ``coarse=True``)
-may end up to :data:`GRID` late. Its deadline is rounded up to the grid and
-pushed on one heap per loop. One task per loop, the :class:`TrioTimers`
-runner, sleeps until the earliest deadline (one cancel scope per wake-up,
-whose deadline an earlier push moves forward), so that the loop wakes then;
-the loop itself resumes every waiter whose deadline passed, right after its
-wait for I/O (a trio instrument), in the same batch of tasks that trio's
-own deadline would have resumed them in. Waits that round to the same grid
-point cost one cancel scope together.
+While a client runs it, a timed wait (:meth:`._trio_wakeup.TrioWakeup.wait`)
+pushes its deadline on one heap per loop and parks. One task per loop, the
+:class:`TrioTimers` runner, holds one cancel scope for its whole life, whose
+deadline is the heap's earliest, so that the loop's wait for I/O ends then.
+Right after that wait (a trio instrument, ``after_io_wait``), the loop itself
+resumes every waiter whose deadline passed and moves the scope's deadline to
+the next one, before trio would expire it: a wait costs a heap push and a
+park, and the waiters resume in the same batch of tasks that trio's own
+deadline would have resumed them in. A waiter may instead be handed a
+callback to run there (:meth:`Expiring.expire`; the WebSocket reader's read
+at the end of a wait, taken with no task step).
+
+A *coarse* wait's deadline is rounded up to :data:`GRID`, so that waits
+ending within the same millisecond end in one wake-up (a fleet's holds); an
+exact one is not rounded.
 
 Ownership: every client on the loop runs :meth:`TrioTimers.participate` as one of its
 tasks (:class:`._relay.Relay`): one runs the heap, the others wait to take
-over. While nobody runs it, coarse waits use their own cancel scope; when
+over. While nobody runs it, timed waits use their own cancel scope; when
 the last participant leaves, every waiter still on the heap is resumed (a
-coarse wait may end early: its caller checks its condition again, as after
-any wake-up).
+wait on the heap may then end early: its caller checks its condition again,
+as after any wake-up).
 """
 
 from __future__ import annotations
@@ -46,7 +53,7 @@ __all__ = ["COMPACT_ABOVE", "GRID", "TrioTimers", "current_timers"]
 
 GRID: Final = 0.001
 """Seconds: a coarse wait's deadline is rounded up to a multiple of this, so
-waits that end within the same millisecond end in one wake-up."""
+coarse waits that end within the same millisecond end in one wake-up."""
 COMPACT_ABOVE: Final = 4096
 """Entries on the heap at which a push first rebuilds it without the entries
 whose waiter has since pushed another (an entry is left on the heap when its
@@ -58,7 +65,10 @@ class Expiring(Protocol):
     """A waiter on the heap (a :class:`._trio_wakeup.TrioWakeup`)."""
 
     def expire(self, entry: Entry, now: float) -> None:
-        """``entry``'s deadline passed (``now``: trio's clock)."""
+        """``entry``'s deadline passed (``now``: trio's clock). Called by the
+        loop between its wait for I/O and its next batch of tasks (or with
+        an infinite ``now`` when the last participant leaves): it must not
+        block and must not raise."""
 
     def owns(self, entry: Entry) -> bool:
         """``entry`` is the waiter's current one (not replaced since)."""
@@ -72,19 +82,23 @@ class TrioTimers:
     """The heap of one trio loop's coarse waits and its runner (see the
     module docstring)."""
 
-    __slots__ = ("_compact_at", "_heap", "_relay", "_scope", "_seq", "fired", "wakeups")
+    __slots__ = ("_compact_at", "_heap", "_relay", "_scope", "_seq", "fired", "rearmed", "wakeups")
 
     def __init__(self) -> None:
         self._heap: list[Entry] = []
         self._seq = 0
         self._compact_at = COMPACT_ABOVE
-        self._scope: trio.CancelScope | None = None  # the runner's sleep
+        self._scope: trio.CancelScope | None = None  # the runner's, while it runs
         self._relay = Relay()
         self.fired = 0
         """Entries whose deadline passed while on the heap."""
         self.wakeups = 0
-        """Times the runner woke to resume waiters (each ends every wait
+        """Times the loop resumed waiters from the heap (each ends every wait
         due by then)."""
+        self.rearmed = 0
+        """Times trio expired the runner's scope before it was moved on (its
+        deadline passed between the instrument's clock reading and trio's):
+        the runner then starts a new scope."""
 
     @property
     def running(self) -> bool:
@@ -100,13 +114,15 @@ class TrioTimers:
     def __len__(self) -> int:
         return len(self._heap)
 
-    def push(self, deadline: float, waiter: Expiring) -> Entry:
+    def push(self, deadline: float, waiter: Expiring, *, exact: bool = False) -> Entry:
         """Call ``waiter.expire(entry, now)`` once trio's clock passes
-        ``deadline`` rounded up to :data:`GRID`; returns the entry."""
+        ``deadline``, rounded up to :data:`GRID` unless ``exact``; returns
+        the entry."""
         heap = self._heap
         if len(heap) >= self._compact_at:
             heap = self._compact()
-        deadline = math.ceil(deadline / GRID) * GRID
+        if not exact:
+            deadline = math.ceil(deadline / GRID) * GRID
         self._seq += 1
         entry = (deadline, self._seq, waiter)
         heapq.heappush(heap, entry)
@@ -126,20 +142,31 @@ class TrioTimers:
 
     def expire_due(self, now: float) -> None:
         """Resume the waiters whose deadline is ``now`` (trio's clock) or
-        earlier."""
+        earlier, then move the runner's scope to the next deadline."""
         heap = self._heap
-        while heap and heap[0][0] <= now:
-            entry = heapq.heappop(heap)
-            self.fired += 1
-            entry[2].expire(entry, now)
+        if heap and heap[0][0] <= now:
+            self.wakeups += 1
+            while heap and heap[0][0] <= now:
+                entry = heapq.heappop(heap)
+                self.fired += 1
+                entry[2].expire(entry, now)
+            heap = self._heap  # (a push may have rebuilt it)
+        scope = self._scope
+        if scope is not None:
+            deadline = heap[0][0] if heap else math.inf
+            if scope.deadline != deadline:
+                scope.deadline = deadline
 
     async def run(self) -> NoReturn:
-        """The runner, until cancelled (driven by :meth:`participate`):
-        sleep until the earliest deadline on the heap, so that the loop
-        wakes then. The waiters due are resumed by the loop itself, right
-        after its wait for I/O (:class:`_AfterIoWait`): in the same batch of
-        tasks as trio's own deadlines would resume them, not one batch after
-        this task's."""
+        """The runner, until cancelled (driven by :meth:`participate`): one
+        cancel scope whose deadline is the earliest on the heap, so that the
+        loop wakes then. The loop itself resumes the waiters due, right
+        after its wait for I/O (:class:`_AfterIoWait`), and moves the
+        scope's deadline on before trio expires it: in the same batch of
+        tasks as trio's own deadlines would resume them, with no scope
+        entered or expired per wait. Should trio expire the scope anyway
+        (its deadline passed after the instrument read the clock), the
+        runner resumes the waiters due itself and starts a new scope."""
         task = trio.lowlevel.current_task()
         instrument = _AfterIoWait(self)
         trio.lowlevel.add_instrument(instrument)
@@ -150,7 +177,7 @@ class TrioTimers:
                 with scope:
                     await trio.lowlevel.wait_task_rescheduled(_waker(task, scope))
                 self._scope = None
-                self.wakeups += 1
+                self.rearmed += 1
                 self.expire_due(trio.current_time())
         finally:
             self._scope = None

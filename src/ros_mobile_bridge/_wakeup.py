@@ -6,10 +6,11 @@ second across a fleet of connections). ``anyio.Event`` builds an event object
 wait adds a cancel scope or a loop timer around it. :class:`Wakeup` is built
 once per consumer and waits on what the loop itself offers: a future (and a
 loop timer for a time limit) on asyncio; on trio the task is parked and
-rescheduled directly, with a cancel scope's deadline as the time limit (trio's
-only timer) that resumes the task with a value instead of raising
-``Cancelled`` through the waiting frames, or for a coarse wait the loop's
-shared timer (:mod:`._trio_timers`, run by :func:`serve_timers`).
+rescheduled directly, with an entry on the loop's shared timer as the time
+limit (:mod:`._trio_timers`, run by :func:`serve_timers`) or, while nobody
+runs that, a cancel scope's deadline (trio's only timer) that resumes the
+task with a value instead of raising ``Cancelled`` through the waiting
+frames.
 
 Single waiter: one task waits at a time. :meth:`Wakeup.set` from the loop's
 thread (a callback or another task) resumes it, or does nothing when nobody
@@ -19,6 +20,7 @@ waits. A cancellation from outside ends the wait as any checkpoint does.
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 from typing import Protocol
 
 import sniffio
@@ -30,12 +32,22 @@ class Wakeup(Protocol):
     def set(self) -> None:
         """Resume the waiting task, if one waits; else nothing."""
 
-    async def wait(self, timeout: float | None = None, *, coarse: bool = False) -> None:
+    async def wait(
+        self,
+        timeout: float | None = None,
+        *,
+        coarse: bool = False,
+        then: Callable[[], tuple[float, bool]] | None = None,
+    ) -> None:
         """Wait until :meth:`set`, or ``timeout`` seconds (None: no limit)
         pass; always suspends the task once (a checkpoint). ``coarse``: the
         wait may end up to a millisecond late, or early (trio: on the loop's
         shared timer, :mod:`._trio_timers`); the caller checks its condition
-        again after any wake-up."""
+        again after any wake-up. ``then``: on trio, while the loop's shared
+        timer runs, the loop calls it at the deadline instead of resuming
+        the task; it returns ``(seconds, coarse)`` to go on waiting, or
+        ``(0.0, _)`` to resume (see :meth:`._trio_wakeup.TrioWakeup.wait`).
+        Elsewhere it is not called: the caller acts once resumed."""
 
 
 def new_wakeup() -> Wakeup:
@@ -79,7 +91,13 @@ class _AsyncioWakeup:
             if not future.done():
                 future.set_result(None)
 
-    async def wait(self, timeout: float | None = None, *, coarse: bool = False) -> None:
+    async def wait(
+        self,
+        timeout: float | None = None,
+        *,
+        coarse: bool = False,
+        then: Callable[[], tuple[float, bool]] | None = None,
+    ) -> None:
         loop = self._loop  # (a loop timer is cheap: every wait is exact)
         future = self._future = loop.create_future()
         timer = None if timeout is None else loop.call_later(timeout, resolve, future)

@@ -15,8 +15,9 @@ handed over together:
 wait: on asyncio's :class:`~._asyncio_stream.ProtocolStream` the stream's
 :meth:`~._asyncio_stream.ProtocolStream.hold` (reading paused, so nothing
 wakes the loop meanwhile); elsewhere a :class:`.._wakeup.Wakeup` (anyio's
-streams read only when asked). Used by one :class:`~._websocket.WebSocket`;
-it never reads or parses itself.
+streams read only when asked), which on trio may hand the end of the wait
+to the owner's :attr:`ReadPacer.due` instead of resuming the reader. Used
+by one :class:`~._websocket.WebSocket`; it never reads or parses itself.
 """
 
 from __future__ import annotations
@@ -55,6 +56,7 @@ class ReadPacer:
         "_wakeup",
         "coalesced",
         "drain",
+        "due",
         "last_read",
         "quiet",
         "quiet_holds",
@@ -84,6 +86,12 @@ class ReadPacer:
         """Waits made for :meth:`set_quiet` (the subscriptions' caps)."""
         self.coalesced = 0
         """Waits made for read coalescing."""
+        self.due: Callable[[], tuple[float, bool]] | None = None
+        """On trio (the loop's shared timer running): called by the loop at
+        the end of a wait instead of resuming the reader (the owner's read
+        there, see :meth:`.._trio_wakeup.TrioWakeup.wait`); returns how long
+        to go on waiting and whether that is a hold, or ``(0.0, False)``:
+        the reader resumes and reads."""
 
     @property
     def active(self) -> bool:
@@ -162,8 +170,9 @@ class ReadPacer:
             if wakeup is None:
                 wakeup = self._wakeup = new_wakeup()
             # (on trio no Cancelled raised and caught; a hold may end a
-            # millisecond late, on the loop's shared timer)
-            await wakeup.wait(delay, coarse=holding)
+            # millisecond late, on the loop's shared timer, and the read at
+            # the end of the wait may be made there, by self.due)
+            await wakeup.wait(delay, coarse=holding, then=self.due)
         return True
 
     def delay(self, pongs: bool) -> tuple[float, bool]:

@@ -6,9 +6,10 @@ and any number of writers (:meth:`WebSocket.send`), serialised by a lock so
 frames never interleave. Keep-alive is WebSocket ping/pong
 (:meth:`WebSocket.keepalive`, run as a task by the owner).
 
-On asyncio's plain TCP stream the owner may also take whole data messages
-synchronously where they are read (:meth:`WebSocket.handle_inline`): no task
-step per message for those it takes.
+The owner may also take whole data messages synchronously where they are
+read (:meth:`WebSocket.handle_inline`): no task step per message for those
+it takes (on asyncio's plain TCP stream in the loop's callbacks, on trio's
+plain socket where the loop ends the reader's wait before a read).
 
 What is read is parsed by the connection's :class:`~._ws_frames.FrameParser`
 (no I/O: bytes in, messages out); this module reads, sends, pings and
@@ -102,6 +103,13 @@ class WebSocket:
         self.reads = 0
         """Reads from the socket so far (each one wake-up of the reader)."""
         self._held_reads = 0
+        self._paced_reads = 0  # trio's (asyncio's stream counts its own)
+        # on trio: a read made by the loop at the end of a wait (_trio_due)
+        # that the handler did not take whole, for the reader; and whether
+        # the loop's read took what the socket held (the reader then waits
+        # for more, as on asyncio, instead of reading again at once)
+        self._leftover = b""
+        self._due_took = False
         self.bytes_received = 0
         """Bytes read from the socket so far (WebSocket framing included; the
         handshake's too when :func:`connect_websocket` opened it)."""
@@ -138,9 +146,12 @@ class WebSocket:
         ends the reader's wait before a read (read coalescing, a hold: see
         :mod:`._read_pacing`): a message taken there costs no task step, and
         a read taken whole at the end of a wait starts the next wait from
-        the callback (counted in :attr:`paced_reads`). Elsewhere (trio, TLS)
-        the reader offers them right after its read, before any message
-        object is built.
+        the callback (counted in :attr:`paced_reads`). On trio's plain
+        socket the same goes for the read at the end of such a wait, made
+        by the loop where it ends the wait (the loop's shared timer, see
+        :mod:`.._trio_timers`); other reads there, and every read over TLS,
+        are offered by the reader right after it read them, before any
+        message object is built.
 
         Only an unfragmented, unmasked text or binary frame with a length
         below 64 KiB that starts a read, or follows taken ones in it, is
@@ -156,6 +167,8 @@ class WebSocket:
         if stream is not None:
             stream.inline = None if handler is None else self._take_read
             stream.paced = None if handler is None else self._paced_read
+        elif self._held_sock is not None:
+            self._pacer.due = None if handler is None else self._trio_due
 
     def _paced_read(self, data: bytes) -> tuple[int, float]:
         """:attr:`ProtocolStream.paced`: a read made at the end of a wait
@@ -176,6 +189,35 @@ class WebSocket:
             return taken, 0.0
         pacer.waited(holding)
         return taken, delay
+
+    def _trio_due(self) -> tuple[float, bool]:
+        """:attr:`.ReadPacer.due` on trio's plain socket: the read at the
+        end of a wait, made by the loop (:meth:`.._trio_wakeup.TrioWakeup.wait`)
+        and offered to the inline handler as asyncio's timer callback does
+        (:meth:`_paced_read`); how long the wait goes on, and whether that
+        is a hold. A read not taken whole is left for the reader, which
+        resumes (as it does when the socket holds nothing or fails: its own
+        read meets that)."""
+        sock = self._held_sock
+        read_ready = self._trio_read_ready
+        if sock is None or read_ready is None or self._leftover:
+            return 0.0, False
+        pacer = self._pacer
+        try:
+            data = read_ready(sock, HOLD_DRAIN if pacer.drain else COALESCE_BELOW)
+        except OSError:
+            return 0.0, False
+        if not data:
+            return 0.0, False
+        self._held_reads += 1
+        taken, delay = self._paced_read(data)
+        if taken < len(data):
+            self._leftover = data[taken:] if taken else data
+            return 0.0, False
+        self._paced_reads += 1
+        if delay <= 0.0:
+            self._due_took = True
+        return delay, pacer.drain
 
     def _take_read(self, data: bytes) -> int:
         """:attr:`ProtocolStream.inline`: :meth:`.FrameParser.take_inline`,
@@ -229,8 +271,12 @@ class WebSocket:
                 if direct:
                     await self._read_direct()
                     continue
-                data = b""
-                if held and sock is not None:
+                data = self._leftover
+                if data:  # the loop read it at the end of the wait (_trio_due)
+                    self._leftover = b""
+                elif self._due_took:  # ... and took all it read: wait for more
+                    self._due_took = False
+                elif held and sock is not None:
                     assert self._trio_read_ready is not None
                     data = self._trio_read_ready(
                         sock, HOLD_DRAIN if pacer.drain else COALESCE_BELOW
@@ -363,10 +409,11 @@ class WebSocket:
     @property
     def paced_reads(self) -> int:
         """Reads made at the end of a wait before a read and taken whole by
-        the :meth:`handle_inline` handler in the loop's timer callback, with
-        no task step (asyncio's plain TCP stream; 0 elsewhere)."""
+        the :meth:`handle_inline` handler where the loop ends the wait, with
+        no task step (asyncio's plain TCP stream: the timer's callback; trio's
+        plain socket: the loop's shared timer; 0 elsewhere)."""
         stream = self._protocol_stream
-        return 0 if stream is None else stream.paced_reads
+        return self._paced_reads if stream is None else stream.paced_reads
 
     @property
     def held_reads(self) -> int:
