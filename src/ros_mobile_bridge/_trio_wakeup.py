@@ -35,7 +35,7 @@ __all__ = ["TrioWakeup"]
 _log = logging.getLogger(__name__)
 
 Then = Callable[[], "tuple[float, bool]"]
-"""A wait's callback at its deadline (see :meth:`TrioWakeup.wait`)."""
+""":data:`._wakeup.Then` (spelled again: ``_wakeup`` imports this module)."""
 
 _FAILED = trio.lowlevel.Abort.FAILED
 _SUCCEEDED = trio.lowlevel.Abort.SUCCEEDED

@@ -25,7 +25,11 @@ from typing import Protocol
 
 import sniffio
 
-__all__ = ["Wakeup", "new_wakeup", "resolve", "serve_timers"]
+__all__ = ["Then", "Wakeup", "new_wakeup", "resolve", "serve_timers"]
+
+Then = Callable[[], "tuple[float, bool]"]
+"""A wait's callback at its deadline (see :meth:`Wakeup.wait`): how many
+more seconds to wait and whether that wait is coarse, or ``(0.0, _)``."""
 
 
 class Wakeup(Protocol):
@@ -33,11 +37,7 @@ class Wakeup(Protocol):
         """Resume the waiting task, if one waits; else nothing."""
 
     async def wait(
-        self,
-        timeout: float | None = None,
-        *,
-        coarse: bool = False,
-        then: Callable[[], tuple[float, bool]] | None = None,
+        self, timeout: float | None = None, *, coarse: bool = False, then: Then | None = None
     ) -> None:
         """Wait until :meth:`set`, or ``timeout`` seconds (None: no limit)
         pass; always suspends the task once (a checkpoint). ``coarse``: the
@@ -92,11 +92,7 @@ class _AsyncioWakeup:
                 future.set_result(None)
 
     async def wait(
-        self,
-        timeout: float | None = None,
-        *,
-        coarse: bool = False,
-        then: Callable[[], tuple[float, bool]] | None = None,
+        self, timeout: float | None = None, *, coarse: bool = False, then: Then | None = None
     ) -> None:
         loop = self._loop  # (a loop timer is cheap: every wait is exact)
         future = self._future = loop.create_future()

@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from typing import Final
 
-from .._wakeup import Wakeup, new_wakeup
+from .._wakeup import Then, Wakeup, new_wakeup
 from ._asyncio_stream import ProtocolStream
 
 __all__ = ["COALESCE_BELOW", "HOLD_DRAIN", "ReadPacer"]
@@ -86,7 +86,7 @@ class ReadPacer:
         """Waits made for :meth:`set_quiet` (the subscriptions' caps)."""
         self.coalesced = 0
         """Waits made for read coalescing."""
-        self.due: Callable[[], tuple[float, bool]] | None = None
+        self.due: Then | None = None
         """On trio (the loop's shared timer running): called by the loop at
         the end of a wait instead of resuming the reader (the owner's read
         there, see :meth:`.._trio_wakeup.TrioWakeup.wait`); returns how long
