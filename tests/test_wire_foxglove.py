@@ -743,13 +743,64 @@ def test_unadvertise_unknown_ids_are_violations_and_skipped() -> None:
     e = connected()
     events = send(e, {"op": "unadvertise", "channelIds": [99, 1, True]})
     assert violations(events) == [
-        "unadvertise: unknown channel id 99",
         "unadvertise: channel id True is not an integer",
+        "unadvertise: unknown channel id 99",
     ]
     assert events[-1] == Unadvertise((CHATTER,))
     assert only_violation(send(e, {"op": "unadvertise", "channelIds": [1]})) == (
         "unadvertise: unknown channel id 1"
     )
+
+
+def test_unadvertise_of_100000_unknown_ids_is_one_violation_that_counts_them() -> None:
+    e = connected()
+    events = send(e, {"op": "unadvertise", "channelIds": [1, *range(10**6, 10**6 + 100_000)]})
+    violation, unadvertise = events
+    assert violation == ProtocolViolation(
+        "unadvertise: unknown channel ids 1000000, 1000001, 1000002 and 99997 more",
+        count=100_000,
+    )
+    assert unadvertise == Unadvertise((CHATTER,))
+    events = send(e, {"op": "unadvertiseServices", "serviceIds": list(range(50, 60))})
+    assert one(events) == ProtocolViolation(
+        "unadvertiseServices: unknown service ids 50, 51, 52 and 7 more", count=10
+    )
+
+
+def test_a_frame_shows_its_first_violations_and_merges_the_rest_per_kind() -> None:
+    shown = fg.VIOLATIONS_SHOWN
+    bad = [{"id": i, "topic": "/x"} for i in range(shown + 100)]  # no encoding
+    huge = "x" * 200
+    oversize = [
+        {
+            "id": 10_000 + i,
+            "topic": f"/big{i}",
+            "encoding": "json",
+            "schemaName": "S",
+            "schema": huge,
+            "schemaEncoding": "jsonschema",
+        }
+        for i in range(5)
+    ]
+    good = {"id": 7, "topic": "/ok", "encoding": "json", "schemaName": "S", "schema": "{}"}
+    e = FoxgloveEngine("foxglove.sdk.v1.1", max_schema_size=100)
+    events = send(e, {"op": "advertise", "channels": [*bad, *oversize, good]})
+    reasons = [(v.kind, v.count) for v in events if isinstance(v, ProtocolViolation)]
+    # the first `shown` stand alone, then one event per kind for the rest
+    assert reasons == [("malformed", 1)] * shown + [("malformed", 100), ("schema_too_large", 5)]
+    merged = [v for v in events if isinstance(v, ProtocolViolation)][shown]
+    assert merged.reason.startswith("100 more in this frame, the first: advertise: channel skipped")
+    assert sum(v.count for v in events if isinstance(v, ProtocolViolation)) == shown + 105
+    advertised = events[-1]
+    assert isinstance(advertised, Advertise)
+    assert sorted(c.topic for c in advertised.channels) == [
+        "/big0",
+        "/big1",
+        "/big2",
+        "/big3",
+        "/big4",
+        "/ok",
+    ]
 
 
 def test_time_frame() -> None:

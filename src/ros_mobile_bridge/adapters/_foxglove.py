@@ -487,7 +487,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             self._decoders.clear()
             self._emit(self._graph())
         elif isinstance(event, fx.ProtocolViolation):
-            self._reject(event.kind, event.reason)
+            self._reject(event.kind, event.reason, event.count)
         elif isinstance(event, fx.MessageData):
             self._pending.append(self._frame(event, time.time_ns()))
 

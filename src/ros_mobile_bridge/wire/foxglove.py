@@ -69,10 +69,12 @@ from ._foxglove._events import Unadvertise as Unadvertise
 from ._foxglove._events import UnadvertiseServices as UnadvertiseServices
 from ._foxglove._protocol import DEFAULT_SCHEMA_ENCODINGS as DEFAULT_SCHEMA_ENCODINGS
 from ._foxglove._protocol import SUBPROTOCOLS as SUBPROTOCOLS
+from ._foxglove._readers import VIOLATIONS_SHOWN as VIOLATIONS_SHOWN
 
 __all__ = [
     "DEFAULT_SCHEMA_ENCODINGS",
     "SUBPROTOCOLS",
+    "VIOLATIONS_SHOWN",
     "Advertise",
     "AdvertiseServices",
     "Channel",

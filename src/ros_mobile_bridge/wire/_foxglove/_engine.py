@@ -43,6 +43,7 @@ from ._readers import (
     Malformed,
     as_object,
     json_kind,
+    merge_violations,
     opt_list,
     parse_channel,
     parse_service,
@@ -59,6 +60,7 @@ from ._readers import (
     req_str,
     schema_fits,
     truncated,
+    unknown_ids,
 )
 from ._writers import (
     check_id,
@@ -232,8 +234,10 @@ class FoxgloveEngine:
         """Parse one text frame from the server.
 
         Returns the resulting events in order (:class:`ProtocolViolation` events
-        for the parts that were unusable come before the event for the rest).
-        Never raises for any ``str`` or bytes-like input; ``bytes`` must be UTF-8.
+        for the parts that were unusable come before the event for the rest;
+        past the first ``VIOLATIONS_SHOWN``, one per kind with its ``count``,
+        however many parts of the frame were unusable). Never raises for any ``str`` or bytes-like
+        input; ``bytes`` must be UTF-8.
         """
         if isinstance(text, (bytes, bytearray, memoryview)):
             try:
@@ -265,7 +269,7 @@ class FoxgloveEngine:
             out.append(ProtocolViolation(f"{op}: {exc}"))
         except Exception as exc:  # the contract: server input never raises
             out.append(ProtocolViolation(f"{op}: internal error: {exc!r}"))
-        return out
+        return merge_violations(out)
 
     def _too_deep(self, size: int) -> ProtocolViolation:
         return ProtocolViolation(
@@ -346,6 +350,7 @@ class FoxgloveEngine:
 
     def _on_unadvertise(self, msg: dict[str, Any], out: list[Event]) -> None:
         removed: list[Channel] = []
+        unknown: list[int] = []  # ids the server never advertised (or withdrew)
         for raw in req_list(msg, "channelIds"):
             if type(raw) is not int:
                 out.append(
@@ -354,10 +359,12 @@ class FoxgloveEngine:
                 continue
             channel = self._channels.pop(raw, None)
             if channel is None:
-                out.append(ProtocolViolation(f"unadvertise: unknown channel id {raw}"))
+                unknown.append(raw)
             else:
                 self._sub_by_channel.pop(raw, None)
                 removed.append(channel)
+        if unknown:
+            out.append(unknown_ids("unadvertise: unknown channel id", unknown))
         if removed:
             out.append(Unadvertise(tuple(removed)))
 
@@ -390,6 +397,7 @@ class FoxgloveEngine:
 
     def _on_unadvertise_services(self, msg: dict[str, Any], out: list[Event]) -> None:
         removed: list[ServiceDef] = []
+        unknown: list[int] = []
         for raw in req_list(msg, "serviceIds"):
             if type(raw) is not int:
                 out.append(
@@ -400,9 +408,11 @@ class FoxgloveEngine:
                 continue
             service = self._services.pop(raw, None)
             if service is None:
-                out.append(ProtocolViolation(f"unadvertiseServices: unknown service id {raw}"))
+                unknown.append(raw)
             else:
                 removed.append(service)
+        if unknown:
+            out.append(unknown_ids("unadvertiseServices: unknown service id", unknown))
         if removed:
             out.append(UnadvertiseServices(tuple(removed)))
 

@@ -281,7 +281,15 @@ class ProtocolViolation(Event):
     ``kind`` classifies it: ``"invalid_utf8"``, ``"json_depth"``,
     ``"schema_too_large"`` (the schema text was dropped, the channel or
     service kept), ``"channel_limit"``, ``"service_limit"`` (one event per
-    message, however many were refused), else ``"malformed"``."""
+    message, however many were refused), else ``"malformed"``.
+
+    ``count`` is how many unusable parts of the frame this one event stands
+    for. A frame yields its first ``VIOLATIONS_SHOWN`` (8) violations as
+    events of their own and the rest as one event per ``kind``, whose
+    ``reason`` says how many and names the first; unknown ids in one
+    ``unadvertise`` are always one event (a frame withdrawing 90,000 channels
+    the client never kept is one event with ``count=90000``, not 90,000)."""
 
     reason: str
     kind: str = "malformed"
+    count: int = 1

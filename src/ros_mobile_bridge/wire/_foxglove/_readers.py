@@ -39,6 +39,7 @@ from ._protocol import (
 )
 
 __all__ = [
+    "VIOLATIONS_SHOWN",
     "Malformed",
     "as_float",
     "as_id",
@@ -46,6 +47,7 @@ __all__ = [
     "as_str",
     "flat_side",
     "json_kind",
+    "merge_violations",
     "nested_side",
     "opt_list",
     "opt_object_tuple",
@@ -69,7 +71,57 @@ __all__ = [
     "schema_dropped",
     "schema_fits",
     "truncated",
+    "unknown_ids",
 ]
+
+
+# --------------------------------------------------------------------------
+# One frame, few violations: a frame of 100,000 bad items is not 100,000 events.
+
+
+def unknown_ids(what: str, ids: list[int]) -> ProtocolViolation:
+    """One violation for every id in ``ids`` (not empty) that names nothing
+    the server advertised; the reason shows the first few."""
+    shown = ", ".join(str(i) for i in ids[:3])
+    more = f" and {len(ids) - 3} more" if len(ids) > 3 else ""
+    plural = "s" if len(ids) > 1 else ""
+    return ProtocolViolation(f"{what}{plural} {shown}{more}", count=len(ids))
+
+
+VIOLATIONS_SHOWN = 8
+"""A frame's first this many violations are events of their own; the rest
+are one event per kind (see :func:`merge_violations`)."""
+
+
+def merge_violations(events: list[Event]) -> list[Event]:
+    """``events`` with the violations after the first :data:`VIOLATIONS_SHOWN`
+    merged into one event per kind, placed where that kind's first merged
+    violation was: its reason names how many more and the first of them,
+    its ``count`` the total. Other events keep their order."""
+    if sum(1 for e in events if type(e) is ProtocolViolation) <= VIOLATIONS_SHOWN:
+        return events
+    out: list[Event] = []
+    merged: dict[str, tuple[int, int]] = {}  # kind -> (its place in out, count)
+    shown = 0
+    for event in events:
+        if type(event) is not ProtocolViolation:
+            out.append(event)
+        elif shown < VIOLATIONS_SHOWN:
+            shown += 1
+            out.append(event)
+        elif event.kind in merged:
+            at, count = merged[event.kind]
+            merged[event.kind] = (at, count + event.count)
+        else:
+            merged[event.kind] = (len(out), event.count)
+            out.append(event)
+    for kind, (at, count) in merged.items():
+        first = out[at]
+        assert type(first) is ProtocolViolation
+        if count > first.count:
+            reason = f"{count} more in this frame, the first: {first.reason}"
+            out[at] = ProtocolViolation(reason, kind, count)
+    return out
 
 
 # --------------------------------------------------------------------------
