@@ -384,6 +384,50 @@ async def test_a_waiting_participant_leaving_does_not_stop_the_sampler() -> None
         tg.cancel_scope.cancel()
 
 
+async def test_the_signals_start_over_after_nobody_sampled_but_not_on_a_handover() -> None:
+    """The signals describe the loop while it was watched without a break: a
+    new sampler after the last participant left starts them over (the
+    history stays), a hand-over between participants keeps them."""
+    # windows of a minute: the stalls stay inside them however slow the host
+    monitor = CountingMonitor(interval=0.002, max_window_s=60.0, sustained_window_s=60.0)
+    stall = 10_000.0  # ms: no real sample of this test comes near it
+    for _ in range(3):
+        monitor.record(stall)  # three stalls a moment ago
+    assert monitor.recurring_lag_ms() == monitor.sustained_lag_ms() == stall
+
+    async def member(scope: anyio.CancelScope) -> None:
+        with scope:
+            await monitor.participate()
+
+    async with anyio.create_task_group() as tg:
+        first, second = anyio.CancelScope(), anyio.CancelScope()
+        tg.start_soon(member, first)
+        await wait_until(lambda: monitor.sampling)
+        tg.start_soon(member, second)
+        await wait_until(lambda: monitor.participants == 2)
+        first.cancel()  # a hand-over: the second samples on, the signals stay
+        await wait_until(lambda: monitor.runs == 2)
+        before = len(monitor)
+        await wait_until(lambda: len(monitor) > before)
+        assert monitor.recurring_lag_ms() == stall  # (the calm samples dilute the p90)
+        second.cancel()  # the last participant leaves
+        await wait_until(lambda: monitor.participants == 0)
+    assert monitor.recurring_lag_ms() == stall  # still readable while nobody samples
+    kept = len(monitor)
+
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(monitor.participate)  # a new client, on a calm loop
+        await wait_until(lambda: len(monitor) >= kept + 1)
+        # only the new samples count (the stalls are well inside every window)
+        assert monitor.max_lag_ms() < stall
+        assert monitor.recurring_lag_ms() < stall
+        assert monitor.sustained_lag_ms() < stall
+        await wait_until(lambda: len(monitor) >= kept + 5)
+        assert monitor.sustained_lag_ms() < stall
+        tg.cancel_scope.cancel()
+    assert monitor.stats().max_ms == stall  # the history kept the stalls
+
+
 async def test_a_blocked_loop_shows_up_as_lag() -> None:
     monitor = LagMonitor(interval=0.05)
     async with anyio.create_task_group() as tg:

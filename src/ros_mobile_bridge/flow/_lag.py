@@ -25,6 +25,14 @@ O(1) (the throttle reads them for every received frame):
 With fewer than three samples (a monitor that just started) the recurring
 and sustained signals read 0.0: nothing is sustained yet.
 
+The signals describe the loop while it was watched without a break. When
+the last participant leaves, nothing samples; when sampling starts again,
+the signals start over (the history stays for :meth:`LagMonitor.stats`). A
+window reaching back over the unwatched time would hold the old samples and
+none of the time in between: the single stalls of a few short-lived
+clients (a connect, a decoder build) would add up to a "sustained" lag that
+throttles the next client's subscriptions for a calm loop.
+
 Percentiles use the nearest-rank method: the p-th percentile of ``n`` samples
 is the ``ceil(p * n / 100)``-th smallest. A sample belongs to a window of
 ``w`` seconds while it is younger than ``w`` (``now - t < w``), where ``now``
@@ -158,6 +166,7 @@ class LagMonitor:
         the signals change): a reader may keep what it derived from them
         while it stays the same (the adaptive throttles do, per frame)."""
         self._relay = Relay()
+        self._unwatched = False  # nobody sampled since the last participant left
         self._ticks: dict[int, Callable[[], object]] = {}
         self._next_tick_key = 0
 
@@ -238,6 +247,11 @@ class LagMonitor:
     def clear(self) -> None:
         """Forget every sample; both signals read 0.0 until the next one."""
         self._history.clear()
+        self._restart_signals()
+
+    def _restart_signals(self) -> None:
+        """Empty the signals' windows (not the history): every signal reads
+        0.0 until new samples fill them."""
         self._max_window.clear()
         self._sustained_window.clear()
         self._sustained_sorted.clear()
@@ -324,7 +338,12 @@ class LagMonitor:
         """The sampler loop, until cancelled: sleep ``interval``, record how
         much later than that the loop woke (ms, at least 0), and every
         ``tick_interval`` run the tick callbacks. Normally driven by
-        :meth:`participate`, which guarantees one sampler per monitor."""
+        :meth:`participate`, which guarantees one sampler per monitor. After
+        a time when no participant sampled, the signals start over (see the
+        module docstring)."""
+        if self._unwatched:
+            self._unwatched = False
+            self._restart_signals()
         clock = self._clock
         interval = self.interval
         next_tick = clock() + self.tick_interval
@@ -342,8 +361,12 @@ class LagMonitor:
         """Take part in sampling until cancelled: the first participant
         samples (:meth:`run`), later ones wait; when the sampling participant
         is cancelled, a waiting one takes over at once. With no participants
-        left nothing samples, and the history is kept."""
-        await self._relay.participate(self.run)
+        left nothing samples, and the history is kept; the signals start
+        over with the next sampler (a hand-over keeps them)."""
+        await self._relay.participate(self.run, self._left)
+
+    def _left(self) -> None:
+        self._unwatched = True
 
 
 # -- one monitor per event loop ----------------------------------------------------
