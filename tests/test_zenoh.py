@@ -24,6 +24,7 @@ import pytest
 
 import ros_mobile_bridge as rmb
 from _util import routed, take, wait_until
+from ros_mobile_bridge._rejection_log import LOG_BURST, LOG_EVERY
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 
@@ -204,6 +205,37 @@ async def test_hostile_samples_are_skipped_and_counted(
         assert "RIHS02: this library reads RIHS01 hashes only" in caplog.text
 
 
+async def test_a_flood_of_bad_samples_is_counted_each_and_logged_in_a_few_lines(
+    zenoh_router: Any, zenoh_domain: int, raw: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A plain zenoh publisher on an rmw_zenoh key (no attachments) at full
+    speed: every sample is refused and counted, the log gets the first
+    LOG_BURST of each second one by one and the rest in one line, and the
+    lines add up to the count once the client closed."""
+    key = data_key(zenoh_domain, "/chatter")
+    good = cdr(STRING, {"data": "ok"})
+    sent = 2000
+    async with (
+        rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
+        client.subscribe("/chatter", schema=STRING) as sub,
+    ):
+        await routed(raw, key)
+        started = time.monotonic()
+        for _ in range(sent):
+            raw.put(key, good)  # no attachment
+        raw.put(key, good, attachment=attachment(1))
+        assert (await take(sub, 1))[0].data == {"data": "ok"}
+        assert client.rejections == {"attachment": sent}
+        seconds = time.monotonic() - started
+    lines = [r.getMessage() for r in caplog.records if "(attachment)" in r.getMessage()]
+    windows = 1 + seconds / LOG_EVERY
+    assert len(lines) <= (LOG_BURST + 1) * (windows + 1), (len(lines), seconds)
+    logged = sum(
+        int(m.group(1)) if (m := re.match(r"skipped (\d+) inputs", line)) else 1 for line in lines
+    )
+    assert logged == sent
+
+
 async def test_the_keyed_attachments_of_early_rmw_zenoh_releases_are_read(
     zenoh_router: Any, zenoh_domain: int, raw: Any
 ) -> None:
@@ -282,7 +314,7 @@ async def test_a_full_backlog_drops_and_counts(
 ) -> None:
     """Samples beyond ``zenoh_backlog`` while the reader is blocked are
     dropped and counted as ``backlog_overflow``; none vanish, and the burst
-    is logged once per batch, not once per dropped sample."""
+    is logged in a few lines, not once per dropped sample."""
     key = data_key(zenoh_domain, "/burst")
     payload = cdr(STRING, {"data": "x"})
     sent = 500
@@ -306,13 +338,14 @@ async def test_a_full_backlog_drops_and_counts(
         dropped = client.rejections.get("backlog_overflow", 0)
         assert dropped > 0
         assert delivered + dropped == sent
-        lines = [r for r in caplog.records if "backlog_overflow" in r.getMessage()]
-        assert 1 <= len(lines) < dropped
-        logged = sum(
-            int(m.group(1)) if (m := re.search(r"skipped (\d+) inputs", r.getMessage())) else 1
-            for r in lines
-        )
-        assert logged == dropped
+    # the lines (at most one a second, the rest when the client closed) add up
+    lines = [r for r in caplog.records if "backlog_overflow" in r.getMessage()]
+    assert 1 <= len(lines) < dropped
+    logged = sum(
+        int(m.group(1)) if (m := re.search(r"skipped (\d+) inputs", r.getMessage())) else 1
+        for r in lines
+    )
+    assert logged == dropped
 
 
 def pump_threads() -> set[threading.Thread]:

@@ -20,9 +20,9 @@ import anyio.lowlevel
 
 from ._checks import nearest_hint
 from ._errors import ConnectError
-from ._limits import truncate_for_log
 from ._options import ClientOptions
 from ._outbound import Outbound
+from ._rejection_log import RejectionLog
 from ._types import Compression, Dispatch, SaveBandwidth, ServiceInfo, Status, TopicInfo
 from .adapters import (
     Adapter,
@@ -92,7 +92,7 @@ class Router:
         self.topics: Watchable[list[TopicInfo]] = Watchable(adapter.topics)
         self.services: Watchable[list[ServiceInfo]] = Watchable(adapter.services)
         self.parameters: Watchable[dict[str, Any]] = Watchable({})
-        self._rejections: dict[str, int] = {}
+        self._rejections = RejectionLog(self._log)
         self._routes: dict[str, list[Route]] = {}
         self._unoffered: dict[Route, float] = {}  # route -> when to warn (unknown_topic_warning)
         self._offers: dict[str, list[Callable[[RawFrame], None]]] = {}  # the hot path's table
@@ -194,21 +194,15 @@ class Router:
             route.queue.set_state("active" if active else "pending")
 
     def _rejected(self, event: Rejected) -> None:
-        """Counted per reason (see :attr:`rejections`) and logged once per
-        event, truncated."""
-        reason, count = event.reason, event.count
-        self._rejections[reason] = self._rejections.get(reason, 0) + count
-        detail = truncate_for_log(event.detail)
-        if count == 1:
-            self._log.warning("skipped input from the server (%s): %s", reason, detail)
-        else:
-            self._log.warning("skipped %d inputs from the server (%s): %s", count, reason, detail)
+        """Counted per reason (see :attr:`rejections`) and logged, at most
+        one line per reason a second (see :mod:`._rejection_log`)."""
+        self._rejections.add(event.reason, event.detail, event.count)
 
     @property
     def rejections(self) -> dict[str, int]:
         """How many inbound frames were skipped or refused, per reason, over
         the client's life (a copy)."""
-        return dict(self._rejections)
+        return self._rejections.counts
 
     def graph_now(self) -> None:
         """Take the current adapter's topic and service lists."""
@@ -397,6 +391,7 @@ class Router:
         for routes in self._routes.values():
             for route in routes:
                 route.sub.close()
+        self._rejections.flush()
         self.topics.close()
         self.services.close()
         self.parameters.close()
