@@ -355,6 +355,7 @@ LAYERS: tuple[frozenset[str], ...] = (
             "_trio_wakeup",
             "_trio_timers",
             "_relay",
+            "_rejection_log",
         }
     ),
     frozenset({"wire", "codec", "flow", "transport", "_signals"}),
