@@ -236,8 +236,8 @@ class FoxgloveEngine:
         Returns the resulting events in order (:class:`ProtocolViolation` events
         for the parts that were unusable come before the event for the rest;
         past the first ``VIOLATIONS_SHOWN``, one per kind with its ``count``,
-        however many parts of the frame were unusable). Never raises for any ``str`` or bytes-like
-        input; ``bytes`` must be UTF-8.
+        however many parts of the frame were unusable). Never raises for any
+        ``str`` or bytes-like input; ``bytes`` must be UTF-8.
         """
         if isinstance(text, (bytes, bytearray, memoryview)):
             try:

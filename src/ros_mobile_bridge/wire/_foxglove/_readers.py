@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import base64
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Final
 
 from ._events import (
     Channel,
@@ -88,7 +88,7 @@ def unknown_ids(what: str, ids: list[int]) -> ProtocolViolation:
     return ProtocolViolation(f"{what}{plural} {shown}{more}", count=len(ids))
 
 
-VIOLATIONS_SHOWN = 8
+VIOLATIONS_SHOWN: Final = 8
 """A frame's first this many violations are events of their own; the rest
 are one event per kind (see :func:`merge_violations`)."""
 
