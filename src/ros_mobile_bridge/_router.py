@@ -194,8 +194,8 @@ class Router:
             route.queue.set_state("active" if active else "pending")
 
     def _rejected(self, event: Rejected) -> None:
-        """Counted per reason (see :attr:`rejections`) and logged, at most
-        one line per reason a second (see :mod:`._rejection_log`)."""
+        """Counted per reason (see :attr:`rejections`) and logged at a
+        bounded rate (see :mod:`._rejection_log`)."""
         self._rejections.add(event.reason, event.detail, event.count)
 
     @property
