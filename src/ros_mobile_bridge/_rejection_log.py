@@ -29,6 +29,17 @@ LOG_BURST: Final = 10
 """Inputs of one reason logged one by one per window; the rest are one line."""
 
 
+class _Window:
+    """One reason's current window of the log."""
+
+    __slots__ = ("lines", "start", "unlogged")
+
+    def __init__(self, start: float) -> None:
+        self.start = start
+        self.lines = 0  # logged one by one in this window
+        self.unlogged = 0  # inputs counted in this window past LOG_BURST
+
+
 class RejectionLog:
     """The counts of one client's rejections and their rate-limited log.
     ``clock`` (monotonic seconds) is injectable for tests."""
@@ -39,8 +50,7 @@ class RejectionLog:
         self._log = logger
         self._clock = clock
         self._counts: dict[str, int] = {}
-        # reason -> [the window's start, its lines, its inputs not logged yet]
-        self._windows: dict[str, list[float]] = {}
+        self._windows: dict[str, _Window] = {}
 
     @property
     def counts(self) -> dict[str, int]:
@@ -53,14 +63,14 @@ class RejectionLog:
         self._counts[reason] = self._counts.get(reason, 0) + count
         now = self._clock()
         window = self._windows.get(reason)
-        if window is None or now - window[0] >= LOG_EVERY:
-            if window is not None and window[2]:
-                self._summary(reason, int(window[2]), now - window[0])
-            window = self._windows[reason] = [now, 0, 0]
-        if window[1] >= LOG_BURST:
-            window[2] += count
+        if window is None or now - window.start >= LOG_EVERY:
+            if window is not None and window.unlogged:
+                self._summary(reason, window.unlogged, now - window.start)
+            window = self._windows[reason] = _Window(now)
+        if window.lines >= LOG_BURST:
+            window.unlogged += count
             return
-        window[1] += 1
+        window.lines += 1
         shown = truncate_for_log(detail)
         if count == 1:
             self._log.warning("skipped input from the server (%s): %s", reason, shown)
@@ -81,6 +91,6 @@ class RejectionLog:
         """Log what was counted but not logged yet (the client is closing)."""
         now = self._clock()
         for reason, window in self._windows.items():
-            if window[2]:
-                self._summary(reason, int(window[2]), now - window[0])
+            if window.unlogged:
+                self._summary(reason, window.unlogged, now - window.start)
         self._windows.clear()
