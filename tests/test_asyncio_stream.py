@@ -14,7 +14,7 @@ import anyio
 import pytest
 
 from peers.scripted import Peer, scripted_server
-from ros_mobile_bridge.transport import _asyncio_stream, connect_websocket
+from ros_mobile_bridge.transport import ConnectionLost, _asyncio_stream, connect_websocket
 from ros_mobile_bridge.transport._asyncio_stream import ProtocolStream
 
 
@@ -179,6 +179,68 @@ async def test_a_send_stuck_on_a_peer_that_does_not_read_raises_when_closed(
         assert stream._protocol.write_paused
         await stream.aclose()
     assert outcome == ["closed"]
+
+
+@asyncio_only
+async def test_write_nowait_writes_until_the_transport_is_full_and_never_after_close(
+    peer: RawPeer,
+) -> None:
+    """``write_nowait`` writes what needs no wait (received in order by the
+    peer); with the transport over its high-water mark it writes nothing,
+    and ``send`` is the way; after ``aclose`` it writes nothing either."""
+    stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
+    conn = await anyio.to_thread.run_sync(peer.wait)
+    assert stream.write_nowait(b"one ")
+    assert stream.write_nowait(b"two")
+    assert not stream.write_nowait(b"")  # an end of stream is send_eof's
+    got = b""
+    while len(got) < 7:
+        got += await anyio.to_thread.run_sync(conn.recv, 64)
+    assert got == b"one two"
+    conn.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    chunk = b"x" * 65536
+    written = 0
+    with anyio.fail_after(10):
+        while stream.write_nowait(chunk):  # the peer reads nothing now
+            written += 1
+            await anyio.sleep(0)
+    assert written > 0
+    assert stream._protocol.write_paused
+    assert not stream.write_nowait(b"y")  # full: nothing written
+    await stream.aclose()
+    assert not stream.write_nowait(b"z")
+    with pytest.raises(anyio.ClosedResourceError):
+        await stream.send(b"z")
+
+
+async def test_a_websocket_send_to_a_peer_that_does_not_read_fails_after_send_timeout() -> None:
+    """Sends that need no wait are written at once (asyncio: without a
+    cancel scope); once the peer stops reading and the buffers fill, a send
+    waits, and past ``send_timeout`` the connection is failed with
+    ``ConnectionLost`` (1011), never left half written; later sends raise
+    at once."""
+    stopped = anyio.Event()
+
+    async def stop(peer: Peer) -> None:
+        peer.stop_reading()
+        stopped.set()
+        await anyio.sleep(30)
+
+    async with scripted_server(stop) as url:
+        ws = await connect_websocket(url, subprotocols=("foxglove.sdk.v1.1",))
+        ws.send_timeout = 0.5
+        await stopped.wait()
+        big = b"x" * 262144
+        sent = 0
+        with anyio.fail_after(20), pytest.raises(ConnectionLost) as caught:
+            while True:
+                await ws.send(big)
+                sent += 1
+        assert sent > 0
+        assert "did not complete within" in str(caught.value)
+        with pytest.raises(ConnectionLost):
+            await ws.send(b"after")
+        await ws.aclose(timeout=0.5)
 
 
 @asyncio_only

@@ -75,3 +75,27 @@ async def test_run_resumes_each_topic_when_due_and_not_before() -> None:
         await anyio.sleep(0.05)
         tg.cancel_scope.cancel()
     assert resumed == [("/a", "ka")]
+
+
+async def test_a_pause_due_sooner_than_the_awaited_one_is_resumed_on_time() -> None:
+    """run waits for the earliest due pause; a pause due sooner, made while
+    it waits, wakes it: that topic is resumed while the other is still
+    paused (without the wake both would be resumed together, later)."""
+    p: PauseSchedule[str] = PauseSchedule()
+    resumed: list[tuple[str, bool]] = []
+
+    async def resume(topic: str, key: str) -> None:
+        resumed.append((topic, "/slow" in p.paused))
+
+    p.set_rate("/slow", 0.2)  # due in 5 s
+    p.set_rate("/fast", 50.0)  # due in 20 ms
+    async with anyio.create_task_group() as tg:
+        tg.start_soon(p.run, resume)
+        p.pause("/slow", anyio.current_time(), "ks")
+        await anyio.sleep(0.05)  # run now waits for /slow
+        p.pause("/fast", anyio.current_time(), "kf")
+        with anyio.fail_after(4):
+            while not resumed:
+                await anyio.sleep(0.005)
+        tg.cancel_scope.cancel()
+    assert resumed == [("/fast", True)]

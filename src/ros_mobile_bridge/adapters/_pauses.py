@@ -11,10 +11,13 @@ It decides; the adapter does the I/O (unsubscribe, subscribe again) in
 
 from __future__ import annotations
 
+import math
 from collections.abc import Awaitable, Callable
 from typing import Generic, TypeVar
 
 import anyio
+
+from .._wakeup import Wakeup, new_wakeup
 
 K = TypeVar("K")
 
@@ -38,7 +41,10 @@ class PauseSchedule(Generic[K]):
         self._resumed: dict[str, tuple[float, bool]] = {}
         self._wait: dict[str, float] = {}
         self._last: dict[str, memoryview] = {}
-        self._changed = anyio.Event()
+        # run's wait (built there, on its loop) and the time it waits for
+        # (inf: until a pause): a pause that is due no sooner does not wake it
+        self._wakeup: Wakeup | None = None
+        self._armed = math.inf
 
     def set_rate(self, topic: str, hz: float | None) -> None:
         """``topic`` pauses after each message and resumes at ``hz``; with
@@ -93,7 +99,9 @@ class PauseSchedule(Generic[K]):
         delivered on time."""
         due = now + 1.0 / self.rates[topic] - self._wait.get(topic, 0.0)
         self.paused[topic] = (due, key)
-        self._changed.set()
+        if due < self._armed and self._wakeup is not None:
+            self._armed = -math.inf  # (woken once: run sets it again)
+            self._wakeup.set()
 
     def unpause(self, topic: str) -> tuple[float, K] | None:
         """Take ``topic`` off the paused ones if it is (the caller subscribes
@@ -110,22 +118,26 @@ class PauseSchedule(Generic[K]):
     async def run(self, resume: Callable[[str, K], Awaitable[None]]) -> None:
         """Call ``resume(topic, key)`` for each paused topic when it is due
         (taken off the paused ones first); runs until cancelled, and an
-        exception of ``resume`` ends it."""
-        while True:
-            if not self.paused:
-                await self._changed.wait()
-                self._changed = anyio.Event()
-                continue
-            now = anyio.current_time()
-            due = min(when for when, _ in self.paused.values())
-            if due > now:
-                changed = self._changed
-                with anyio.move_on_after(due - now):
-                    await changed.wait()
-                if changed.is_set():
-                    self._changed = anyio.Event()
-                continue
-            for topic in [t for t, (when, _) in self.paused.items() if when <= now]:
-                entry = self.paused.pop(topic, None)
-                if entry is not None:
-                    await resume(topic, entry[1])
+        exception of ``resume`` ends it. One wait per pause and one per
+        resumption, on the loop's own timer (:mod:`.._wakeup`): a thousand
+        connections in bandwidth mode wait thousands of times a second."""
+        wakeup = self._wakeup = new_wakeup()
+        try:
+            while True:
+                if not self.paused:
+                    self._armed = math.inf
+                    await wakeup.wait()
+                    continue
+                now = anyio.current_time()
+                due = min(when for when, _ in self.paused.values())
+                if due > now:
+                    self._armed = due
+                    await wakeup.wait(due - now, coarse=True)
+                    continue
+                self._armed = -math.inf  # resuming: a pause meanwhile needs no wake
+                for topic in [t for t, (when, _) in self.paused.items() if when <= now]:
+                    entry = self.paused.pop(topic, None)
+                    if entry is not None:
+                        await resume(topic, entry[1])
+        finally:
+            self._wakeup = None

@@ -434,6 +434,27 @@ class ProtocolStream(anyio.abc.ByteStream):
             if p.error is not None or self._transport.is_closing():
                 raise anyio.BrokenResourceError from p.error
 
+    def write_nowait(self, data: bytes) -> bool:
+        """Write ``data`` at once if that needs no wait: the stream is open
+        and the transport is under its high-water mark. True when written
+        (the transport sends it or buffers it, as :meth:`send` does); False
+        when nothing was written, and :meth:`send` (which may wait, and
+        raises what the stream's state says) is the way. A write that takes
+        the transport over its high-water mark is made: the next
+        :meth:`send` waits for the drain, as after :meth:`send`'s own
+        write."""
+        p = self._protocol
+        if (
+            self._closed
+            or p.write_paused
+            or p.error is not None
+            or not data
+            or self._transport.is_closing()
+        ):
+            return False
+        self._transport.write(data)
+        return True
+
     async def send_eof(self) -> None:
         if self._closed:
             raise anyio.ClosedResourceError

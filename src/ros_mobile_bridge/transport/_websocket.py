@@ -502,7 +502,14 @@ class WebSocket:
         A frame half written is a corrupt connection, so the write itself is
         shielded from cancellation (the cancellation lands right after it).
         It is bounded by ``send_timeout``, or by the caller's own earlier
-        deadline; past that the connection is failed, never left corrupt."""
+        deadline; past that the connection is failed, never left corrupt.
+
+        What the connection takes without a wait (:meth:`_write_now`: the
+        common case) is written first, with no cancel scope and no timer;
+        only the rest goes the way above."""
+        chunks = self._write_now(chunks)
+        if not chunks:
+            return
         now = anyio.current_time()
         limit = now + self.send_timeout
         effective = anyio.current_effective_deadline()
@@ -524,6 +531,34 @@ class WebSocket:
             )
             await self._close_stream()
             raise lost
+
+    def _write_now(self, chunks: list[bytes]) -> list[bytes]:
+        """Write the leading ``chunks`` the connection takes without a wait,
+        and return the rest (an end of stream, ``b""``, is always left):
+        on asyncio's own stream what
+        :meth:`~._asyncio_stream.ProtocolStream.write_nowait` accepts; on
+        trio's plain TCP socket what one non-blocking ``send`` takes (a
+        partial send leaves the chunk's tail). Elsewhere nothing. An error
+        is left for the waiting write to meet and report."""
+        stream = self._protocol_stream
+        sock = self._held_sock
+        if stream is None and sock is None:
+            return chunks
+        for i, chunk in enumerate(chunks):
+            if not chunk:
+                return chunks[i:]
+            if stream is not None:
+                if not stream.write_nowait(chunk):
+                    return chunks[i:]
+                continue
+            assert sock is not None
+            try:
+                n = sock.send(chunk)
+            except OSError:  # full (BlockingIOError), or failed: the waiting write
+                return chunks[i:]
+            if n < len(chunk):
+                return [chunk[n:], *chunks[i + 1 :]]
+        return []
 
     async def ping(self) -> anyio.Event:
         """Send a ping; the returned event is set when its pong arrives (or the
