@@ -51,20 +51,21 @@ async def wait_port_free(port: int, timeout: float = 5.0) -> None:
         await anyio.sleep(0.02)
 
 
-async def routed(session: Any, key: str, timeout: float = 10.0) -> None:
-    """Wait until the Zenoh router routes puts on ``key`` to a subscriber,
-    as a raw eclipse-zenoh ``session``'s publisher sees it (its matching
-    status). A fixed sleep after subscribing was not always enough under
-    CI's load: a sample put before the route exists is lost."""
-    publisher = session.declare_publisher(key)
+async def routed(session: Any, key: str, timeout: float = 10.0, *, queryable: bool = False) -> None:
+    """Wait until the Zenoh router routes puts on ``key`` to a subscriber
+    (queries to a queryable, with ``queryable``), as a raw eclipse-zenoh
+    ``session``'s publisher (querier) sees it: its matching status. A fixed
+    sleep after declaring was not always enough under CI's load: a sample
+    put before the route exists is lost."""
+    sender = session.declare_querier(key) if queryable else session.declare_publisher(key)
     try:
         await wait_until(
-            lambda: publisher.matching_status.matching,
+            lambda: sender.matching_status.matching,
             timeout,
-            what=f"the router to route {key} to a subscriber",
+            what=f"the router to route {key} to a {'queryable' if queryable else 'subscriber'}",
         )
     finally:
-        publisher.undeclare()
+        sender.undeclare()
 
 
 def fast_options(**kw: Any) -> rmb.ClientOptions:

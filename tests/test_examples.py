@@ -109,7 +109,7 @@ def test_fleet_drives_every_robot_and_reports_the_one_that_failed(backend: str) 
         bots = [stack.enter_context(DemoRobot(name=f"bot{i}")) for i in range(3)]
         dead = "ws://127.0.0.1:1"
         urls = [bots[0].url, dead, bots[1].url, bots[2].url]
-        result = run("fleet.py", *urls, "--seconds", "0.5", "--backend", backend)
+        result = run("fleet.py", *urls, "--seconds", "1.0", "--backend", backend)
         assert result.returncode == 1, result.stderr  # one robot failed
         lines = dict(line.split(": ", 1) for line in result.stdout.splitlines())
         assert list(lines) == urls

@@ -223,7 +223,11 @@ async def test_the_adaptive_throttle_is_forwarded_as_throttle_rate(peer: RosPeer
                 current_monitor().record(1500.0)
             await anyio.sleep(0.05)
 
-    opts = options(breaker=None)  # the breaker would stop the topic outright
+    # the breaker would stop the topic outright; the curve reaches 1 Hz at the
+    # injected 1500 ms, and nothing short of 1 s (a loaded machine's own lag)
+    opts = options(
+        breaker=None, preset_overrides={"auto": [(0, 0, "full rate"), (1000, 1000, "1 Hz")]}
+    )
     async with rmb.connect(peer.url, protocol="rosbridge", options=opts) as robot:
         async with robot.subscribe("/counter") as sub, anyio.create_task_group() as tg:
             await take(sub, 1)
@@ -242,13 +246,13 @@ async def test_the_adaptive_throttle_is_forwarded_as_throttle_rate(peer: RosPeer
             relaxed = sub.stats.received - start
     # /counter runs at 50 Hz: about 2 frames in 2 s at 1 Hz, 50 a second after
     assert throttled <= 8, throttled
-    assert relaxed >= 25, relaxed
+    assert relaxed >= 15, relaxed
 
 
 async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) -> None:
     """Read coalescing against the condition it exists for: a topic the graph
     publishes at about 1 kHz, through the bridge. Every frame received is
-    delivered; with a 10 ms window the reader takes several frames per
+    delivered; with a 20 ms window the reader takes several frames per
     read; with ``read_coalesce=0`` no read waits. Either way the frames are
     taken where they are read (no event built); most reads at the end of a
     wait are taken where the loop ends the wait (asyncio: the timer's
@@ -256,7 +260,7 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) 
 
     Not the default 4 ms window: on a loaded machine the graph publishes
     at a few hundred Hz, a frame or two per 4 ms, and CI once counted 0.61
-    reads per frame there; at 10 ms the bound holds down to the 250 Hz the
+    reads per frame there; at 20 ms the bound holds down to the 150 Hz the
     test requires. Discovery polls at its default interval: each rosapi
     answer is a frame the reader must handle, and the frames after it in
     its read go with it (the tests' 0.25 s polls left 15% of a 10 ms
@@ -270,7 +274,7 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) 
          "data": {"data": "x" * 50}},
     )  # fmt: skip
     try:
-        for window in (0.01, 0.0):
+        for window in (0.02, 0.0):
             opts = options(read_coalesce=window, discovery_interval=2.0)
             async with rmb.connect(peer.url, protocol="rosbridge", options=opts) as robot:
                 ws = robot._conn.adapter._ws  # type: ignore[attr-defined]
@@ -287,8 +291,8 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) 
                             got += 1
                     stats = sub.stats
                     frames = stats.received - received
-                    # the stream really was fast (the reads' bound needs 250 Hz)
-                    assert frames > (500 if window else 100), frames
+                    # the stream really was fast (the reads' bound needs 150 Hz)
+                    assert frames > (300 if window else 100), frames
                     assert stats.delivered - 1 == got  # nothing dropped or kept back
                     assert stats.dropped_throttle == stats.dropped_overflow == 0
                     assert ws.inline_messages - inline > frames * 0.9, (inline, frames)
@@ -354,7 +358,8 @@ async def test_a_stream_through_the_bridge_keeps_its_order_taken_where_it_is_rea
 async def test_the_loosest_cap_among_local_subscriptions_is_forwarded(peer: RosPeer) -> None:
     async with rmb.connect(peer.url, protocol="rosbridge", options=options()) as robot:
         async with robot.subscribe("/counter", max_hz=2) as slow:
-            async with robot.subscribe("/counter") as fast:
+            # (not adaptive: a loaded machine's own lag would cap it at 20 Hz)
+            async with robot.subscribe("/counter", adaptive=False) as fast:
                 await take(fast, 5)
                 start = slow.stats.received
                 await anyio.sleep(1.0)
@@ -363,7 +368,8 @@ async def test_the_loosest_cap_among_local_subscriptions_is_forwarded(peer: RosP
             start = slow.stats.received
             await anyio.sleep(1.0)
             alone = slow.stats.received - start
-    assert with_fast >= 25, with_fast  # the bridge sent everything for `fast`
+    # the bridge sent everything for `fast` (50 Hz; at `slow`'s cap about 2)
+    assert with_fast >= 15, with_fast
     assert alone <= 5, alone  # and throttles again once `fast` left
 
 

@@ -142,7 +142,7 @@ async def test_another_domain_is_invisible(zenoh_router: Any, zenoh_domain: int,
         # the subscriber's declaration reaches the router before the marker
         # is put (as in the hostile-sample test below); without it the marker
         # could pass the router first and be lost (seen once in CI under load)
-        await anyio.sleep(0.3)
+        await routed(raw, data_key(zenoh_domain, "/chatter"))
         await far.advertise("/chatter", STRING)
         await far.advertise("/far_only", STRING)
         for i in range(20):

@@ -83,8 +83,9 @@ def test_the_peer_publishes_the_official_event_type(params_node: SdkNode) -> Non
 
 
 async def test_a_watcher_sees_the_changes_another_client_makes(
-    params_node: SdkNode, zenoh_router: Any, zenoh_domain: int
+    params_node: SdkNode, zenoh_router: Any, zenoh_domain: int, raw: Any
 ) -> None:
+    events = data_key(zenoh_domain, "/parameter_events", EVENT)
     async with (
         rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as watcher,
         rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as setter,
@@ -93,7 +94,7 @@ async def test_a_watcher_sees_the_changes_another_client_makes(
         assert not subscribed(watcher)
         async with watcher.watch_parameters([SPEED]) as updates:
             assert subscribed(watcher)
-            await anyio.sleep(0.3)  # the subscriber's declaration reaches the router
+            await routed(raw, events)  # the subscriber's declaration reaches the router
             await setter.set_parameters({SPEED: 1.25})
             assert await next_update(updates) == {SPEED: 1.25}
             # a change of another parameter of the node is not delivered ...
@@ -110,7 +111,9 @@ async def test_a_watcher_sees_the_changes_another_client_makes(
         assert not subscribed(watcher)
         await setter.set_parameters({SPEED: 4.0})
         async with watcher.watch_parameters([NAME]) as names:
+            # (the old declaration's route may linger: a pause first)
             await anyio.sleep(0.3)
+            await routed(raw, events)
             await setter.set_parameters({NAME: "r3"})
             assert await next_update(names) == {NAME: "r3"}
         # the change made while nothing was watched never arrived

@@ -13,7 +13,7 @@ from typing import Any
 import anyio
 import pytest
 
-from _util import wait_until
+from _util import routed, wait_until
 from ros_mobile_bridge.transport._zenoh import DEFAULT_MAX_OPEN_QUERIES, ZenohSession
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 
@@ -78,7 +78,7 @@ async def test_each_query_is_a_request_answered_once_in_order(zenoh_router: Any,
     session = await open_session(zenoh_router)
     try:
         session.declare_queryable(KEY, tag=5)
-        await anyio.sleep(0.3)  # the declaration reaches the router
+        await routed(raw, KEY, queryable=True)  # the declaration reaches the router
         caller = Caller(raw)
         attachment = rz.encode_attachment(1, 2, bytes(range(16)))
         for n in range(3):
@@ -110,7 +110,7 @@ async def test_queries_past_the_bound_are_refused_and_counted(zenoh_router: Any,
     session = await open_session(zenoh_router, max_open_queries=2)
     try:
         session.declare_queryable(KEY, tag=1)
-        await anyio.sleep(0.3)
+        await routed(raw, KEY, queryable=True)
         caller = Caller(raw)
         for n in range(5):
             caller.get(n, b"x")
@@ -147,7 +147,7 @@ async def test_undeclare_and_close_answer_the_open_queries(zenoh_router: Any, ra
     session = await open_session(zenoh_router)
     try:
         handle = session.declare_queryable(KEY, tag=1)
-        await anyio.sleep(0.3)
+        await routed(raw, KEY, queryable=True)
         caller = Caller(raw)
         caller.get(0, b"a")
         caller.get(1, b"b")
@@ -161,7 +161,8 @@ async def test_undeclare_and_close_answer_the_open_queries(zenoh_router: Any, ra
         assert session.open_queries == 0
         assert not session.reply(got[0].query_id, KEY, b"late", b"")
         session.declare_queryable(KEY, tag=2)
-        await anyio.sleep(0.3)
+        await anyio.sleep(0.3)  # (the old declaration's route may linger: a pause too)
+        await routed(raw, KEY, queryable=True)
         caller.get(2, b"c")
         (open_,) = await requests(session, 1)
         assert open_.tag == 2

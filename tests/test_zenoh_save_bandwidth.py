@@ -62,9 +62,10 @@ async def test_the_subscriber_pauses_between_deliveries_and_its_threads_end(
         stats = sub.stats
     seqs = [m.sequence for m in got]
     assert seqs == sorted(seqs) and len(set(seqs)) == 6
-    # about one sample per delivery (and one on its way at a pause), where
-    # the 200 Hz stream would bring ~20 per delivery at max_hz=10
-    assert stats.received <= 2 * stats.delivered + 1, stats
+    # about one sample per delivery (and those on their way at a pause: a
+    # few on a loaded machine), where the 200 Hz stream would bring ~20 per
+    # delivery at max_hz=10
+    assert stats.received <= 4 * stats.delivered + 2, stats
     assert client.rejections == {}
     await wait_until(lambda: not (pump_threads() - before), what="the receiving threads end")
 
