@@ -143,11 +143,12 @@ async def test_100000_channels_in_one_advertise_are_bounded_and_a_later_advertis
                 )
                 assert len(robot.topics) <= limit
                 assert not any(t.name == "/early" for t in robot.topics)
-                before = robot.rejections.get("malformed", 0)
                 # then the flood is unadvertised and /late advertised: it shows
                 # up (each advertisement costs what it changes); the ids the
                 # client never kept (all but the limit less /chatter's) are
-                # one rejection event, counted once per id and logged once
+                # one rejection event, counted once per id and logged once.
+                # (Nothing else here is malformed: the count is absolute, as a
+                # loaded machine may read the unadvertise before this line.)
                 await wait_until(
                     lambda: any(t.name == "/late" for t in robot.topics),
                     timeout=8,
@@ -156,7 +157,7 @@ async def test_100000_channels_in_one_advertise_are_bounded_and_a_later_advertis
                 assert robot.status == "connected"
                 assert not any(t.name.startswith("/c/") for t in robot.topics)
                 never_kept = 100_000 - (limit - 1)
-                assert robot.rejections.get("malformed", 0) - before == never_kept
+                assert robot.rejections.get("malformed", 0) == never_kept
                 async with robot.subscribe("/chatter") as sub:
                     await until_data(sub, "1")
     unknown = [r for r in caplog.records if "unknown channel id" in r.getMessage()]
