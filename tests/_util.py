@@ -8,6 +8,7 @@ from collections.abc import Callable
 from typing import Any
 
 import anyio
+import pytest
 
 import ros_mobile_bridge as rmb
 
@@ -30,6 +31,15 @@ async def take(sub: rmb.Subscription, n: int, timeout: float = 15.0) -> list[rmb
             if len(got) == n:
                 break
     return got
+
+
+ASYNCIO_LOOPS = [
+    pytest.param("asyncio", id="asyncio"),
+    pytest.param(("asyncio", {"use_uvloop": True}), id="uvloop"),
+]
+"""``anyio_backend`` values for tests of asyncio-only code: the standard
+loop and uvloop (which uvicorn runs whenever it is installed), whose
+transports are not ``asyncio.Transport`` subclasses."""
 
 
 # A reconnect policy for tests: retries within 0.2 s.

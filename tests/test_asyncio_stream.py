@@ -1,6 +1,7 @@
 """The asyncio TCP stream (``transport/_asyncio_stream.py``) against real
-sockets: order, EOF, a reset, closing, back-pressure both ways. On trio the
-WebSocket keeps anyio's stream, which the last test checks."""
+sockets: order, EOF, a reset, closing, back-pressure both ways, on asyncio's
+own loop and on uvloop. On trio the WebSocket keeps anyio's stream, which the
+last test checks."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from collections.abc import Iterator
 import anyio
 import pytest
 
+from _util import ASYNCIO_LOOPS
 from peers.scripted import Peer, scripted_server
 from ros_mobile_bridge.transport import ConnectionLost, _asyncio_stream, connect_websocket
 from ros_mobile_bridge.transport._asyncio_stream import ProtocolStream
@@ -52,7 +54,7 @@ def peer() -> Iterator[RawPeer]:
     p.close()
 
 
-asyncio_only = pytest.mark.parametrize("anyio_backend", ["asyncio"])
+asyncio_only = pytest.mark.parametrize("anyio_backend", ASYNCIO_LOOPS)
 
 
 async def recv_all(stream: ProtocolStream, n: int) -> bytes:

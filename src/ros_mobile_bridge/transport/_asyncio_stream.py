@@ -15,7 +15,9 @@ It implements the part of ``anyio.abc.ByteStream`` the WebSocket uses
 connection failed, ``ClosedResourceError`` after :meth:`aclose`. ``receive``
 does not checkpoint when data is already buffered: the WebSocket's reader
 yields to the loop on its own schedule. Used for plain TCP on asyncio only;
-TLS and trio keep anyio's streams.
+TLS and trio keep anyio's streams. It runs on uvloop as on asyncio's own
+loop (uvloop's transports have ``asyncio.Transport``'s methods without
+deriving from it, so nothing here checks the class).
 
 A large frame's bytes can go straight where they belong:
 :meth:`ProtocolStream.receive_into` has the next read of the socket land in
@@ -42,7 +44,7 @@ import sys
 import threading
 from collections import deque
 from collections.abc import Callable
-from typing import Final
+from typing import Final, cast
 
 import anyio
 import anyio.abc
@@ -107,8 +109,9 @@ class _Protocol(asyncio.BufferedProtocol):
         self.target_filled = 0
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
+        # not an isinstance check: uvloop's TCP transport has asyncio.Transport's
+        # methods without deriving from it
+        self.transport = cast("asyncio.Transport", transport)
 
     def get_buffer(self, sizehint: int) -> memoryview:
         target = self.target
@@ -479,5 +482,4 @@ async def connect_tcp(host: str, port: int) -> ProtocolStream:
     failure, as ``anyio.connect_tcp`` raises)."""
     loop = asyncio.get_running_loop()
     transport, protocol = await loop.create_connection(lambda: _Protocol(loop), host, port)
-    assert isinstance(transport, asyncio.Transport)
-    return ProtocolStream(transport, protocol)
+    return ProtocolStream(transport, protocol)  # (typed Transport; on uvloop not a subclass)
