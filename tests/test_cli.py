@@ -85,7 +85,7 @@ def strict_json(line: str) -> Any:
 
 
 def test_version() -> None:
-    result = rmb("--version")
+    result = rmb("--version", process=True)  # (the module entry point, as a user starts it)
     assert result.returncode == 0
     assert result.stdout.strip() == f"rmb (ros-mobile-bridge) {__version__}"
 
@@ -123,6 +123,8 @@ def test_the_url_comes_from_rmb_url_a_leading_argument_or_u(robot: DemoRobot) ->
 def test_usage_mistakes_exit_2_with_one_line(args: tuple[str, ...], says: str) -> None:
     result = rmb(*args)
     assert result.returncode == 2, result.stderr
+    if not args:  # once as a process: the status is the process's
+        assert rmb(*args, process=True).returncode == 2
     assert says in result.stderr and "Traceback" not in result.stderr
 
 
@@ -140,7 +142,7 @@ def test_backend_trio_without_trio_is_one_line() -> None:
 
 
 def test_a_refused_connection_is_a_runtime_failure() -> None:
-    result = rmb("info", "-u", "127.0.0.1:1", "--timeout", "2")
+    result = rmb("info", "-u", "127.0.0.1:1", "--timeout", "2", process=True)  # (the exit status)
     assert result.returncode == 1
     assert "ConnectError" in one_line(result.stderr)
 

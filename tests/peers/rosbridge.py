@@ -67,8 +67,15 @@ class PeerProcessError(RuntimeError):
 
 def random_domain_id() -> int:
     """A DDS domain for one test session (1..101), so parallel sessions on
-    one machine do not see each other's graphs."""
-    return random.SystemRandom().randint(1, 101)
+    one machine do not see each other's graphs. The workers of one parallel
+    run (pytest-xdist) each draw from their own residue class, so no two of
+    them share a domain."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+    index = int(worker.removeprefix("gw")) if worker.startswith("gw") else 0
+    if count <= 1 or count > 50:
+        return random.SystemRandom().randint(1, 101)
+    return 1 + index + count * random.SystemRandom().randrange(100 // count)
 
 
 def free_port() -> int:
