@@ -1,11 +1,21 @@
-"""Every async test runs on asyncio and on trio: anyio's pytest plugin in auto
-mode (pyproject.toml) with this backend fixture."""
+"""Every async test runs on asyncio and on trio (anyio's pytest plugin in
+auto mode, pyproject.toml, with the ``anyio_backend`` fixture below), except
+the protocol tests of :data:`LOOP_NEUTRAL`, which run once each.
+
+Collection also marks what each test needs: ``ros`` (the ROS 2 peer
+environment, CPython 3.11 wheels only) and ``peer`` (any server: a real
+peer or a scripted one), so ``-m "not peer"`` is the quick run
+(``scripts/test --quick``); the ``ros`` tests share one pytest-xdist
+worker (one ROS graph and bridge per run)."""
 
 from __future__ import annotations
 
 import json
+import os
 import random
+import zlib
 from collections.abc import Iterator
+from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 import pytest
@@ -18,14 +28,108 @@ if TYPE_CHECKING:
 _ROS_FIXTURES = frozenset({"ros_peer_env", "ros_graph", "rosbridge", "rosbridge_factory"})
 """The fixtures of tests/peers/ros_fixtures.py: the ROS 2 Jazzy peer environment."""
 
+_PEER_FIXTURES = _ROS_FIXTURES | {"ros_share", "sdk", "zenoh_router", "raw", "server", "robot"}
+"""Fixtures that start a server (a test module's ``robot`` is a demo robot)."""
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark every test that needs the ROS 2 peer environment (its wheels are
-    for CPython 3.11 only) as ``ros``: the other Python versions run
-    ``-m "not ros"`` (scripts/test)."""
+LOOP_NEUTRAL = frozenset(
+    {
+        "test_bytes_received_peers",
+        "test_connection_options",
+        "test_demo_robot",
+        "test_error_contract",
+        "test_foxglove_legacy",
+        "test_foxglove_sdk",
+        "test_parameter_events",
+        "test_publish_checks",
+        "test_raw_subscribe",
+        "test_record",
+        "test_rosbridge",
+        "test_rosbridge_params_watch",
+        "test_rosbridge_peer",
+        "test_serve",
+        "test_zenoh_actions",
+        "test_zenoh_describe",
+        "test_zenoh_params_watch",
+        "test_zenoh_queryable",
+        "test_zenoh_record",
+        "test_zenoh_sdk",
+        "test_zenoh_serve",
+    }
+)
+"""Test modules of protocol behaviour against peers, whose code under the
+client is the same on every event loop: the loop-specific paths below them
+(the WebSocket and asyncio streams, trio's reads and timers, the Zenoh
+session's hand-over to the loop, the subscription queue's wake-ups, the lag
+monitor, signals, the sync worker) have tests of their own that run on both
+loops (test_asyncio_stream, test_websocket_*, test_read_*, test_transport*,
+test_zenoh, test_flow, test_wakeup, test_trio_timers, test_lag, ...). Each
+test of these modules runs on one loop, picked from its name, so each module
+runs about half its tests on each loop. ``RMB_BOTH_LOOPS=1`` runs them on
+both."""
+
+
+def _one_loop(item: pytest.Item) -> str:
+    """The loop a loop-neutral test runs on: stable for the test, half and half."""
+    params = getattr(getattr(item, "callspec", None), "params", {})
+    key = repr(
+        (
+            item.module.__name__,
+            getattr(item, "originalname", item.name),
+            sorted(
+                (name, repr(value)) for name, value in params.items() if name != "anyio_backend"
+            ),
+        )
+    )
+    return ("asyncio", "trio")[zlib.crc32(key.encode()) % 2]
+
+
+_peer_modules: dict[str, bool] = {}
+
+
+def _starts_servers(module: ModuleType) -> bool:
+    """The module imports a server: the peers package (real peers, the
+    scripted and hostile servers) or the demo robot."""
+    name = module.__name__
+    if name not in _peer_modules:
+        _peer_modules[name] = any(
+            (getattr(value, "__module__", None) or getattr(value, "__name__", "")).startswith(
+                ("peers", "ros_mobile_bridge.demo")
+            )
+            for value in vars(module).values()
+            if isinstance(value, type | ModuleType) or callable(value)
+        )
+    return _peer_modules[name]
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark ``ros`` and ``peer`` tests (see the module docstring), keep the
+    ``ros`` ones on one xdist worker, and run each loop-neutral test on its
+    one loop."""
+    both = os.environ.get("RMB_BOTH_LOOPS", "") not in ("", "0")
+    kept: list[pytest.Item] = []
+    dropped: list[pytest.Item] = []
     for item in items:
-        if _ROS_FIXTURES & set(getattr(item, "fixturenames", ())):
+        fixtures = set(getattr(item, "fixturenames", ()))
+        if _ROS_FIXTURES & fixtures:
             item.add_marker(pytest.mark.ros)
+            item.add_marker(pytest.mark.xdist_group("ros"))
+        module = getattr(item, "module", None)
+        if _PEER_FIXTURES & fixtures or (module is not None and _starts_servers(module)):
+            item.add_marker(pytest.mark.peer)
+        backend = getattr(getattr(item, "callspec", None), "params", {}).get("anyio_backend")
+        if (
+            not both
+            and isinstance(backend, str)
+            and module is not None
+            and module.__name__ in LOOP_NEUTRAL
+            and backend != _one_loop(item)
+        ):
+            dropped.append(item)
+            continue
+        kept.append(item)
+    if dropped:
+        config.hook.pytest_deselected(items=dropped)
+        items[:] = kept
 
 
 @pytest.fixture(params=["asyncio", "trio"])
@@ -33,12 +137,23 @@ def anyio_backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 
 
-@pytest.fixture
-def zenoh_router() -> Iterator[ZenohRouter]:
-    """A fresh eclipse-zenoh router on a loopback port (tests/peers/zenoh_router.py)."""
+@pytest.fixture(scope="session")
+def _shared_zenoh_router() -> Iterator[ZenohRouter]:
     pytest.importorskip("zenoh")
     with ZenohRouter() as router:
         yield router
+
+
+@pytest.fixture
+def zenoh_router(_shared_zenoh_router: ZenohRouter) -> ZenohRouter:
+    """The eclipse-zenoh router of this test process (one per pytest-xdist
+    worker; tests/peers/zenoh_router.py) on a loopback port. Tests sharing it
+    do not see each other: each has its own ROS domain (``zenoh_domain``) and
+    closes its sessions. A test that stops or restarts a router starts its
+    own ``ZenohRouter``."""
+    if not _shared_zenoh_router.running:  # (stopped by a test that should not have)
+        _shared_zenoh_router.start()
+    return _shared_zenoh_router
 
 
 @pytest.fixture
