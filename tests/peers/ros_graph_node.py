@@ -29,6 +29,8 @@ JSON line on stdout, ``{"ok": true, "result": ...}`` or ``{"ok": false,
 - ``received`` {topic}: the messages recorded on a topic, as JSON-able dicts
   (``uint8[]`` as a list of ints);
 - ``clear`` {topic}: forget them;
+- ``matched`` {topic}: how many publishers the recording subscriber of a
+  topic is matched with (DDS matching done: what they publish now arrives);
 - ``record`` {topic, type}: a new recording subscriber (type "pkg/msg/Name");
 - ``publish`` {topic, type, hz, data}: a periodic publisher of ``data``;
 - ``image`` {topic, hz=30, width=640, height=480}: a sensor_msgs/msg/Image
@@ -335,6 +337,10 @@ class Graph:
             with self.lock:
                 self.received[topic] = []
             return None
+        if cmd == "matched":
+            with self.lock:
+                sub = self.subscriptions[topic]
+            return sub.get_publisher_count()
         if cmd == "record":
             self.record(topic, str(request["type"]))
             return None
