@@ -101,6 +101,7 @@ def _starts_servers(module: ModuleType) -> bool:
     return _peer_modules[name]
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the xdist_group marks
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Mark ``ros`` and ``peer`` tests (see the module docstring), keep the
     ``ros`` ones on one xdist worker, and run each loop-neutral test on its
