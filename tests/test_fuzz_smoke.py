@@ -9,6 +9,10 @@ from types import ModuleType
 
 import pytest
 
+# CPU-bound searches: under parallel workers on a busy machine they may take
+# several times their quiet minute, more than the suite's 120 s per test
+pytestmark = pytest.mark.timeout(360)
+
 HARNESS = Path(__file__).resolve().parents[1] / "fuzz" / "fuzz_foxglove.py"
 
 

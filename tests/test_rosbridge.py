@@ -634,14 +634,14 @@ async def test_latency_probe_reports_round_trips(peer: RosPeer) -> None:
 
 
 async def test_latency_probe_turns_off_after_one_failure(
-    ros_peer_env: Any, caplog: pytest.LogCaptureFixture
+    ros_peer_env: Any, ros_graph: RosGraph, caplog: pytest.LogCaptureFixture
 ) -> None:
     # A bridge without rosapi, alone in its own ROS domain (on the session
     # domain it would reach the other bridge's /rosapi services).
     bridge = await anyio.to_thread.run_sync(
         lambda: RosBridge.start(
             ros_peer_env,
-            random_domain_id(),
+            random_domain_id(other_than=ros_graph.domain_id),
             "--no-rosapi",
             wait_topics=(),
             wait_services=(),

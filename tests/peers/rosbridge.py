@@ -65,17 +65,23 @@ class PeerProcessError(RuntimeError):
     """A peer process failed to start, died, or answered with an error."""
 
 
-def random_domain_id() -> int:
+def random_domain_id(*, other_than: int | None = None) -> int:
     """A DDS domain for one test session (1..101), so parallel sessions on
-    one machine do not see each other's graphs. The workers of one parallel
-    run (pytest-xdist) each draw from their own residue class, so no two of
+    one machine do not see each other's graphs; never ``other_than`` (a
+    graph to stay away from). The workers of one parallel run
+    (pytest-xdist) each draw from their own residue class, so no two of
     them share a domain."""
     worker = os.environ.get("PYTEST_XDIST_WORKER", "")
     count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
     index = int(worker.removeprefix("gw")) if worker.startswith("gw") else 0
-    if count <= 1 or count > 50:
-        return random.SystemRandom().randint(1, 101)
-    return 1 + index + count * random.SystemRandom().randrange(100 // count)
+    draw = random.SystemRandom()
+    while True:
+        if count <= 1 or count > 50:
+            domain = draw.randint(1, 101)
+        else:
+            domain = 1 + index + count * draw.randrange(100 // count)
+        if domain != other_than:
+            return domain
 
 
 def free_port() -> int:
