@@ -89,8 +89,8 @@ def child(case: str, period: float, seconds: float) -> tuple[int, float]:
 
         return trio.run(measure, trio_sleep, seconds)
 
-    from ros_mobile_bridge._trio_wakeup import TrioWakeup
-    from ros_mobile_bridge._wakeup import serve_timers
+    from ros_mobile_bridge._loop._trio_wakeup import TrioWakeup
+    from ros_mobile_bridge._loop._wakeup import serve_timers
 
     async def main() -> tuple[int, float]:
         async with trio.open_nursery() as nursery:

@@ -99,7 +99,7 @@ def test_version_and_help_import_no_verb_module_nor_the_client(argv: list[str]) 
         "numpy",
         "yaml",
         "websockets",
-        "ros_mobile_bridge._client",
+        "ros_mobile_bridge._core",
         "ros_mobile_bridge._connect",
         "ros_mobile_bridge.codec",
         "ros_mobile_bridge._signals",

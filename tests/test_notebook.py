@@ -19,7 +19,7 @@ import pytest
 import trio
 
 import ros_mobile_bridge as rmb
-from ros_mobile_bridge import _background
+from ros_mobile_bridge._sync import _background
 from ros_mobile_bridge.demo import DemoRobot
 
 pytestmark = pytest.mark.peer

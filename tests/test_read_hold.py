@@ -26,7 +26,7 @@ from peers.foxglove_sdk import SdkServer, string_msg
 from ros_mobile_bridge.flow import FrameQueue, RawFrame
 
 try:
-    from ros_mobile_bridge._trio_timers import current_timers
+    from ros_mobile_bridge._loop._trio_timers import current_timers
 except ImportError:  # trio not installed: the asyncio cases still run
     current_timers = None  # type: ignore[assignment]
 

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ros_mobile_bridge._rejection_log import LOG_BURST, LOG_EVERY, RejectionLog
+from ros_mobile_bridge._core._rejection_log import LOG_BURST, LOG_EVERY, RejectionLog
 
 LOGGER = logging.getLogger("tests.test_rejection_log")
 

@@ -16,7 +16,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from ros_mobile_bridge._serve import ServedServices, Serving
+from ros_mobile_bridge._core._serve import ServedServices, Serving
 from ros_mobile_bridge.adapters import _rosbridge
 from ros_mobile_bridge.wire import rosbridge as rb
 

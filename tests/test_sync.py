@@ -23,7 +23,7 @@ import sniffio
 import trio
 
 import ros_mobile_bridge as rmb
-from ros_mobile_bridge import _sync
+from ros_mobile_bridge._sync import _client as _sync
 from ros_mobile_bridge.demo import DemoRobot
 
 pytestmark = pytest.mark.peer

@@ -1,5 +1,5 @@
-"""trio's shared timer of timed waits (``_trio_timers.py``, and the heap's
-side of ``_trio_wakeup.py``): a coarse wait ends on the loop's one runner, no
+"""trio's shared timer of timed waits (``_loop/_trio_timers.py``, and the heap's
+side of ``_loop/_trio_wakeup.py``): a coarse wait ends on the loop's one runner, no
 earlier than asked and at most ``GRID`` later; an exact one at its deadline;
 neither enters a cancel scope (the runner's one scope is moved on, never
 expired); waits due in the same millisecond end in one wake-up; a wait's
@@ -28,16 +28,16 @@ trio_testing = pytest.importorskip("trio.testing")
 import anyio  # noqa: E402
 import sniffio  # noqa: E402
 
-from ros_mobile_bridge import _trio_timers  # noqa: E402
-from ros_mobile_bridge._trio_timers import (  # noqa: E402
+from ros_mobile_bridge._loop import _trio_timers  # noqa: E402
+from ros_mobile_bridge._loop._trio_timers import (  # noqa: E402
     COMPACT_ABOVE,
     GRID,
     Entry,
     TrioTimers,
     current_timers,
 )
-from ros_mobile_bridge._trio_wakeup import TrioWakeup  # noqa: E402
-from ros_mobile_bridge._wakeup import serve_timers  # noqa: E402
+from ros_mobile_bridge._loop._trio_wakeup import TrioWakeup  # noqa: E402
+from ros_mobile_bridge._loop._wakeup import serve_timers  # noqa: E402
 
 
 def run(fn: object) -> None:
@@ -201,7 +201,7 @@ def test_a_callback_that_raises_is_logged_and_the_task_resumes(
                 raise RuntimeError("a bug in the callback")
 
             start = trio.current_time()
-            with caplog.at_level(logging.ERROR, logger="ros_mobile_bridge._trio_wakeup"):
+            with caplog.at_level(logging.ERROR, logger="ros_mobile_bridge._loop._trio_wakeup"):
                 await wakeup.wait(0.3, then=then)
             assert trio.current_time() - start == pytest.approx(0.3)
             assert "a timed wait's callback failed" in caplog.text

@@ -1,7 +1,7 @@
-"""A consumer's wait for its producer (``_wakeup.py``): on both loops
+"""A consumer's wait for its producer (``_loop/_wakeup.py``): on both loops
 :meth:`Wakeup.set` resumes the waiter, a time limit ends the wait without an
 error, a set with nobody waiting does nothing, and a cancellation from
-outside ends the wait. On trio (``_trio_wakeup.py``) the deadline ends the
+outside ends the wait. On trio (``_loop/_trio_wakeup.py``) the deadline ends the
 wait with a plain return, not a ``Cancelled`` raised and caught, and a
 cancellation from outside is never lost; trio's virtual clock (``MockClock``,
 jumping ahead whenever every task waits) makes those times exact, so the
@@ -18,8 +18,8 @@ trio_testing = pytest.importorskip("trio.testing")
 
 import anyio  # noqa: E402
 
-from ros_mobile_bridge._trio_wakeup import TrioWakeup  # noqa: E402
-from ros_mobile_bridge._wakeup import new_wakeup  # noqa: E402
+from ros_mobile_bridge._loop._trio_wakeup import TrioWakeup  # noqa: E402
+from ros_mobile_bridge._loop._wakeup import new_wakeup  # noqa: E402
 
 
 def run(fn: object) -> None:

@@ -24,7 +24,7 @@ import pytest
 
 import ros_mobile_bridge as rmb
 from _util import routed, take, wait_until
-from ros_mobile_bridge._rejection_log import LOG_BURST, LOG_EVERY
+from ros_mobile_bridge._core._rejection_log import LOG_BURST, LOG_EVERY
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 

@@ -17,13 +17,16 @@ from ._version import __version__ as __version__
 
 if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from . import lag as lag
-    from ._action import ActionGoal as ActionGoal
-    from ._background import ClientHandle as ClientHandle
-    from ._background import open_client as open_client
-    from ._client import Client as Client
     from ._connect import Endpoint as Endpoint
     from ._connect import connect as connect
     from ._connect import parse_target as parse_target
+    from ._core._action import ActionGoal as ActionGoal
+    from ._core._client import Client as Client
+    from ._core._record import Recording as Recording
+    from ._core._record import RecordStats as RecordStats
+    from ._core._serve import ServeStats as ServeStats
+    from ._core._serve import ServiceRequest as ServiceRequest
+    from ._core._serve import ServiceRequests as ServiceRequests
     from ._errors import ActionGoalError as ActionGoalError
     from ._errors import ConnectError as ConnectError
     from ._errors import DecodeError as DecodeError
@@ -36,22 +39,18 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._errors import SchemaError as SchemaError
     from ._errors import ServiceError as ServiceError
     from ._errors import ServiceTimeout as ServiceTimeout
-    from ._jsonable import jsonable as jsonable
     from ._options import BreakerPolicy as BreakerPolicy
     from ._options import ClientOptions as ClientOptions
     from ._options import ReconnectPolicy as ReconnectPolicy
     from ._options import RosbridgeAuth as RosbridgeAuth
-    from ._record import Recording as Recording
-    from ._record import RecordStats as RecordStats
-    from ._serve import ServeStats as ServeStats
-    from ._serve import ServiceRequest as ServiceRequest
-    from ._serve import ServiceRequests as ServiceRequests
     from ._signals import SignalScope as SignalScope
     from ._signals import cancel_on_signals as cancel_on_signals
-    from ._sync import SyncActionGoal as SyncActionGoal
-    from ._sync import SyncClient as SyncClient
-    from ._sync import SyncSubscription as SyncSubscription
-    from ._sync import connect_sync as connect_sync
+    from ._sync._background import ClientHandle as ClientHandle
+    from ._sync._background import open_client as open_client
+    from ._sync._client import SyncActionGoal as SyncActionGoal
+    from ._sync._client import SyncClient as SyncClient
+    from ._sync._client import SyncSubscription as SyncSubscription
+    from ._sync._client import connect_sync as connect_sync
     from ._types import DEFAULT_PORTS as DEFAULT_PORTS
     from ._types import ActionOutcome as ActionOutcome
     from ._types import Compression as Compression
@@ -68,6 +67,7 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._types import SubscriptionStats as SubscriptionStats
     from ._types import TopicInfo as TopicInfo
     from .codec import FieldDef as FieldDef
+    from .codec._jsonable import jsonable as jsonable
     from .flow import Batches as Batches
     from .flow import Subscription as Subscription
     from .flow._breaker import BreakerState as BreakerState
@@ -79,8 +79,8 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
 
 _LAZY: "dict[str, tuple[str, str]]" = {
     "lag": ("", "lag"),
-    "ActionGoal": ("._action", "ActionGoal"),
-    "Client": ("._client", "Client"),
+    "ActionGoal": ("._core._action", "ActionGoal"),
+    "Client": ("._core._client", "Client"),
     "Endpoint": ("._connect", "Endpoint"),
     "connect": ("._connect", "connect"),
     "parse_target": ("._connect", "parse_target"),
@@ -125,19 +125,19 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "DEFAULT_PRESETS": (".flow._throttle", "DEFAULT_PRESETS"),
     "Bucket": (".flow._throttle", "Bucket"),
     "ThrottleMode": (".flow._throttle", "ThrottleMode"),
-    "ClientHandle": ("._background", "ClientHandle"),
-    "open_client": ("._background", "open_client"),
-    "SyncActionGoal": ("._sync", "SyncActionGoal"),
-    "SyncClient": ("._sync", "SyncClient"),
-    "SyncSubscription": ("._sync", "SyncSubscription"),
-    "connect_sync": ("._sync", "connect_sync"),
-    "Recording": ("._record", "Recording"),
-    "RecordStats": ("._record", "RecordStats"),
-    "ServeStats": ("._serve", "ServeStats"),
-    "ServiceRequest": ("._serve", "ServiceRequest"),
-    "ServiceRequests": ("._serve", "ServiceRequests"),
+    "ClientHandle": ("._sync._background", "ClientHandle"),
+    "open_client": ("._sync._background", "open_client"),
+    "SyncActionGoal": ("._sync._client", "SyncActionGoal"),
+    "SyncClient": ("._sync._client", "SyncClient"),
+    "SyncSubscription": ("._sync._client", "SyncSubscription"),
+    "connect_sync": ("._sync._client", "connect_sync"),
+    "Recording": ("._core._record", "Recording"),
+    "RecordStats": ("._core._record", "RecordStats"),
+    "ServeStats": ("._core._serve", "ServeStats"),
+    "ServiceRequest": ("._core._serve", "ServiceRequest"),
+    "ServiceRequests": ("._core._serve", "ServiceRequests"),
     "RosbridgeAuth": ("._options", "RosbridgeAuth"),
-    "jsonable": ("._jsonable", "jsonable"),
+    "jsonable": (".codec._jsonable", "jsonable"),
 }
 """Public name -> (private module relative to this package, its name there);
 ``("", name)`` is a public submodule. Kept equal to the ``TYPE_CHECKING``

@@ -11,8 +11,8 @@ from typing import Final, Literal
 
 import anyio
 
-from ._client import Client
-from ._connection import Connection
+from ._core._client import Client
+from ._core._connection import Connection
 from ._options import ClientOptions
 from ._types import DEFAULT_PORTS
 from .adapters import (

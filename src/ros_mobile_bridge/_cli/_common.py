@@ -14,7 +14,7 @@ import anyio
 
 from .. import _connect
 from .._checks import nearest as nearest  # one nearest-names rule, the library's
-from .._client import Client
+from .._core._client import Client
 from .._options import ClientOptions
 
 __all__ = [

@@ -21,7 +21,7 @@ from typing import Any, Final, Literal
 
 import anyio
 
-from .._client import Client
+from .._core._client import Client
 from .._errors import NotSupportedError
 from ._common import open_robot, out, warn
 from ._format import UsageError, json_line

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from .._client import Client
+from .._core._client import Client
 from ._common import missing_line, open_robot, out, same_type, warn
 from ._format import json_line
 from ._verb import Verb

@@ -21,8 +21,8 @@ from typing import IO
 
 import anyio
 
-from .._client import Client
-from .._record import Recording, RecordStats
+from .._core._client import Client
+from .._core._record import Recording, RecordStats
 from ._common import NOTICE_AFTER_S, missing_line, open_robot, warn
 from ._verb import Verb
 

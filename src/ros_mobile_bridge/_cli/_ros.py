@@ -9,8 +9,8 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-from .._action import ActionGoal
-from .._client import Client
+from .._core._action import ActionGoal
+from .._core._client import Client
 from .._errors import ParameterError, RosBridgeError
 from ._common import check_type, graph_name, missing_line, open_robot, out, warn
 from ._format import (

@@ -13,7 +13,7 @@ from typing import Any
 import anyio
 import anyio.abc
 
-from .._client import Client
+from .._core._client import Client
 from .._errors import NotConnected
 from .._types import Message, Priority
 from ..flow import Subscription

@@ -25,13 +25,13 @@ from .._errors import (
     SchemaError,
     ServiceError,
 )
-from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket
 from ..wire import foxglove as fx
+from ..wire._limits import truncate_for_log
 from ._pauses import PauseSchedule
 from ._seam import (
     EventSink,

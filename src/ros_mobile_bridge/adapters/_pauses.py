@@ -17,7 +17,7 @@ from typing import Generic, TypeVar
 
 import anyio
 
-from .._wakeup import Wakeup, new_wakeup
+from .._loop._wakeup import Wakeup, new_wakeup
 
 K = TypeVar("K")
 
@@ -119,7 +119,7 @@ class PauseSchedule(Generic[K]):
         """Call ``resume(topic, key)`` for each paused topic when it is due
         (taken off the paused ones first); runs until cancelled, and an
         exception of ``resume`` ends it. One wait per pause and one per
-        resumption, on the loop's own timer (:mod:`.._wakeup`): a thousand
+        resumption, on the loop's own timer (:mod:`.._loop._wakeup`): a thousand
         connections in bandwidth mode wait thousands of times a second."""
         wakeup = self._wakeup = new_wakeup()
         try:

@@ -28,7 +28,6 @@ from .._errors import (
     ServiceError,
     ServiceTimeout,
 )
-from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo
 from ..codec import CodecRegistry, SchemaTooLarge, same_type_name
@@ -36,6 +35,7 @@ from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
+from ..wire._limits import truncate_for_log
 from ._parameter_events import PARAMETER_EVENTS
 from ._rosbridge_definitions import RosbridgeDefinitions
 from ._rosbridge_definitions import _typedefs_to_msg as _typedefs_to_msg

@@ -9,8 +9,8 @@ from collections.abc import Awaitable, Callable, Mapping
 from typing import Any, Final
 
 from .._errors import SchemaError, ServiceError
-from .._limits import truncate_for_log
 from ..codec import CodecRegistry, same_type_name
+from ..wire._limits import truncate_for_log
 
 _IDL_TO_MSG: Final[Mapping[str, str]] = {
     "boolean": "bool",

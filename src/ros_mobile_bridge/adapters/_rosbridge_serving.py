@@ -14,10 +14,10 @@ from typing import Any, Final
 import anyio
 
 from .._errors import RosBridgeError, SchemaError, ServiceError
-from .._limits import truncate_for_log
 from ..codec import CodecRegistry, same_type_name
 from ..transport import WebSocket
 from ..wire import rosbridge as rb
+from ..wire._limits import truncate_for_log
 from ._rosbridge_discovery import _INTERNAL_TIMEOUT
 from ._seam import ServiceHandler
 

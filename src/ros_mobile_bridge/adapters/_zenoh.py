@@ -52,13 +52,13 @@ from .._errors import (
     RosBridgeError,
     SchemaError,
 )
-from .._limits import truncate_for_log
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import same_type_name, type_hash
 from ..flow import PendingRequests, RawFrame, TopicMessage, WireMessage
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
+from ..wire._limits import truncate_for_log
 from ._pauses import PauseSchedule
 from ._seam import EventSink, GraphChanged, SubscribeHints, TopicState
 from ._shared import (

@@ -41,7 +41,6 @@ import anyio
 from anyio.abc import TaskGroup
 
 from .._errors import SchemaError, ServiceError
-from .._limits import truncate_for_log
 from .._options import ClientOptions
 from ..codec import (
     DESCRIPTION_CACHE,
@@ -53,6 +52,7 @@ from ..codec import (
     type_description,
 )
 from ..wire import rmw_zenoh as rz
+from ..wire._limits import truncate_for_log
 
 __all__ = ["DESCRIBE_SERVICE_TYPE", "ZenohDescribe"]
 

@@ -31,12 +31,12 @@ from typing import TYPE_CHECKING, Any, cast
 import anyio
 
 from .._errors import ConnectError, DecodeError, SchemaError, ServiceError
-from .._limits import truncate_for_log
 from .._options import ClientOptions
 from ..codec import CodecRegistry
 from ..flow import Decoder
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
+from ..wire._limits import truncate_for_log
 from ._seam import Adapter, ServiceHandler
 
 __all__ = ["ZenohServing"]

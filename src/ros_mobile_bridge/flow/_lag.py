@@ -66,7 +66,7 @@ from typing import Final, NoReturn
 import anyio
 from anyio.lowlevel import RunVar
 
-from .._relay import Relay
+from .._loop._relay import Relay
 
 _log = logging.getLogger("ros_mobile_bridge.lag")
 

@@ -31,8 +31,8 @@ import anyio
 import anyio.lowlevel
 
 from .._errors import DecodeError, NotConnected
+from .._loop._wakeup import Wakeup, new_wakeup
 from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats, new_message
-from .._wakeup import Wakeup, new_wakeup
 from ._breaker import CircuitBreaker
 from ._frame import RawFrame
 from ._throttle import AdaptiveThrottle

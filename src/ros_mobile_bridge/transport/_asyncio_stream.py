@@ -49,7 +49,7 @@ from typing import Final, cast
 import anyio
 import anyio.abc
 
-from .._wakeup import resolve
+from .._loop._wakeup import resolve
 
 __all__ = ["ProtocolStream", "connect_tcp"]
 

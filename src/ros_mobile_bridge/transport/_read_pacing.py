@@ -14,7 +14,7 @@ handed over together:
 :class:`ReadPacer` holds the policy (when to wait, and how long) and does the
 wait: on asyncio's :class:`~._asyncio_stream.ProtocolStream` the stream's
 :meth:`~._asyncio_stream.ProtocolStream.hold` (reading paused, so nothing
-wakes the loop meanwhile); elsewhere a :class:`.._wakeup.Wakeup` (anyio's
+wakes the loop meanwhile); elsewhere a :class:`.._loop._wakeup.Wakeup` (anyio's
 streams read only when asked), which on trio may hand the end of the wait
 to the owner's :attr:`ReadPacer.due` instead of resuming the reader. Used
 by one :class:`~._websocket.WebSocket`; it never reads or parses itself.
@@ -26,7 +26,7 @@ import time
 from collections.abc import Callable
 from typing import Final
 
-from .._wakeup import Then, Wakeup, new_wakeup
+from .._loop._wakeup import Then, Wakeup, new_wakeup
 from ._asyncio_stream import ProtocolStream
 
 __all__ = ["COALESCE_BELOW", "HOLD_DRAIN", "ReadPacer"]
@@ -89,7 +89,7 @@ class ReadPacer:
         self.due: Then | None = None
         """On trio (the loop's shared timer running): called by the loop at
         the end of a wait instead of resuming the reader (the owner's read
-        there, see :meth:`.._trio_wakeup.TrioWakeup.wait`); returns how long
+        there, see :meth:`.._loop._trio_wakeup.TrioWakeup.wait`); returns how long
         to go on waiting and whether that is a hold, or ``(0.0, False)``:
         the reader resumes and reads."""
 

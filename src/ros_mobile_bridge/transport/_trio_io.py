@@ -1,6 +1,6 @@
 """The WebSocket reader's trio side (imported on trio only): reads of trio's
 plain TCP socket without anyio's stream layers. (Its waits between reads are
-a :class:`.._trio_wakeup.TrioWakeup`.)
+a :class:`.._loop._trio_wakeup.TrioWakeup`.)
 """
 
 from __future__ import annotations

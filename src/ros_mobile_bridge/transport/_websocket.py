@@ -149,7 +149,7 @@ class WebSocket:
         the callback (counted in :attr:`paced_reads`). On trio's plain
         socket the same goes for the read at the end of such a wait, made
         by the loop where it ends the wait (the loop's shared timer, see
-        :mod:`.._trio_timers`); other reads there, and every read over TLS,
+        :mod:`.._loop._trio_timers`); other reads there, and every read over TLS,
         are offered by the reader right after it read them, before any
         message object is built.
 
@@ -192,7 +192,7 @@ class WebSocket:
 
     def _trio_due(self) -> tuple[float, bool]:
         """:attr:`.ReadPacer.due` on trio's plain socket: the read at the
-        end of a wait, made by the loop (:meth:`.._trio_wakeup.TrioWakeup.wait`)
+        end of a wait, made by the loop (:meth:`.._loop._trio_wakeup.TrioWakeup.wait`)
         and offered to the inline handler as asyncio's timer callback does
         (:meth:`_paced_read`); how long the wait goes on, and whether that
         is a hold. A read not taken whole is left for the reader, which

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from types import MappingProxyType
 from typing import Any
 
-from ..._limits import json_too_deep
+from .._limits import json_too_deep
 from ._events import (
     Advertise,
     AdvertiseServices,

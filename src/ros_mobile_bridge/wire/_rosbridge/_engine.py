@@ -11,7 +11,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final
 
-from ..._limits import json_too_deep, truncate_for_log
+from .._limits import json_too_deep, truncate_for_log
 from ._events import (
     ActionFeedback,
     ActionResult,

@@ -10,7 +10,7 @@ import json
 import math
 from typing import Any
 
-from ..._limits import truncate_for_log
+from .._limits import truncate_for_log
 from .._rosbridge_auth import auth_fields
 
 __all__ = [

@@ -2,7 +2,7 @@
 or trio) with an anyio ``BlockingPortal``, the ``async with`` blocks it holds
 (each entered and left by one task of the worker, so anyio's cancel scopes
 stay in the task that opened them), and the registry of the blocks a
-:class:`~ros_mobile_bridge.SyncClient` made. ``_sync.py`` builds the public
+:class:`~ros_mobile_bridge.SyncClient` made. ``_client.py`` builds the public
 sync API on it."""
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Any, Final, Generic, Literal, TypeVar
 
 import anyio
 
-from ._checks import check_timeout as _check_timeout
-from ._errors import NotConnected
+from .._checks import check_timeout as _check_timeout
+from .._errors import NotConnected
 
 if TYPE_CHECKING:
     from anyio.from_thread import BlockingPortal

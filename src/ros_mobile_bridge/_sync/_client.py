@@ -26,14 +26,13 @@ from contextlib import AbstractAsyncContextManager
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
 
-from ._action import ActionGoal
-from ._checks import check_timeout as _check_timeout
-from ._client import Client
-from ._connect import ProtocolArg, connect
-from ._errors import NotConnected
-from ._options import CLOSE_SLACK_S, ClientOptions
-from ._sync_worker import JOIN_S, Children, Held, Parent, SyncBackend, Worker
-from ._types import (
+from .._checks import check_timeout as _check_timeout
+from .._connect import ProtocolArg, connect
+from .._core._action import ActionGoal
+from .._core._client import Client
+from .._errors import NotConnected
+from .._options import CLOSE_SLACK_S, ClientOptions
+from .._types import (
     ActionOutcome,
     Compression,
     ConnectionStats,
@@ -49,8 +48,9 @@ from ._types import (
     SubscriptionStats,
     TopicInfo,
 )
-from .codec import FieldDef
-from .flow import Subscription
+from ..codec import FieldDef
+from ..flow import Subscription
+from ._worker import JOIN_S, Children, Held, Parent, SyncBackend, Worker
 
 if TYPE_CHECKING:
     pass

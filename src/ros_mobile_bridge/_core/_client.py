@@ -16,10 +16,8 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import anyio
 
-from ._action import ActionGoal
-from ._checks import check_name, check_save_bandwidth, check_schema, check_timeout, nearest_hint
-from ._connection import Connection, RouteContext, is_velocity_type, zero_twist
-from ._errors import (
+from .._checks import check_name, check_save_bandwidth, check_schema, check_timeout, nearest_hint
+from .._errors import (
     ConnectError,
     MessageError,
     NotConnected,
@@ -27,11 +25,8 @@ from ._errors import (
     RosBridgeError,
     ServiceTimeout,
 )
-from ._options import ClientOptions
-from ._published_types import PublishTypes
-from ._router import Route
-from ._serve import DEFAULT_SERVE_BUFFER, DEFAULT_SERVE_TIMEOUT, ServiceRequests
-from ._types import (
+from .._options import ClientOptions
+from .._types import (
     Compression,
     ConnectionStats,
     Dispatch,
@@ -42,8 +37,13 @@ from ._types import (
     Status,
     TopicInfo,
 )
-from .codec import FieldDef, same_type_name
-from .flow import Subscription, Watcher
+from ..codec import FieldDef, same_type_name
+from ..flow import Subscription, Watcher
+from ._action import ActionGoal
+from ._connection import Connection, RouteContext, is_velocity_type, zero_twist
+from ._published_types import PublishTypes
+from ._router import Route
+from ._serve import DEFAULT_SERVE_BUFFER, DEFAULT_SERVE_TIMEOUT, ServiceRequests
 
 if TYPE_CHECKING:
     import os

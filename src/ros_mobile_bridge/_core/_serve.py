@@ -22,8 +22,8 @@ from typing import Any, Final, Literal
 
 import anyio
 
-from ._errors import ConnectError, MessageError, NotConnected, RosBridgeError, ServiceError
-from .adapters import Adapter
+from .._errors import ConnectError, MessageError, NotConnected, RosBridgeError, ServiceError
+from ..adapters import Adapter
 
 __all__ = ["ServeStats", "ServedServices", "ServiceRequest", "ServiceRequests", "Serving"]
 

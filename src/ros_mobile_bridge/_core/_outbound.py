@@ -9,9 +9,9 @@ from collections.abc import Awaitable, Callable
 
 import anyio
 
-from ._errors import ConnectError
-from .adapters import Adapter
-from .flow import Outbox, WireMessage
+from .._errors import ConnectError
+from ..adapters import Adapter
+from ..flow import Outbox, WireMessage
 
 __all__ = ["Outbound", "Receipt"]
 

@@ -16,16 +16,16 @@ from typing import Any, Final
 import anyio
 import anyio.abc
 
-from ._errors import ConnectError, DecodeError, NotConnected, NotSupportedError
-from ._options import ClientOptions
+from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError
+from .._loop._wakeup import serve_timers
+from .._options import ClientOptions
+from .._types import Status
+from ..adapters import Adapter
+from ..codec import same_type_name
+from ..flow import Bucket, ThrottleMode, Watchable, participate
 from ._outbound import Outbound
 from ._router import Route, Router
 from ._serve import ServedServices
-from ._types import Status
-from ._wakeup import serve_timers
-from .adapters import Adapter
-from .codec import same_type_name
-from .flow import Bucket, ThrottleMode, Watchable, participate
 
 __all__ = [
     "TWIST",

@@ -11,9 +11,9 @@ from typing import Any, Final, Literal
 
 import anyio
 
-from ._errors import ActionGoalError
-from ._types import ActionOutcome, GoalState
-from .flow import Watchable, Watcher
+from .._errors import ActionGoalError
+from .._types import ActionOutcome, GoalState
+from ..flow import Watchable, Watcher
 
 __all__ = ["ActionGoal"]
 

@@ -45,18 +45,18 @@ from typing import IO, TYPE_CHECKING, Any, Final, Literal, cast
 import anyio
 import anyio.abc
 
-from ._checks import check_name
+from .._checks import check_name
+from .._errors import ConnectError, DecodeError, NotConnected, RosBridgeError
+from .._types import Compression
+from .._version import __version__
+from ..codec import normalize_type_name, type_hash
 from ._connection import Connection, RouteContext
-from ._errors import ConnectError, DecodeError, NotConnected, RosBridgeError
-from ._types import Compression
-from ._version import __version__
-from .codec import normalize_type_name, type_hash
 
 if TYPE_CHECKING:
     from mcap.writer import Writer
 
-    from .codec import CodecRegistry
-    from .flow import RawFrame
+    from ..codec import CodecRegistry
+    from ..flow import RawFrame
 
 __all__ = ["DEFAULT_QOS", "OfferedQos", "RecordStats", "Recording", "SkipReason", "open_recording"]
 

@@ -19,7 +19,7 @@ import time
 from collections.abc import Callable
 from typing import Final
 
-from ._limits import truncate_for_log
+from ..wire._limits import truncate_for_log
 
 __all__ = ["LOG_BURST", "LOG_EVERY", "RejectionLog"]
 

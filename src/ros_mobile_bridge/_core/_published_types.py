@@ -6,11 +6,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ._checks import check_schema
-from ._errors import SchemaError
-from ._types import TopicInfo
-from .adapters import Adapter
-from .codec import CodecRegistry, same_type_name
+from .._checks import check_schema
+from .._errors import SchemaError
+from .._types import TopicInfo
+from ..adapters import Adapter
+from ..codec import CodecRegistry, same_type_name
 
 __all__ = ["PublishTypes"]
 

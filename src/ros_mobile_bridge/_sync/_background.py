@@ -20,10 +20,10 @@ from typing import Any, Final
 import anyio
 import sniffio
 
-from ._client import Client
-from ._connect import ProtocolArg, connect
-from ._errors import NotConnected
-from ._options import CLOSE_SLACK_S, ClientOptions
+from .._connect import ProtocolArg, connect
+from .._core._client import Client
+from .._errors import NotConnected
+from .._options import CLOSE_SLACK_S, ClientOptions
 
 __all__ = ["ClientHandle", "open_client"]
 

@@ -4,8 +4,8 @@ trio's only timer is a cancel scope's deadline: entering the scope, trio
 expiring it and leaving it cost about 15-20 us of CPU per timed wait (a
 plain park and resume costs about 2 us). A fleet of rate-capped connections
 waits thousands of times a second: each WebSocket reader holds its reads
-until its subscriptions' next window (:mod:`.transport._read_pacing`), and
-each consumer waits for the end of its cap's window (:mod:`.flow._subscription`);
+until its subscriptions' next window (:mod:`..transport._read_pacing`), and
+each consumer waits for the end of its cap's window (:mod:`..flow._subscription`);
 a single fast stream's reader waits once per read for read coalescing.
 
 While a client runs it, a timed wait (:meth:`._trio_wakeup.TrioWakeup.wait`)

@@ -1,7 +1,7 @@
 """One worker per event loop, run by whichever of its users is still there.
 
 Some work serves every client on a loop at once: the lag sampler
-(:mod:`.flow._lag`) and, on trio, the shared timer of coarse waits
+(:mod:`..flow._lag`) and, on trio, the shared timer of coarse waits
 (:mod:`._trio_timers`). No client may own it alone (it would stop when that
 client closes), and a task outside every task group would outlive them all.
 So each client runs :meth:`Relay.participate` as one of its own tasks: the

@@ -2,7 +2,7 @@
 and the client's watchable state (topics, services, parameters, rejection
 counts), and what the subscriptions want goes down to the bridge (subscribe,
 unsubscribe, the forwarded rate, the circuit breaker's verdict). It is the
-adapter's :class:`~.adapters.EventSink`; the connection tells it which
+adapter's :class:`~..adapters.EventSink`; the connection tells it which
 adapter is current."""
 
 from __future__ import annotations
@@ -18,13 +18,11 @@ from typing import Any, Final
 import anyio
 import anyio.lowlevel
 
-from ._checks import nearest_hint
-from ._errors import ConnectError
-from ._options import ClientOptions
-from ._outbound import Outbound
-from ._rejection_log import RejectionLog
-from ._types import Compression, Dispatch, SaveBandwidth, ServiceInfo, Status, TopicInfo
-from .adapters import (
+from .._checks import nearest_hint
+from .._errors import ConnectError
+from .._options import ClientOptions
+from .._types import Compression, Dispatch, SaveBandwidth, ServiceInfo, Status, TopicInfo
+from ..adapters import (
     Adapter,
     Event,
     GraphChanged,
@@ -34,7 +32,7 @@ from .adapters import (
     SubscribeHints,
     TopicState,
 )
-from .flow import (
+from ..flow import (
     AdaptiveThrottle,
     Bucket,
     FrameQueue,
@@ -45,6 +43,8 @@ from .flow import (
     Watchable,
     current_monitor,
 )
+from ._outbound import Outbound
+from ._rejection_log import RejectionLog
 
 __all__ = ["Route", "Router"]
 
