@@ -3,7 +3,7 @@
 The conventions (CONTRIBUTING.md, "Code blocks in the docs"):
 
 - Every fenced block names its language. ``text``, ``yaml``, ``json`` and
-  ``toml`` blocks (output, configuration) are exempt. Output lines of a
+  ``toml`` blocks (output, configuration) and ``mermaid`` diagrams are exempt. Output lines of a
   ``console`` block (those without a ``$ `` prompt) are exempt too.
 - An unmarked ``python`` block runs against the demo robot. An unmarked
   ``bash``/``console`` block's commands (``rmb ...``, ``python examples/...``,
@@ -50,7 +50,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = (ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")))
 
-EXEMPT = frozenset({"text", "yaml", "json", "toml"})
+EXEMPT = frozenset({"text", "yaml", "json", "toml", "mermaid"})
 PYTHON = frozenset({"python"})
 SHELL = frozenset({"bash", "console"})
 NEEDS = {
