@@ -449,7 +449,9 @@ async def test_rosbridge_topics_round_trip_through_mcap(
                 adaptive=False,
                 compression=compression,  # type: ignore[arg-type]
             ) as rec:
-                await wait_until(lambda: all(rec.stats.messages.get(t, 0) >= 3 for t in topics), 15)
+                await wait_until(
+                    lambda: all(rec.stats.messages.get(t, 0) >= 10 for t in topics), 15
+                )
             stats = rec.stats
             await anyio.sleep(0.3)
             tg.cancel_scope.cancel()
@@ -474,8 +476,16 @@ async def test_rosbridge_topics_round_trip_through_mcap(
         text = schemas["/chatter"][1].data.decode()
         assert text.startswith("# This was originally provided as an example message.")
         assert text.rstrip().endswith("\nstring data")
-        # JSON (and CBOR) messages are re-encoded to CDR and counted; cbor-raw's are not
-        assert stats.reencoded == ({} if compression == "cbor-raw" else stats.messages)
+        # JSON (and CBOR) messages are re-encoded to CDR and counted; cbor-raw's
+        # are not. The recording switches the bridge's subscription of each
+        # topic from JSON to cbor-raw: a JSON message already on its way then
+        # is still delivered, and re-encoded (a few of a topic's first)
+        if compression == "cbor-raw":
+            assert all(stats.reencoded.get(t, 0) <= stats.messages[t] // 2 for t in topics), (
+                stats.reencoded
+            )
+        else:
+            assert stats.reencoded == stats.messages
         # the ros2 profile on every channel; the recipe and rosbags read every one
         assert set(ros2_profile(path)) == set(topics)
         recipe = read_with_recipe(path)
