@@ -5,27 +5,26 @@ from __future__ import annotations
 
 import asyncio
 import os
-from typing import Any
+from functools import partial
 
 import anyio
 import sniffio
 
 import ros_mobile_bridge as rmb
+from _util import fast_options
 
 WIRE = {"foxglove": "foxglove-ws", "rosbridge": "rosbridge"}
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    base: dict[str, Any] = {
-        "connect_timeout": 5.0,
-        "reconnect": None,
-        "discovery_grace": 0.05,
-        "advertise_settle": 0.0,
-        "teardown_timeout": 1.0,
-        "latency_probe_interval": 0,
-    }
-    base.update(kw)
-    return rmb.ClientOptions(**base)
+options = partial(
+    fast_options,
+    reconnect=None,
+    discovery_grace=0.05,
+    teardown_timeout=1.0,
+    latency_probe_interval=0,
+)
+"""Client options for the hostile server (either protocol): ``fast_options``
+without reconnect, probes, or long waits at the start and the end."""
 
 
 async def until_data(sub: rmb.Subscription, data: str, timeout: float = 10.0) -> rmb.Message:

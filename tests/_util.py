@@ -5,21 +5,58 @@ from __future__ import annotations
 import socket
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
 
+T = TypeVar("T")
 
-async def wait_until(predicate: Callable[[], object], timeout: float = 5.0, what: str = "") -> None:
-    """Poll ``predicate`` every 10 ms until it is truthy; fail after ``timeout``."""
+
+def _timed_out(
+    timeout: float, what: str | Callable[[], object], predicate: object
+) -> AssertionError:
+    described = what() if callable(what) else what
+    return AssertionError(f"timed out after {timeout} s waiting for {described or predicate}")
+
+
+async def wait_until(
+    predicate: Callable[[], T],
+    timeout: float = 5.0,
+    what: str | Callable[[], object] = "",
+    *,
+    interval: float = 0.01,
+) -> T:
+    """Poll ``predicate`` every ``interval`` seconds until it returns something
+    truthy, and return that; after ``timeout`` seconds fail with an
+    ``AssertionError`` naming ``what`` (a callable ``what`` is called then, to
+    report the state at the timeout). An exception of ``predicate`` propagates
+    at once. ``wait_until_sync`` is the same for sync tests."""
     with anyio.move_on_after(timeout):
-        while not predicate():
-            await anyio.sleep(0.01)
-        return
-    raise AssertionError(f"timed out after {timeout} s waiting for {what or predicate}")
+        while not (result := predicate()):
+            await anyio.sleep(interval)
+        return result
+    raise _timed_out(timeout, what, predicate)
+
+
+def wait_until_sync(
+    predicate: Callable[[], T],
+    timeout: float = 5.0,
+    what: str | Callable[[], object] = "",
+    *,
+    interval: float = 0.01,
+) -> T:
+    """``wait_until`` for sync tests (blocks the thread): the truthy value of
+    ``predicate``, or an ``AssertionError`` naming ``what`` after ``timeout``.
+    Never returns on a timeout."""
+    deadline = time.monotonic() + timeout
+    while not (result := predicate()):
+        if time.monotonic() >= deadline:
+            raise _timed_out(timeout, what, predicate)
+        time.sleep(interval)
+    return result
 
 
 async def take(sub: rmb.Subscription, n: int, timeout: float = 15.0) -> list[rmb.Message]:
@@ -79,11 +116,31 @@ async def routed(session: Any, key: str, timeout: float = 10.0, *, queryable: bo
 
 
 def fast_options(**kw: Any) -> rmb.ClientOptions:
-    """Client options for a local test server: no wait for advertisements to
-    settle, a 5 s connect timeout; ``kw`` overrides."""
+    """Client options for a local test server (the Foxglove SDK server, the
+    demo robot, the hostile server): no wait for advertisements to settle,
+    a 5 s connect timeout; ``kw`` overrides."""
     kw.setdefault("advertise_settle", 0.0)
     kw.setdefault("connect_timeout", 5.0)
     return rmb.ClientOptions(**kw)
+
+
+def rosbridge_options(**kw: Any) -> rmb.ClientOptions:
+    """Client options for rosbridge_server_rs on the test ROS graph: the
+    graph polled every 0.25 s, a 10 s connect timeout, 3 s for the
+    teardown, no reconnect (a test that wants one passes it); ``kw``
+    overrides."""
+    kw.setdefault("connect_timeout", 10.0)
+    kw.setdefault("discovery_interval", 0.25)
+    kw.setdefault("teardown_timeout", 3.0)
+    kw.setdefault("reconnect", None)
+    return rmb.ClientOptions(**kw)
+
+
+def zenoh_options(domain: int, **kw: Any) -> rmb.ClientOptions:
+    """Client options for a Zenoh router: the test's ROS ``domain`` (the
+    ``zenoh_domain`` fixture), the library's defaults otherwise; ``kw``
+    overrides."""
+    return rmb.ClientOptions(domain_id=domain, **kw)
 
 
 def websocket_of(robot: rmb.Client) -> Any:

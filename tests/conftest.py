@@ -24,6 +24,7 @@ from peers.zenoh_router import ZenohRouter
 
 if TYPE_CHECKING:
     from peers.foxglove_sdk import SdkServer
+    from ros_mobile_bridge.demo import DemoRobot
 
 _ROS_FIXTURES = frozenset({"ros_peer_env", "ros_graph", "rosbridge", "rosbridge_factory"})
 """The fixtures of tests/peers/ros_fixtures.py: the ROS 2 Jazzy peer environment."""
@@ -181,6 +182,18 @@ def server() -> Iterator[SdkServer]:
 
     with SdkServer() as srv:
         yield srv
+
+
+@pytest.fixture(scope="module")
+def robot() -> Iterator[DemoRobot]:
+    """The embedded demo robot (``ros_mobile_bridge.demo``, the official
+    Foxglove SDK server) with its default rates, one per module; a module
+    that needs another (other rates, a fresh one per test) defines its own
+    ``robot``."""
+    from ros_mobile_bridge.demo import DemoRobot
+
+    with DemoRobot() as bot:
+        yield bot
 
 
 @pytest.fixture

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 import anyio
 import pytest
 
-from _util import ASYNCIO_LOOPS
+from _util import ASYNCIO_LOOPS, wait_until
 from peers.scripted import Peer, scripted_server
 from ros_mobile_bridge.transport import ConnectionLost, _asyncio_stream, connect_websocket
 from ros_mobile_bridge.transport._asyncio_stream import ProtocolStream
@@ -262,9 +262,7 @@ async def test_a_reader_that_falls_behind_pauses_the_socket(peer: RawPeer) -> No
 
     thread = threading.Thread(target=send_all, daemon=True)
     thread.start()
-    with anyio.fail_after(10):
-        while not stream._protocol.read_paused:
-            await anyio.sleep(0.01)
+    await wait_until(lambda: stream._protocol.read_paused, 10, what="reading to pause")
     assert stream._protocol.buffered <= _asyncio_stream._HIGH_WATER + (1 << 20)
     assert await recv_all(stream, total) == b"y" * total
     assert not stream._protocol.read_paused
@@ -423,9 +421,7 @@ async def test_receive_into_takes_buffered_bytes_first_then_reads_straight_in(
     stream = await _asyncio_stream.connect_tcp("127.0.0.1", peer.port)
     conn = await anyio.to_thread.run_sync(peer.wait)
     await anyio.to_thread.run_sync(conn.sendall, b"abcdefgh")
-    with anyio.fail_after(10):
-        while not stream.has_data:
-            await anyio.sleep(0.01)
+    await wait_until(lambda: stream.has_data, 10, what="the bytes to be buffered")
     target = bytearray(5)
     assert await stream.receive_into(memoryview(target)) == 5
     assert target == b"abcde"
@@ -472,9 +468,7 @@ async def test_a_read_that_landed_before_a_cancellation_is_counted_next_time(
             raise
 
     task = asyncio.get_running_loop().create_task(reader())
-    with anyio.fail_after(10):
-        while stream._protocol.target is None:
-            await anyio.sleep(0.01)
+    await wait_until(lambda: stream._protocol.target is not None, 10, what="the reader's buffer")
     # what the event loop does on a read, then the cancellation before the
     # reader resumes (asyncio's own: it cancels a task whose wait is over)
     p = stream._protocol

@@ -5,7 +5,7 @@ and cancellation behave as for ``async for msg in sub``."""
 
 from __future__ import annotations
 
-from typing import Any
+from functools import partial
 
 import anyio
 import pytest
@@ -17,9 +17,7 @@ from peers.foxglove_sdk import SdkServer, string_msg
 TOPIC = "/chatter"
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("zero_twist_on_exit", False)
-    return rmb.ClientOptions(**kw)
+options = partial(rmb.ClientOptions, zero_twist_on_exit=False)
 
 
 async def test_waiting_messages_come_in_batches_in_order(server: SdkServer) -> None:

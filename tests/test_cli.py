@@ -13,8 +13,7 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
@@ -22,6 +21,7 @@ import pytest
 import yaml
 
 from _cli_run import ROOT, rmb, rmb_proc
+from _util import wait_until_sync
 from peers.rosbridge import RosBridge, RosGraph
 from ros_mobile_bridge import __version__
 from ros_mobile_bridge._cli._format import dump_yaml, json_line, plain
@@ -31,12 +31,6 @@ pytest_plugins = ["peers.ros_fixtures"]
 
 BACKENDS = ["asyncio", "trio"]
 TWIST = "geometry_msgs/msg/Twist"
-
-
-@pytest.fixture(scope="module")
-def robot() -> Iterator[DemoRobot]:
-    with DemoRobot() as bot:
-        yield bot
 
 
 def read_until(stream: IO[str] | None, found: Callable[[str], bool], lines: int = 200) -> str:
@@ -65,13 +59,6 @@ def one_line(stderr: str) -> str:
     assert len(lines) == 1 and lines[0].startswith("rmb: "), stderr
     assert "Traceback" not in stderr
     return lines[0]
-
-
-def wait_for(condition: Callable[[], bool], timeout: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.02)
 
 
 def strict_json(line: str) -> Any:
@@ -292,7 +279,7 @@ def test_pub_times_3_sends_three_then_the_zero(robot: DemoRobot) -> None:
     assert result.stdout.splitlines() == [
         f"publishing #{n}: {{linear: {{x: 0.2}}}}" for n in (1, 2, 3)
     ]
-    wait_for(lambda: len(robot.received_cmd_vel()) - before >= 4)
+    wait_until_sync(lambda: len(robot.received_cmd_vel()) - before >= 4, 10)
     assert [c.linear_x for c in robot.received_cmd_vel()[before:]] == [0.2, 0.2, 0.2, 0.0]
 
 
@@ -301,7 +288,7 @@ def test_pub_once_on_a_velocity_topic_says_why_the_robot_will_not_move(robot: De
     result = rmb("pub", "/cmd_vel", TWIST, "{linear: {x: 0.3}}", "--once", url=robot.url)
     assert result.returncode == 0, result.stderr
     assert "use -r 10" in one_line(result.stderr).lower()
-    wait_for(lambda: len(robot.received_cmd_vel()) - before >= 2)
+    wait_until_sync(lambda: len(robot.received_cmd_vel()) - before >= 2, 10)
     assert [c.linear_x for c in robot.received_cmd_vel()[before:]] == [0.3, 0.0]
 
 
@@ -314,13 +301,13 @@ def test_pub_repeats_at_1hz_until_ctrl_c_then_stops_the_robot(
         "--backend", backend, "pub", "/cmd_vel", TWIST, "{angular: {z: 0.5}}", url=robot.url
     )
     try:
-        wait_for(lambda: len(robot.received_cmd_vel()) - before >= 2, 10)
+        wait_until_sync(lambda: len(robot.received_cmd_vel()) - before >= 2, 10)
     finally:
         out, err = interrupt(proc)
     assert proc.returncode == 130, err
     assert "Traceback" not in err
     assert out.startswith("publishing #1: {angular: {z: 0.5}}\npublishing #2: ")
-    wait_for(lambda: robot.received_cmd_vel()[-1].angular_z == 0.0)
+    wait_until_sync(lambda: robot.received_cmd_vel()[-1].angular_z == 0.0, 10)
     got = [c.angular_z for c in robot.received_cmd_vel()[before:]]
     assert got[-1] == 0.0 and set(got[:-1]) == {0.5}, got
 
@@ -521,13 +508,17 @@ def test_pub_keeps_publishing_across_a_reconnect_then_stops_on_ctrl_c(
         "pub", "/rmb_in", "std_msgs/msg/String", "{data: tick}", "-r", "10", url=bridge.url
     )
     try:
-        wait_for(lambda: {"data": "tick"} in ros_graph.received("/rmb_in"), 30)
+        wait_until_sync(
+            lambda: {"data": "tick"} in ros_graph.received("/rmb_in"), 30, interval=0.02
+        )
         bridge.stop()
         read_until(proc.stderr, lambda s: "connection lost" in s)  # the library's one line
         ros_graph.command({"cmd": "clear", "topic": "/rmb_in"})
         rosbridge_factory(port=port)
         read_until(proc.stderr, lambda s: "connected again" in s)
-        wait_for(lambda: {"data": "tick"} in ros_graph.received("/rmb_in"), 30)
+        wait_until_sync(
+            lambda: {"data": "tick"} in ros_graph.received("/rmb_in"), 30, interval=0.02
+        )
         assert proc.poll() is None  # still running
     finally:
         interrupt(proc)

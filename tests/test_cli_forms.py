@@ -12,7 +12,6 @@ import json
 import signal
 import socket
 import subprocess
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -26,12 +25,6 @@ pytest_plugins = ["peers.ros_fixtures"]
 
 BACKENDS = ["asyncio", "trio"]
 TOPICS = {"/battery", "/camera/image/compressed", "/odom", "/pose", "/status"}
-
-
-@pytest.fixture(scope="module")
-def robot() -> Iterator[DemoRobot]:
-    with DemoRobot() as bot:
-        yield bot
 
 
 def ok(result: subprocess.CompletedProcess[str]) -> str:

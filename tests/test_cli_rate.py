@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import signal
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -76,12 +75,6 @@ def test_delay_figures_and_the_header_stamp() -> None:
 
 
 # -- against the demo robot --------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def robot() -> Iterator[DemoRobot]:
-    with DemoRobot() as bot:
-        yield bot
 
 
 def lines_of(*args: str, count: int) -> tuple[list[str], int]:

@@ -13,6 +13,7 @@ import json
 import logging
 import ssl
 from collections.abc import Iterator
+from functools import partial
 from typing import Any
 
 import anyio
@@ -21,7 +22,7 @@ import trustme
 
 import ros_mobile_bridge as rmb
 from _relay import Relay
-from _util import wait_until
+from _util import fast_options, wait_until
 from peers.foxglove_sdk import SdkServer, string_msg
 from peers.rosbridge import RosBridge
 
@@ -30,11 +31,7 @@ pytest_plugins = ["peers.ros_fixtures"]
 TOKEN = "Bearer s3cret-token-4242"
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 5.0)
-    kw.setdefault("zero_twist_on_exit", False)
-    return rmb.ClientOptions(**kw)
+options = partial(fast_options, zero_twist_on_exit=False)
 
 
 @pytest.fixture(scope="module")

@@ -25,6 +25,7 @@ from websockets.exceptions import InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 from websockets.typing import Subprotocol
 
+from _util import wait_until_sync
 from ros_mobile_bridge.demo import (
     CMD_VEL_TIMEOUT_S,
     SERVICES,
@@ -62,18 +63,6 @@ def open_ws(url: str, subprotocol: str = SUBPROTOCOL) -> ClientConnection:
     return connect(
         url, subprotocols=[Subprotocol(subprotocol)], open_timeout=TIMEOUT, max_queue=None
     )
-
-
-def wait_until(cond: Callable[[], T], timeout: float = TIMEOUT, what: str = "condition") -> T:
-    """Poll ``cond`` every 10 ms until it returns something truthy; fail after ``timeout``."""
-    deadline = time.monotonic() + timeout
-    while True:
-        result = cond()
-        if result:
-            return result
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.01)
 
 
 Message = dict[str, Any] | bytes
@@ -263,6 +252,7 @@ TRIGGER_REQUEST = b"\x00\x01\x00\x00\x00"
 
 @pytest.fixture
 def robot() -> Iterator[DemoRobot]:
+    """Not conftest's ``robot``: a fresh one per test, at faster rates."""
     with DemoRobot(rate_hz=50.0, camera_hz=10.0) as demo:
         yield demo
 
@@ -400,14 +390,14 @@ def test_cdr_cmd_vel_is_logged_and_moves_the_robot(robot: DemoRobot, peer: Peer)
     peer.advertise(1, "/cmd_vel", "cdr", "geometry_msgs/msg/Twist")
     before = time.time_ns()
     peer.publish(1, twist_cdr(0.5, 0.25))
-    log = wait_until(robot.received_cmd_vel, what="cmd_vel logged")
+    log = wait_until_sync(robot.received_cmd_vel, what="cmd_vel logged")
     assert len(log) == 1
     cmd = log[0]
     assert isinstance(cmd, CmdVel)
     assert (cmd.linear_x, cmd.angular_z, cmd.encoding) == (0.5, 0.25, "cdr")
     assert cmd.receive_time_ns >= before
     assert robot.cmd_vel_log == log
-    wait_until(lambda: robot.pose[0] > 0.01, what="robot to move forward")
+    wait_until_sync(lambda: robot.pose[0] > 0.01, what="robot to move forward")
     assert robot.pose[2] > 0.0  # turning left
 
 
@@ -447,7 +437,7 @@ def test_odom_twist_reflects_command_then_watchdog_stops(robot: DemoRobot, peer:
     peer.wait_for(lambda m: (odom_twist(m) == (0.0, 0.0)) or None, what="odom twist = 0")
     stopped = robot.pose
     # Well past the watchdog, the pose no longer changes.
-    wait_until(lambda: time.monotonic() - sent > 3 * CMD_VEL_TIMEOUT_S, what="time to pass")
+    wait_until_sync(lambda: time.monotonic() - sent > 3 * CMD_VEL_TIMEOUT_S, what="time to pass")
     assert robot.pose == stopped
 
 
@@ -458,10 +448,10 @@ def test_json_and_stamped_cmd_vel(robot: DemoRobot, peer: Peer) -> None:
     peer.advertise(4, "/chatter", "json", "std_msgs/msg/String")
     twist_json = {"linear": {"x": 0.3, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0.1}}
     peer.publish(1, json.dumps(twist_json).encode())
-    wait_until(lambda: len(robot.received_cmd_vel()) == 1, what="json cmd_vel")
+    wait_until_sync(lambda: len(robot.received_cmd_vel()) == 1, what="json cmd_vel")
     peer.publish(4, b'{"data": "ignored"}')
     peer.publish(2, twist_stamped_cdr(-0.2, 0.0))
-    wait_until(lambda: len(robot.received_cmd_vel()) == 2, what="stamped cdr cmd_vel")
+    wait_until_sync(lambda: len(robot.received_cmd_vel()) == 2, what="stamped cdr cmd_vel")
     stamped_json = {
         "header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""},
         "twist": twist_json,
@@ -469,7 +459,7 @@ def test_json_and_stamped_cmd_vel(robot: DemoRobot, peer: Peer) -> None:
     peer.publish(3, json.dumps(stamped_json).encode())
     peer.publish(1, b"not json")  # dropped with a warning, not fatal
     peer.publish(1, json.dumps({"linear": {"x": 0.0}, "angular": {"z": 0.0}}).encode())
-    wait_until(lambda: len(robot.received_cmd_vel()) == 4, what="all cmd_vel")
+    wait_until_sync(lambda: len(robot.received_cmd_vel()) == 4, what="all cmd_vel")
     log = robot.received_cmd_vel()
     assert [(c.linear_x, c.angular_z, c.encoding) for c in log] == [
         (0.3, 0.1, "json"),
@@ -484,9 +474,9 @@ def test_zero_twist_stops_immediately(robot: DemoRobot, peer: Peer) -> None:
     status_sub = peer.subscribe("/status")
     peer.advertise(1, "/cmd_vel", "cdr", "geometry_msgs/msg/Twist")
     peer.publish(1, twist_cdr(1.0, 0.0))
-    wait_until(lambda: robot.pose[0] > 0.01, what="robot to move")
+    wait_until_sync(lambda: robot.pose[0] > 0.01, what="robot to move")
     peer.publish(1, twist_cdr(0.0, 0.0))
-    wait_until(lambda: len(robot.received_cmd_vel()) == 2, what="zero twist logged")
+    wait_until_sync(lambda: len(robot.received_cmd_vel()) == 2, what="zero twist logged")
 
     def mode(msg: Message) -> str | None:
         if (
@@ -507,7 +497,7 @@ def test_max_speed_parameter_clamps_linear_velocity(robot: DemoRobot, peer: Peer
     peer.send_json(
         {"op": "setParameters", "parameters": [{"name": "max_speed", "value": 0.25}], "id": "s"}
     )
-    wait_until(lambda: robot.parameters["max_speed"] == 0.25, what="max_speed set")
+    wait_until_sync(lambda: robot.parameters["max_speed"] == 0.25, what="max_speed set")
     peer.advertise(1, "/cmd_vel", "cdr", "geometry_msgs/msg/Twist")
     peer.publish(1, twist_cdr(5.0, 0.0))
 
@@ -564,9 +554,9 @@ def test_set_led_rejects_garbage(robot: DemoRobot, peer: Peer) -> None:
 def test_reset_odometry_service(robot: DemoRobot, peer: Peer) -> None:
     peer.advertise(1, "/cmd_vel", "cdr", "geometry_msgs/msg/Twist")
     peer.publish(1, twist_cdr(1.0, 0.5))
-    wait_until(lambda: robot.pose[0] > 0.02, what="robot to move")
+    wait_until_sync(lambda: robot.pose[0] > 0.02, what="robot to move")
     peer.publish(1, twist_cdr(0.0, 0.0))
-    wait_until(lambda: len(robot.received_cmd_vel()) == 2, what="zero twist logged")
+    wait_until_sync(lambda: len(robot.received_cmd_vel()) == 2, what="zero twist logged")
     response = peer.call_service("/reset_odometry", TRIGGER_REQUEST)
     assert isinstance(response, bytes)
     reply: Any = TS.deserialize_cdr(response, "std_srvs/srv/Trigger_Response")
@@ -738,7 +728,7 @@ def test_cmd_vel_log_is_bounded() -> None:
         peer.advertise(1, "/cmd_vel", "cdr", "geometry_msgs/msg/Twist")
         for i in range(3):
             peer.publish(1, twist_cdr(0.1 * i, 0.0))
-        wait_until(
+        wait_until_sync(
             lambda: [c.linear_x for c in small.received_cmd_vel()] == [0.1, 0.2],
             what="oldest entry dropped",
         )

@@ -61,12 +61,6 @@ UNTIL_S = 5.0
 """How long a ``block: until-stopped`` block runs before the harness stops it."""
 
 
-@pytest.fixture(scope="module")
-def robot() -> Iterator[DemoRobot]:
-    with DemoRobot() as bot:
-        yield bot
-
-
 def _runs_on_demo(block: Block) -> bool:
     return block.needs in (None, "recording") and block.include is None and block.lang not in EXEMPT
 

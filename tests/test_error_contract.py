@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +29,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import rosbridge_options, wait_until, zenoh_options
 from peers.rosbridge import RosBridge, RosGraph
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.demo import DemoRobot
@@ -41,20 +42,7 @@ SET_BOOL = "std_srvs/srv/SetBool"
 FIB = "test_msgs/action/Fibonacci"
 
 
-@pytest.fixture(scope="module")
-def robot() -> Iterator[DemoRobot]:
-    with DemoRobot() as demo:
-        yield demo
-
-
-def fox_options(**kw: Any) -> rmb.ClientOptions:
-    return rmb.ClientOptions(reconnect=None, **kw)
-
-
-def rb_options(**kw: Any) -> rmb.ClientOptions:
-    base: dict[str, Any] = {"discovery_interval": 0.25, "teardown_timeout": 3.0, "reconnect": None}
-    base.update(kw)
-    return rmb.ClientOptions(**base)
+fox_options = partial(rmb.ClientOptions, reconnect=None)
 
 
 def assert_misfit(exc: rmb.MessageError, call: str, type_name: str, field: str) -> None:
@@ -226,7 +214,9 @@ def test_sync_client_waits_through_the_async_one(robot: DemoRobot) -> None:
 
 @pytest.mark.peer
 async def test_rosbridge_misfits_are_one_class(rosbridge: RosBridge, ros_graph: RosGraph) -> None:
-    async with rmb.connect(rosbridge.url, protocol="rosbridge", options=rb_options()) as client:
+    async with rmb.connect(
+        rosbridge.url, protocol="rosbridge", options=rosbridge_options()
+    ) as client:
         with pytest.raises(rmb.MessageError) as pub:
             await client.publish("/rmb_contract_twist", TWIST, {"angular": {"w": 1}})
         assert_misfit(pub.value, "publish /rmb_contract_twist", "Twist", "angular.w")
@@ -263,7 +253,9 @@ async def answer_a_typo_first(
 async def test_rosbridge_serve_reply_misfit(rosbridge: RosBridge, ros_graph: RosGraph) -> None:
     name = "/rmb_contract_served"
     caught: list[rmb.MessageError] = []
-    async with rmb.connect(rosbridge.url, protocol="rosbridge", options=rb_options()) as client:
+    async with rmb.connect(
+        rosbridge.url, protocol="rosbridge", options=rosbridge_options()
+    ) as client:
         async with client.serve(name, SET_BOOL) as requests, anyio.create_task_group() as tg:
             tg.start_soon(answer_a_typo_first, requests, caught)
             request = {"cmd": "call", "service": name, "type": SET_BOOL, "args": {"data": True}}
@@ -278,7 +270,9 @@ async def test_rosbridge_serve_reply_misfit(rosbridge: RosBridge, ros_graph: Ros
 @pytest.mark.peer
 async def test_rosbridge_parameter_refusals(rosbridge: RosBridge, ros_graph: RosGraph) -> None:
     count, label = "/rmb_params:count", "/rmb_params:label"
-    async with rmb.connect(rosbridge.url, protocol="rosbridge", options=rb_options()) as client:
+    async with rmb.connect(
+        rosbridge.url, protocol="rosbridge", options=rosbridge_options()
+    ) as client:
         try:
             with pytest.raises(rmb.ParameterError) as refused:
                 await client.set_parameters({count: "fast", label: "contract"})
@@ -297,10 +291,6 @@ async def test_rosbridge_parameter_refusals(rosbridge: RosBridge, ros_graph: Ros
 
 
 # -- Zenoh: zenoh-ros2-sdk nodes ------------------------------------------------------------
-
-
-def zenoh_options(domain: int, **kw: Any) -> rmb.ClientOptions:
-    return rmb.ClientOptions(domain_id=domain, **kw)
 
 
 @pytest.mark.peer

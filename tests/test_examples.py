@@ -10,7 +10,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 from pathlib import Path
@@ -21,16 +20,11 @@ import httpx
 import pytest
 from httpx_ws import aconnect_ws
 
+from _util import wait_until_sync
 from ros_mobile_bridge.demo import DemoRobot
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLES = ROOT / "examples"
-
-
-@pytest.fixture(scope="module")
-def robot() -> Iterator[DemoRobot]:
-    with DemoRobot() as bot:
-        yield bot
 
 
 def run(script: str, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
@@ -145,17 +139,17 @@ def relay(robot: DemoRobot) -> Iterator[str]:
     script = str(EXAMPLES / "relay_starlette.py")
     cmd = [sys.executable, script, robot.url, "/odom", "--port", str(port)]
     with subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.PIPE, text=True) as proc:
+
+        def page() -> httpx.Response | None:
+            assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+            try:
+                return httpx.get(f"http://127.0.0.1:{port}/", timeout=1)
+            except httpx.TransportError:
+                return None
+
         try:
-            deadline = time.monotonic() + 30
-            while True:
-                assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
-                try:
-                    page = httpx.get(f"http://127.0.0.1:{port}/", timeout=1)
-                    break
-                except httpx.TransportError:
-                    assert time.monotonic() < deadline, "the relay did not start"
-                    time.sleep(0.2)
-            assert "new WebSocket" in page.text  # the page a browser loads
+            served = wait_until_sync(page, 30, what="the relay to start", interval=0.2)
+            assert "new WebSocket" in served.text  # the page a browser loads
             yield f"ws://127.0.0.1:{port}/ws"
         finally:
             proc.terminate()  # uvicorn's graceful shutdown runs the lifespan's teardown

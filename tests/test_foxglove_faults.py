@@ -11,13 +11,14 @@ import logging
 import socket
 import struct
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import fast_options, wait_until
 from peers.scripted import SERVER_INFO, Peer, scripted_server
 from ros_mobile_bridge.transport import HandshakeRejected
 
@@ -70,12 +71,8 @@ ADVERTISE_SERVICES = json.dumps(
 )
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("connect_timeout", 5.0)
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("discovery_grace", 0.05)
-    kw.setdefault("reconnect", None)  # these faults end the session; reconnect has its own tests
-    return rmb.ClientOptions(**kw)
+# these faults end the session; reconnect has its own tests
+options = partial(fast_options, discovery_grace=0.05, reconnect=None)
 
 
 def message_data(sub_id: int, payload: bytes, log_time: int = 7) -> bytes:

@@ -4,7 +4,7 @@ process) serves the library as Foxglove and as rosbridge: the ground the
 
 from __future__ import annotations
 
-from typing import Any
+from functools import partial
 
 import anyio
 import pytest
@@ -12,11 +12,7 @@ import pytest
 import ros_mobile_bridge as rmb
 from peers.hostile import HostileServer
 
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    base: dict[str, Any] = {"connect_timeout": 5.0, "reconnect": None, "discovery_grace": 0.05}
-    base.update(kw)
-    return rmb.ClientOptions(**base)
+options = partial(rmb.ClientOptions, connect_timeout=5.0, reconnect=None, discovery_grace=0.05)
 
 
 @pytest.mark.parametrize("protocol", ["foxglove", "rosbridge"])

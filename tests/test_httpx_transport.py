@@ -11,7 +11,7 @@ from __future__ import annotations
 import ssl
 import sys
 from collections.abc import AsyncIterator, Iterator
-from typing import Any
+from functools import partial
 
 import anyio
 import httpx
@@ -20,7 +20,7 @@ import trustme
 
 import ros_mobile_bridge as rmb
 from _relay import Relay
-from _util import wait_until
+from _util import fast_options, wait_until
 from peers.foxglove_sdk import SdkServer, decode, string_msg
 from peers.rosbridge import RosBridge
 
@@ -29,11 +29,7 @@ pytest_plugins = ["peers.ros_fixtures"]
 TOKEN = "Bearer httpx-s3cret"
 
 
-def options(client: httpx.AsyncClient, **kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 5.0)
-    kw.setdefault("zero_twist_on_exit", False)
-    return rmb.ClientOptions(http_client=client, **kw)
+options = partial(fast_options, zero_twist_on_exit=False)
 
 
 @pytest.fixture
@@ -56,7 +52,7 @@ async def test_foxglove_negotiates_its_subprotocol_subscribes_and_publishes(
     server: SdkServer, client: httpx.AsyncClient
 ) -> None:
     chatter = server.channel("/chatter", "std_msgs/msg/String")
-    async with rmb.connect(server.url, options=options(client)) as robot:
+    async with rmb.connect(server.url, options=options(http_client=client)) as robot:
         assert robot.protocol == "foxglove-ws"
         assert robot.server_info.subprotocol == "foxglove.sdk.v1.1"
         assert [t.name for t in robot.topics] == ["/chatter"]
@@ -81,7 +77,9 @@ async def test_foxglove_negotiates_its_subprotocol_subscribes_and_publishes(
 async def test_protocol_auto_through_httpx_finds_foxglove(
     server: SdkServer, client: httpx.AsyncClient
 ) -> None:
-    async with rmb.connect(server.url, protocol="auto", options=options(client)) as robot:
+    async with rmb.connect(
+        server.url, protocol="auto", options=options(http_client=client)
+    ) as robot:
         assert robot.protocol == "foxglove-ws"
 
 
@@ -90,7 +88,7 @@ async def test_the_clients_default_headers_and_the_options_headers_reach_the_pro
 ) -> None:
     with Relay(server.url, require=("authorization", TOKEN)) as proxy:
         async with httpx.AsyncClient(headers={"Authorization": TOKEN}) as c:
-            opts = options(c, headers={"X-Robot-Fleet": "north"})
+            opts = options(http_client=c, headers={"X-Robot-Fleet": "north"})
             async with rmb.connect(proxy.url, options=opts) as robot:
                 assert robot.server_info.subprotocol == "foxglove.sdk.v1.1"
         (headers,) = proxy.requests
@@ -107,7 +105,7 @@ async def test_the_clients_auth_flow_applies_to_the_upgrade(server: SdkServer) -
 
     with Relay(server.url, require=("authorization", TOKEN)) as proxy:
         async with httpx.AsyncClient(auth=Bearer()) as c:
-            async with rmb.connect(proxy.url, options=options(c)) as robot:
+            async with rmb.connect(proxy.url, options=options(http_client=c)) as robot:
                 assert robot.protocol == "foxglove-ws"
 
 
@@ -117,7 +115,9 @@ async def test_a_refused_upgrade_is_a_handshake_rejection_with_status_and_body(
     with Relay(server.url, require=("authorization", TOKEN)) as proxy:
         with pytest.raises(rmb.ConnectError) as caught:
             async with rmb.connect(
-                proxy.url, protocol="foxglove-ws", options=options(client, reconnect=None)
+                proxy.url,
+                protocol="foxglove-ws",
+                options=options(http_client=client, reconnect=None),
             ):
                 pass
     assert getattr(caught.value, "status", None) == 401
@@ -128,14 +128,16 @@ async def test_a_refused_tcp_connection_is_a_connect_error(client: httpx.AsyncCl
     with SdkServer() as srv:
         url = srv.url
     with pytest.raises(rmb.ConnectError, match="cannot connect"):
-        async with rmb.connect(url, protocol="foxglove-ws", options=options(client)):
+        async with rmb.connect(url, protocol="foxglove-ws", options=options(http_client=client)):
             pass
 
 
 async def test_the_server_going_away_is_noticed(client: httpx.AsyncClient) -> None:
     srv = SdkServer()
     try:
-        async with rmb.connect(srv.url, options=options(client, reconnect=None)) as robot:
+        async with rmb.connect(
+            srv.url, options=options(http_client=client, reconnect=None)
+        ) as robot:
             assert robot.status == "connected"
             srv.stop()
             await wait_until(lambda: robot.status == "error", what="connection loss")
@@ -148,7 +150,7 @@ async def test_a_message_over_max_frame_size_fails_the_connection_as_by_default(
 ) -> None:
     """The bounds are the library's WebSocket's, whichever transport opened it."""
     chatter = server.channel("/chatter", "std_msgs/msg/String")
-    opts = options(client, max_frame_size=4096, reconnect=None)
+    opts = options(http_client=client, max_frame_size=4096, reconnect=None)
     async with rmb.connect(server.url, options=opts) as robot:
         async with robot.subscribe("/chatter") as sub:
             await wait_until(lambda: "/chatter" in server.subscribed())
@@ -169,7 +171,7 @@ async def test_wss_with_the_clients_tls_settings() -> None:
         ca.configure_trust(ctx)
         chatter = srv.channel("/chatter", "std_msgs/msg/String")
         async with httpx.AsyncClient(verify=ctx) as c:
-            async with rmb.connect(srv.url, options=options(c)) as robot:
+            async with rmb.connect(srv.url, options=options(http_client=c)) as robot:
                 async with robot.subscribe("/chatter") as sub:
                     await wait_until(lambda: "/chatter" in srv.subscribed())
                     chatter.log(string_msg("tls via httpx"))
@@ -177,7 +179,9 @@ async def test_wss_with_the_clients_tls_settings() -> None:
         assert msg.data == {"data": "tls via httpx"}
         async with httpx.AsyncClient() as untrusting:  # the system CAs only
             with pytest.raises(rmb.ConnectError, match=r"(?i)certificate"):
-                async with rmb.connect(srv.url, options=options(untrusting, reconnect=None)):
+                async with rmb.connect(
+                    srv.url, options=options(http_client=untrusting, reconnect=None)
+                ):
                     pass
 
 
@@ -202,7 +206,7 @@ def switching_protocols(request: httpx.Request) -> httpx.Response:
 
 async def test_a_transport_without_a_network_stream_is_a_connect_error_naming_it() -> None:
     async with httpx.AsyncClient(transport=httpx.MockTransport(switching_protocols)) as c:
-        opts = options(c, reconnect=None)
+        opts = options(http_client=c, reconnect=None)
         with pytest.raises(rmb.ConnectError, match="no network stream") as caught:
             async with rmb.connect("ws://robot.test:8765", protocol="foxglove-ws", options=opts):
                 pass
@@ -219,7 +223,7 @@ async def test_an_http2_answer_says_http2_whatever_its_status(status: int) -> No
         return httpx.Response(status, extensions={"http_version": b"HTTP/2"})
 
     async with httpx.AsyncClient(transport=httpx.MockTransport(over_http2)) as c:
-        opts = options(c, reconnect=None)
+        opts = options(http_client=c, reconnect=None)
         with pytest.raises(rmb.ConnectError, match="answered over HTTP/2") as caught:
             async with rmb.connect("ws://robot.test:8765", protocol="foxglove-ws", options=opts):
                 pass
@@ -235,7 +239,7 @@ async def test_rosbridge_server_rs_through_httpx_with_auth_first(
 ) -> None:
     auth = rmb.RosbridgeAuth("mac", "127.0.0.1", "127.0.0.1", "rand", 1, "admin", 2)
     with Relay(rosbridge.url) as proxy:
-        opts = options(client, rosbridge_auth=auth, latency_probe_interval=0)
+        opts = options(http_client=client, rosbridge_auth=auth, latency_probe_interval=0)
         async with rmb.connect(proxy.url, protocol="rosbridge", options=opts) as robot:
             assert "/chatter" in [t.name for t in robot.topics]
             async with robot.subscribe("/chatter") as sub:
@@ -269,7 +273,7 @@ def test_httpx_missing_is_a_clear_import_error(monkeypatch: pytest.MonkeyPatch) 
 async def test_httpx_missing_when_the_transport_is_opened(
     monkeypatch: pytest.MonkeyPatch, client: httpx.AsyncClient
 ) -> None:
-    opts = options(client)
+    opts = options(http_client=client)
     monkeypatch.setitem(sys.modules, "httpx", None)
     monkeypatch.delitem(sys.modules, "ros_mobile_bridge.transport._httpx", raising=False)
     with pytest.raises(ImportError, match=r"\[httpx\]"):

@@ -26,6 +26,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.ros_env import PeerEnv
 from ros_mobile_bridge._errors import SchemaError
 from ros_mobile_bridge.adapters._shared import codec_registry
@@ -406,9 +407,7 @@ async def test_a_local_type_crosses_zenoh(
         rmb.connect(zenoh_router.locator, options=options) as b,
         b.subscribe("/outer", schema=outer, buffer=10) as sub,
     ):
-        with anyio.fail_after(10):
-            while not any(t.name == "/outer" for t in a.topics):
-                await anyio.sleep(0.02)
+        await wait_until(lambda: any(t.name == "/outer" for t in a.topics), 10, what="/outer")
         for i in range(3):
             await a.publish("/outer", outer, {"inner": {"x": float(i)}})
         got = []
@@ -456,9 +455,9 @@ async def test_we_call_the_tutorial_service_over_zenoh(
     assert adder.hashes[ADD_TWO_INTS] == ADD_TWO_INTS_OFFICIAL
     options = rmb.ClientOptions(domain_id=zenoh_domain, ament_prefix_path=False)
     async with rmb.connect(zenoh_router.locator, options=options) as client:
-        with anyio.fail_after(15):
-            while not any(s.name == "/add_two_ints" for s in client.services):
-                await anyio.sleep(0.05)
+        await wait_until(
+            lambda: any(s.name == "/add_two_ints" for s in client.services), 15, what="the service"
+        )
         assert {s.name: s.type for s in client.services}["/add_two_ints"] == ADD_TWO_INTS
         sums = [
             await client.call_service("/add_two_ints", {"a": a, "b": b}, timeout=5)

@@ -16,6 +16,7 @@ from typing import Any, NoReturn
 import anyio
 import pytest
 
+from _util import wait_until
 from ros_mobile_bridge import lag
 from ros_mobile_bridge.flow._lag import LagMonitor, LagStats, current_monitor, participate
 
@@ -49,11 +50,8 @@ class CountingMonitor(LagMonitor):
             self.running -= 1
 
 
-async def wait_until(predicate: Callable[[], bool], *, deadline: float = 10.0) -> None:
-    """Wait for a sampler-driven condition (the sampler ticks on real time)."""
-    with anyio.fail_after(deadline):
-        while not predicate():
-            await anyio.sleep(0.005)
+SAMPLED = 10.0
+"""Seconds to wait for a sampler-driven condition (the sampler ticks on real time)."""
 
 
 # -- window semantics (fake clock) ------------------------------------------------------
@@ -309,7 +307,7 @@ async def test_the_sampler_records_on_the_real_loop() -> None:
     monitor = LagMonitor(interval=0.001)
     async with anyio.create_task_group() as tg:
         tg.start_soon(monitor.run)
-        await wait_until(lambda: len(monitor) >= 3)
+        await wait_until(lambda: len(monitor) >= 3, SAMPLED)
         tg.cancel_scope.cancel()
     assert all(s >= 0.0 for s in (monitor.stats().p50_ms, monitor.max_lag_ms()))
 
@@ -319,7 +317,7 @@ async def test_two_participants_on_one_loop_make_one_sampler() -> None:
     async with anyio.create_task_group() as tg:
         tg.start_soon(monitor.participate)
         tg.start_soon(monitor.participate)
-        await wait_until(lambda: len(monitor) >= 5)
+        await wait_until(lambda: len(monitor) >= 5, SAMPLED)
         assert monitor.participants == 2
         assert monitor.sampling
         assert monitor.running == 1
@@ -341,21 +339,21 @@ async def test_another_participant_takes_over_when_the_sampler_leaves() -> None:
                 await monitor.participate()
 
         tg.start_soon(member, first)
-        await wait_until(lambda: monitor.sampling)
+        await wait_until(lambda: monitor.sampling, SAMPLED)
         tg.start_soon(member, second)
-        await wait_until(lambda: monitor.participants == 2)
+        await wait_until(lambda: monitor.participants == 2, SAMPLED)
         assert monitor.runs == 1  # the first samples, the second waits
 
         first.cancel()  # the sampling participant's client closes
-        await wait_until(lambda: monitor.participants == 1)
+        await wait_until(lambda: monitor.participants == 1, SAMPLED)
         before = len(monitor)
-        await wait_until(lambda: len(monitor) >= before + 3)  # sampling goes on
+        await wait_until(lambda: len(monitor) >= before + 3, SAMPLED)  # sampling goes on
         assert monitor.runs == 2
         assert monitor.most_running == 1
         assert monitor.sampling
 
         second.cancel()  # the last participant leaves
-        await wait_until(lambda: monitor.participants == 0)
+        await wait_until(lambda: monitor.participants == 0, SAMPLED)
         assert (monitor.sampling, monitor.running) == (False, 0)
     kept = len(monitor)
     assert kept > 0  # the history stays readable
@@ -373,13 +371,13 @@ async def test_a_waiting_participant_leaving_does_not_stop_the_sampler() -> None
                 await monitor.participate()
 
         tg.start_soon(monitor.participate)
-        await wait_until(lambda: monitor.sampling)
+        await wait_until(lambda: monitor.sampling, SAMPLED)
         tg.start_soon(member, waiting)
-        await wait_until(lambda: monitor.participants == 2)
+        await wait_until(lambda: monitor.participants == 2, SAMPLED)
         waiting.cancel()
-        await wait_until(lambda: monitor.participants == 1)
+        await wait_until(lambda: monitor.participants == 1, SAMPLED)
         before = len(monitor)
-        await wait_until(lambda: len(monitor) >= before + 3)
+        await wait_until(lambda: len(monitor) >= before + 3, SAMPLED)
         assert monitor.runs == 1
         tg.cancel_scope.cancel()
 
@@ -402,27 +400,27 @@ async def test_the_signals_start_over_after_nobody_sampled_but_not_on_a_handover
     async with anyio.create_task_group() as tg:
         first, second = anyio.CancelScope(), anyio.CancelScope()
         tg.start_soon(member, first)
-        await wait_until(lambda: monitor.sampling)
+        await wait_until(lambda: monitor.sampling, SAMPLED)
         tg.start_soon(member, second)
-        await wait_until(lambda: monitor.participants == 2)
+        await wait_until(lambda: monitor.participants == 2, SAMPLED)
         first.cancel()  # a hand-over: the second samples on, the signals stay
-        await wait_until(lambda: monitor.runs == 2)
+        await wait_until(lambda: monitor.runs == 2, SAMPLED)
         before = len(monitor)
-        await wait_until(lambda: len(monitor) > before)
+        await wait_until(lambda: len(monitor) > before, SAMPLED)
         assert monitor.recurring_lag_ms() == stall  # (the calm samples dilute the p90)
         second.cancel()  # the last participant leaves
-        await wait_until(lambda: monitor.participants == 0)
+        await wait_until(lambda: monitor.participants == 0, SAMPLED)
     assert monitor.recurring_lag_ms() == stall  # still readable while nobody samples
     kept = len(monitor)
 
     async with anyio.create_task_group() as tg:
         tg.start_soon(monitor.participate)  # a new client, on a calm loop
-        await wait_until(lambda: len(monitor) >= kept + 1)
+        await wait_until(lambda: len(monitor) >= kept + 1, SAMPLED)
         # only the new samples count (the stalls are well inside every window)
         assert monitor.max_lag_ms() < stall
         assert monitor.recurring_lag_ms() < stall
         assert monitor.sustained_lag_ms() < stall
-        await wait_until(lambda: len(monitor) >= kept + 5)
+        await wait_until(lambda: len(monitor) >= kept + 5, SAMPLED)
         assert monitor.sustained_lag_ms() < stall
         tg.cancel_scope.cancel()
     assert monitor.stats().max_ms == stall  # the history kept the stalls
@@ -432,10 +430,10 @@ async def test_a_blocked_loop_shows_up_as_lag() -> None:
     monitor = LagMonitor(interval=0.05)
     async with anyio.create_task_group() as tg:
         tg.start_soon(monitor.participate)
-        await wait_until(lambda: len(monitor) >= 1)
+        await wait_until(lambda: len(monitor) >= 1, SAMPLED)
         time.sleep(0.2)  # block the event loop on purpose
         # the sampler was asleep (0.05 s) when the loop blocked for 0.2 s
-        await wait_until(lambda: monitor.stats().max_ms >= 145.0)
+        await wait_until(lambda: monitor.stats().max_ms >= 145.0, SAMPLED)
         assert monitor.max_lag_ms() >= 145.0
         tg.cancel_scope.cancel()
 
@@ -469,21 +467,21 @@ async def test_tick_callbacks_run_in_the_one_sampler_and_survive_a_handover(
                 await monitor.participate()
 
         tg.start_soon(member, first)
-        await wait_until(lambda: monitor.sampling)  # the first one samples
+        await wait_until(lambda: monitor.sampling, SAMPLED)  # the first one samples
         tg.start_soon(monitor.participate)
-        await wait_until(lambda: monitor.participants == 2)
-        await wait_until(lambda: calls["a"] >= 3)
+        await wait_until(lambda: monitor.participants == 2, SAMPLED)
+        await wait_until(lambda: calls["a"] >= 3, SAMPLED)
         assert calls["b"] >= calls["a"] - 1  # the failing one between them did not stop it
         assert calls["bad"] >= 3
         assert any("periodic callback failed" in r.getMessage() for r in caplog.records)
         assert monitor.most_running == 1
 
         first.cancel()  # the sampler's client leaves: the other takes over
-        await wait_until(lambda: monitor.runs == 2)
+        await wait_until(lambda: monitor.runs == 2, SAMPLED)
         monitor.remove_tick(keys["a"])
         monitor.remove_tick(keys["a"])  # twice is harmless
         a, b = calls["a"], calls["b"]
-        await wait_until(lambda: calls["b"] >= b + 3)
+        await wait_until(lambda: calls["b"] >= b + 3, SAMPLED)
         assert calls["a"] == a  # removed: no more calls
         tg.cancel_scope.cancel()
     assert monitor.ticks == 2
@@ -522,7 +520,7 @@ async def test_participate_samples_the_current_loop() -> None:
         tg.start_soon(participate)
         tg.start_soon(participate)
         monitor = current_monitor()
-        await wait_until(lambda: monitor.participants == 2 and len(monitor) >= 1)
+        await wait_until(lambda: monitor.participants == 2 and len(monitor) >= 1, SAMPLED)
         assert monitor.sampling
         tg.cancel_scope.cancel()
     assert current_monitor().participants == 0

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import anyio
 
+from _util import wait_until
 from ros_mobile_bridge.adapters._pauses import PauseSchedule
 
 
@@ -66,9 +67,7 @@ async def test_run_resumes_each_topic_when_due_and_not_before() -> None:
         now = anyio.current_time()
         p.pause("/a", now, "ka")  # due in 20 ms
         p.pause("/b", now, "kb")  # due in 1 s
-        with anyio.fail_after(5):
-            while not resumed:
-                await anyio.sleep(0.005)
+        await wait_until(lambda: resumed, 5, what="a resume")
         assert resumed == [("/a", "ka")]
         assert "/a" not in p.paused and "/b" in p.paused
         p.forget("/b")  # left while paused: never resumed
@@ -94,8 +93,6 @@ async def test_a_pause_due_sooner_than_the_awaited_one_is_resumed_on_time() -> N
         p.pause("/slow", anyio.current_time(), "ks")
         await anyio.sleep(0.05)  # run now waits for /slow
         p.pause("/fast", anyio.current_time(), "kf")
-        with anyio.fail_after(4):
-            while not resumed:
-                await anyio.sleep(0.005)
+        await wait_until(lambda: resumed, 4, what="a resume")
         tg.cancel_scope.cancel()
     assert resumed == [("/fast", True)]

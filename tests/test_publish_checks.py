@@ -7,7 +7,7 @@ with a ROS 2 graph behind it."""
 from __future__ import annotations
 
 import itertools
-from typing import Any
+from functools import partial
 
 import anyio
 import pytest
@@ -16,7 +16,7 @@ from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import fast_options, rosbridge_options, wait_until
 from peers.foxglove_sdk import SdkServer, decode
 from peers.rosbridge import RosBridge, RosGraph
 
@@ -27,11 +27,7 @@ _unique = itertools.count()
 THING = "float64 speed\nstring label\ngeometry_msgs/Vector3 direction\n"
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 5.0)
-    kw.setdefault("reconnect", None)
-    return rmb.ClientOptions(**kw)
+options = partial(fast_options, reconnect=None)
 
 
 # -- unknown types ----------------------------------------------------------------------
@@ -193,23 +189,14 @@ async def test_publish_zero_twist_passes_the_checks(server: SdkServer) -> None:
 # -- rosbridge ---------------------------------------------------------------------------
 
 
-def ros_options(**kw: Any) -> rmb.ClientOptions:
-    base: dict[str, Any] = {
-        "connect_timeout": 10.0,
-        "discovery_interval": 0.25,
-        "teardown_timeout": 3.0,
-        "reconnect": None,
-    }
-    base.update(kw)
-    return rmb.ClientOptions(**base)
-
-
 async def test_rosbridge_refuses_bad_types_before_advertising(
     rosbridge: RosBridge, ros_graph: RosGraph
 ) -> None:
     await anyio.to_thread.run_sync(ros_graph.command, {"cmd": "clear", "topic": "/cmd_vel"})
     topic = f"/rmb_checked_{next(_unique)}"
-    async with rmb.connect(rosbridge.url, protocol="rosbridge", options=ros_options()) as robot:
+    async with rmb.connect(
+        rosbridge.url, protocol="rosbridge", options=rosbridge_options()
+    ) as robot:
         await wait_until(lambda: any(t.name == "/chatter" for t in robot.topics), 10)
         # unknown to the bundled definitions, the graph and the bridge's rosapi
         with pytest.raises(rmb.SchemaError, match="unknown type 'std_msgs/msg/Strng'"):
@@ -231,6 +218,8 @@ async def test_rosbridge_resolves_a_type_through_rosapi(
     """``test_msgs/msg/Builtins`` is neither bundled nor on the graph: the
     bridge's ``/rosapi/message_details`` knows it."""
     topic = f"/rmb_builtins_{next(_unique)}"
-    async with rmb.connect(rosbridge.url, protocol="rosbridge", options=ros_options()) as robot:
+    async with rmb.connect(
+        rosbridge.url, protocol="rosbridge", options=rosbridge_options()
+    ) as robot:
         await robot.publish(topic, "test_msgs/msg/Builtins", {})
         assert robot._conn.adapter.codecs.resolves("test_msgs/msg/Builtins")

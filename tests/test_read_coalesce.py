@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any
+from functools import partial
 
 import anyio
 import pytest
@@ -27,10 +27,7 @@ from ros_mobile_bridge.transport import WebSocket
 TOPIC = "/chatter"
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("zero_twist_on_exit", False)
-    kw.setdefault("keepalive_interval", 0)
-    return rmb.ClientOptions(**kw)
+options = partial(rmb.ClientOptions, zero_twist_on_exit=False, keepalive_interval=0)
 
 
 def websocket(robot: rmb.Client) -> WebSocket:

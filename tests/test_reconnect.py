@@ -8,23 +8,23 @@ from __future__ import annotations
 import os
 import socket
 import time
+from functools import partial
 from typing import Any
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import FAST, wait_port_free, wait_until
+from _util import FAST, fast_options, wait_port_free, wait_until
 from peers.foxglove_sdk import SdkServer, ros2_service, string_msg
 
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 2.0)
-    kw.setdefault("reconnect", FAST)
-    kw.setdefault("keepalive_interval", 0.5)
-    kw.setdefault("keepalive_timeout", 1.0)
-    return rmb.ClientOptions(**kw)
+options = partial(
+    fast_options,
+    connect_timeout=2.0,
+    reconnect=FAST,
+    keepalive_interval=0.5,
+    keepalive_timeout=1.0,
+)
 
 
 def open_fds() -> int:

@@ -33,6 +33,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 import ros_mobile_bridge as rmb
 from _recording import fields_only, read_with_recipe, read_with_rosbags, ros2_profile
+from _util import rosbridge_options as options
 from _util import wait_until
 from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph
@@ -46,19 +47,9 @@ pytest_plugins = ["peers.ros_fixtures"]
 _unique = itertools.count()
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    base: dict[str, Any] = {
-        "connect_timeout": 10.0,
-        "discovery_interval": 0.25,
-        "teardown_timeout": 3.0,
-        "reconnect": None,
-    }
-    base.update(kw)
-    return rmb.ClientOptions(**base)
-
-
 @pytest.fixture
 def demo() -> Iterator[DemoRobot]:
+    """Not conftest's ``robot``: a fresh one per test, at faster rates."""
     with DemoRobot(rate_hz=50.0, camera_hz=10.0) as robot:
         yield robot
 

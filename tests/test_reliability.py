@@ -11,12 +11,12 @@ machine is."""
 from __future__ import annotations
 
 import threading
-from typing import Any
+from functools import partial
 
 import anyio
 
 import ros_mobile_bridge as rmb
-from _util import wait_until
+from _util import fast_options, wait_until
 from peers.foxglove_sdk import SdkServer, decode, image_msg, string_msg
 from ros_mobile_bridge.flow import current_monitor
 
@@ -32,10 +32,7 @@ def saturate(lag_ms: float) -> None:
         current_monitor().record(lag_ms)
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("zero_twist_on_exit", False)
-    return rmb.ClientOptions(**kw)
+options = partial(fast_options, connect_timeout=10.0, zero_twist_on_exit=False)
 
 
 async def test_adaptive_throttle_caps_a_subscription_ahead_of_decoding(server: SdkServer) -> None:

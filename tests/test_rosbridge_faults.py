@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Awaitable, Callable
+from functools import partial
 from typing import Any
 
 import anyio
@@ -27,16 +28,14 @@ TOPICS = {
 }
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    base: dict[str, Any] = {
-        "connect_timeout": 3.0,
-        "reconnect": None,
-        "teardown_timeout": 1.0,
-        "latency_probe_interval": 0,
-        "keepalive_interval": 0,
-    }
-    base.update(kw)
-    return rmb.ClientOptions(**base)
+options = partial(
+    rmb.ClientOptions,
+    connect_timeout=3.0,
+    reconnect=None,
+    teardown_timeout=1.0,
+    latency_probe_interval=0,
+    keepalive_interval=0,
+)
 
 
 def publish(topic: str, data: str) -> str:

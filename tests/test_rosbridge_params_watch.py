@@ -19,6 +19,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import rosbridge_options as options
 from _util import wait_until
 from peers.ros_env import PeerEnv
 from peers.rosbridge import RosBridge, RosGraph
@@ -29,17 +30,6 @@ EVENT = "rcl_interfaces/msg/ParameterEvent"
 SPEED = "/rmb_params:speed"
 LABEL = "/rmb_params:label"
 _values = itertools.count(1)
-
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    base: dict[str, Any] = {
-        "connect_timeout": 10.0,
-        "discovery_interval": 0.25,
-        "teardown_timeout": 3.0,
-        "reconnect": None,
-    }
-    base.update(kw)
-    return rmb.ClientOptions(**base)
 
 
 def fresh() -> float:

@@ -5,13 +5,13 @@ failure in the rosbridge backend's tests can be told apart from a broken peer.""
 from __future__ import annotations
 
 import json
-import time
 import uuid
 from typing import Any
 
 import pytest
 from websockets.sync.client import ClientConnection
 
+from _util import wait_until_sync
 from peers.rosbridge import RosBridge, RosGraph
 
 pytest_plugins = ["peers.ros_fixtures"]
@@ -22,15 +22,6 @@ def recv_json(ws: ClientConnection, timeout: float = 5.0) -> dict[str, Any]:
     frame = ws.recv(timeout=timeout)
     assert isinstance(frame, str), f"expected a text frame, got {frame!r:.80}"
     return dict(json.loads(frame))
-
-
-def wait_for(predicate: Any, timeout: float = 5.0, interval: float = 0.05) -> Any:
-    deadline = time.monotonic() + timeout
-    while True:
-        value = predicate()
-        if value or time.monotonic() > deadline:
-            return value
-        time.sleep(interval)
 
 
 def test_rosapi_lists_the_graph_topics_services_and_action(rosbridge: RosBridge) -> None:
@@ -68,8 +59,11 @@ def test_publish_reaches_the_graph(rosbridge: RosBridge, ros_graph: RosGraph) ->
         # The bridge drops a publish sent just before the socket closes: a
         # round trip after it makes sure it was handled.
         assert rosbridge.call_service("/rosapi/get_time", ws=ws)["result"] is True
-        received = wait_for(lambda: {"data": text} in ros_graph.received("/rmb_in"))
-    assert received
+        wait_until_sync(
+            lambda: {"data": text} in ros_graph.received("/rmb_in"),
+            interval=0.05,
+            what="the graph to receive the publish",
+        )
 
 
 def test_call_service_answers_and_reports_refusal_as_a_result(rosbridge: RosBridge) -> None:
@@ -123,8 +117,11 @@ def test_graph_node_starts_and_stops_publishers(rosbridge: RosBridge, ros_graph:
     )
     try:
         with rosbridge.connect() as ws:
-            msg = wait_for(
-                lambda: _subscribe_once(ws, "/smoke_point", "geometry_msgs/msg/Point"), 10
+            msg = wait_until_sync(
+                lambda: _subscribe_once(ws, "/smoke_point", "geometry_msgs/msg/Point"),
+                10,
+                interval=0.05,
+                what="a message on /smoke_point",
             )
         assert msg == {"x": 1.5, "y": 0.0, "z": 0.0}
         assert ros_graph.command({"cmd": "count", "topic": "/smoke_point"}) > 0

@@ -20,7 +20,8 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import FAST, take, wait_port_free, wait_until
+from _util import FAST, take, wait_port_free, wait_until, wait_until_sync
+from _util import fast_options as options
 from peers.foxglove_sdk import SdkServer, _Listener, image_msg, string_msg
 
 STRING = "std_msgs/msg/String"
@@ -64,12 +65,6 @@ def replaying() -> Iterator[ReplayingServer]:
         yield srv
     finally:
         srv.stop()
-
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("advertise_settle", 0.0)
-    kw.setdefault("connect_timeout", 5.0)
-    return rmb.ClientOptions(**kw)
 
 
 def fates(stats: rmb.SubscriptionStats) -> int:
@@ -366,9 +361,7 @@ def test_the_sync_client_mirrors_the_mode_and_the_stats(server: SdkServer, backe
         with pytest.raises(ValueError, match="needs max_hz"):
             robot.subscribe("/sync", save_bandwidth=True)
         with robot.subscribe("/sync", max_hz=10, save_bandwidth=True, timeout=5) as sub:
-            deadline = time.monotonic() + 5
-            while subscribes(server, "/sync") < 1 and time.monotonic() < deadline:
-                time.sleep(0.01)
+            wait_until_sync(lambda: subscribes(server, "/sync") >= 1, 5, what="the subscribe")
             chatter.log(string_msg("s"))
             msg = sub.get()
             stats = sub.stats

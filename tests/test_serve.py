@@ -19,6 +19,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import rosbridge_options as options
 from _util import wait_until
 from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph
@@ -35,17 +36,6 @@ _unique = itertools.count()
 
 def unique(name: str) -> str:
     return f"{name}_{next(_unique)}"
-
-
-def options(**kw: Any) -> rmb.ClientOptions:
-    base: dict[str, Any] = {
-        "connect_timeout": 10.0,
-        "discovery_interval": 0.25,
-        "teardown_timeout": 3.0,
-        "reconnect": None,
-    }
-    base.update(kw)
-    return rmb.ClientOptions(**base)
 
 
 async def ros_call(

@@ -16,6 +16,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from ros_mobile_bridge._core._serve import ServedServices, Serving
 from ros_mobile_bridge.adapters import _rosbridge
 from ros_mobile_bridge.wire import rosbridge as rb
@@ -141,9 +142,8 @@ async def test_requests_expired_while_queued_do_not_fill_the_buffer() -> None:
         tg.start_soon(serving.expire)
         await serving.on_service_request(backend, "a", {})  # type: ignore[arg-type]
         await serving.on_service_request(backend, "b", {})  # type: ignore[arg-type]
-        with anyio.fail_after(5):
-            while serving.requests.stats.unanswered < 2:  # the consumer stalls past the deadline
-                await anyio.sleep(0.01)
+        # the consumer stalls past the deadline
+        await wait_until(lambda: serving.requests.stats.unanswered >= 2, 5, what="the expiry")
         await serving.on_service_request(backend, "c", {})  # type: ignore[arg-type]
         await serving.on_service_request(backend, "d", {})  # type: ignore[arg-type]
         assert serving.requests.stats.overflowed == 0

@@ -13,14 +13,13 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until, wait_until_sync
 from peers.rosbridge import RosBridge, RosGraph
 from ros_mobile_bridge.demo import DemoRobot
 
@@ -60,10 +59,11 @@ async def test_the_teardown_of_a_connection_inside_runs(caplog: pytest.LogCaptur
             os.kill(os.getpid(), signal.SIGTERM)
             await anyio.sleep(10)
         assert stop.signal == signal.SIGTERM
-        deadline = time.monotonic() + 5
-        while [c.linear_x for c in robot.received_cmd_vel()] != [0.3, 0.0]:
-            assert time.monotonic() < deadline, robot.received_cmd_vel()
-            await anyio.sleep(0.02)
+        await wait_until(
+            lambda: [c.linear_x for c in robot.received_cmd_vel()] == [0.3, 0.0],
+            5,
+            what=lambda: f"the 0.3 then the zero Twist, got {robot.received_cmd_vel()}",
+        )
 
 
 async def test_a_scope_without_a_signal_reports_none() -> None:
@@ -168,12 +168,6 @@ def test_a_second_signal_exits_at_once(backend: str) -> None:
 # -- rmb, killed -----------------------------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def robot() -> Iterator[DemoRobot]:
-    with DemoRobot() as bot:
-        yield bot
-
-
 def rmb_cli(backend: str, *args: str) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", "ros_mobile_bridge", "--backend", backend, *args],
@@ -182,13 +176,6 @@ def rmb_cli(backend: str, *args: str) -> subprocess.Popen[str]:
         text=True,
         cwd=ROOT,
     )
-
-
-def wait_for(condition: object, timeout: float = 20.0) -> None:
-    deadline = time.monotonic() + timeout
-    while not condition():  # type: ignore[operator]
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.02)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -201,14 +188,14 @@ def test_rmb_pub_killed_sends_the_zero_twist_and_exits_128_plus_signal(
         backend, "pub", "-r", "10", robot.url, "/cmd_vel", "geometry_msgs/msg/Twist", TWIST_03
     )
     try:
-        wait_for(lambda: len(robot.received_cmd_vel()) - before >= 3)
+        wait_until_sync(lambda: len(robot.received_cmd_vel()) - before >= 3, 20)
         proc.send_signal(sig)
         _out, err = proc.communicate(timeout=20)
     finally:
         proc.kill()
     assert proc.returncode == 128 + sig, err
     assert "Traceback" not in err
-    wait_for(lambda: robot.received_cmd_vel()[-1].linear_x == 0.0, 5)
+    wait_until_sync(lambda: robot.received_cmd_vel()[-1].linear_x == 0.0, 5)
     got = [c.linear_x for c in robot.received_cmd_vel()[before:]]
     assert got[-1] == 0.0 and set(got[:-1]) == {0.3}, got
 
@@ -228,13 +215,13 @@ def test_rmb_pub_killed_stops_a_ros_robot_through_rosbridge(
         backend, "pub", "-r", "10", rosbridge.url, "/cmd_vel", "geometry_msgs/msg/Twist", TWIST_03
     )
     try:
-        wait_for(lambda: len(received()) >= 3)
+        wait_until_sync(lambda: len(received()) >= 3, 20, interval=0.02)
         proc.send_signal(signal.SIGTERM)
         _out, err = proc.communicate(timeout=20)
     finally:
         proc.kill()
     assert proc.returncode == 128 + signal.SIGTERM, err
-    wait_for(lambda: received()[-1] == 0.0, 10)  # DDS may still be delivering
+    wait_until_sync(lambda: received()[-1] == 0.0, 10, interval=0.02)  # DDS may still be delivering
     got = received()
     assert set(got[:-1]) == {0.3}, got
 
@@ -288,7 +275,7 @@ def test_rmb_pub_whose_stdout_closes_still_stops_the_robot(robot: DemoRobot, bac
         proc.stderr.close()
     assert "Traceback" not in err and "Exception ignored" not in err, err
     assert proc.returncode == 128 + signal.SIGPIPE
-    wait_for(lambda: robot.received_cmd_vel()[-1].linear_x == 0.0, 5)
+    wait_until_sync(lambda: robot.received_cmd_vel()[-1].linear_x == 0.0, 5)
     got = [c.linear_x for c in robot.received_cmd_vel()[before:]]
     assert got[-1] == 0.0 and 0.3 in got, got
 

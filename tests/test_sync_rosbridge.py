@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import rosbridge_options as options
 from peers.rosbridge import RosBridge
 
 pytest_plugins = ["peers.ros_fixtures"]
@@ -18,12 +19,6 @@ FIB = "test_msgs/action/Fibonacci"
 @pytest.fixture(params=["asyncio", "trio"])
 def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
-
-
-def options() -> rmb.ClientOptions:
-    return rmb.ClientOptions(
-        connect_timeout=10.0, discovery_interval=0.25, teardown_timeout=3.0, reconnect=None
-    )
 
 
 def test_an_action_goal_gives_feedback_and_its_result(rosbridge: RosBridge, backend: str) -> None:

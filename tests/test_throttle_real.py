@@ -21,7 +21,7 @@ import logging
 import struct
 import threading
 import time
-from typing import Any
+from functools import partial
 
 import anyio
 import pytest
@@ -81,9 +81,7 @@ async def busy_loop(busy: anyio.Event, calm: anyio.Event) -> None:
         await anyio.sleep(0.015)
 
 
-def options(**kw: Any) -> rmb.ClientOptions:
-    kw.setdefault("zero_twist_on_exit", False)
-    return rmb.ClientOptions(**kw)
+options = partial(rmb.ClientOptions, zero_twist_on_exit=False)
 
 
 def dropped(stats: rmb.SubscriptionStats) -> dict[str, int]:
@@ -164,9 +162,12 @@ async def test_a_new_image_subscriber_loses_nothing_to_its_first_decode(
                     with anyio.fail_after(20):
                         await consume(late_sub, second)
                     late_stats = late_sub.stats
-                with anyio.fail_after(20):
-                    while not first or first[-1] != count - 1:
-                        await anyio.sleep(0.05)
+                await wait_until(
+                    lambda: first and first[-1] == count - 1,
+                    20,
+                    what="the first subscriber's last frame",
+                    interval=0.05,
+                )
             stats = sub.stats
     finally:
         camera.stop()

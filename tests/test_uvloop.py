@@ -28,6 +28,7 @@ def anyio_backend() -> object:
 
 @pytest.fixture
 def robot() -> Iterator[DemoRobot]:
+    """Not conftest's ``robot``: a fresh one per test, at faster rates."""
     with DemoRobot(rate_hz=50.0, camera_hz=10.0) as demo:
         yield demo
 

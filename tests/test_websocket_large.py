@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
+from _util import wait_until
 from peers.foxglove_sdk import SdkServer, image_msg
 from peers.hostile_server import frame
 from peers.scripted import Peer, scripted_server
@@ -154,9 +155,7 @@ async def test_camera_images_arrive_whole_and_read_only(server: SdkServer) -> No
     options = rmb.ClientOptions(zero_twist_on_exit=False, keepalive_interval=0)
     async with rmb.connect(server.url, options=options) as robot:
         async with robot.subscribe("/camera", buffer=count, adaptive=False) as sub:
-            with anyio.fail_after(10):
-                while "/camera" not in server.subscribed():
-                    await anyio.sleep(0.01)
+            await wait_until(lambda: "/camera" in server.subscribed(), 10, what="the subscribe")
             for pixels in images:
                 cam.log(image_msg(pixels=pixels, stamp=(1, 2), frame_id="cam"))
             got = []

@@ -23,7 +23,8 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import routed, take, wait_until
+from _util import routed, take, wait_until, wait_until_sync
+from _util import zenoh_options as options
 from ros_mobile_bridge._core._rejection_log import LOG_BURST, LOG_EVERY
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
@@ -32,10 +33,6 @@ zenoh = pytest.importorskip("zenoh")
 
 STRING = "std_msgs/msg/String"
 TWIST = "geometry_msgs/msg/Twist"
-
-
-def options(domain: int, **kw: Any) -> rmb.ClientOptions:
-    return rmb.ClientOptions(domain_id=domain, **kw)
 
 
 def data_key(domain: int, topic: str, type_name: str = STRING) -> str:
@@ -660,13 +657,13 @@ def test_rmb_pub_killed_leaves_a_zero_twist_last(
         text=True,
         env={**os.environ, "ROS_DOMAIN_ID": str(zenoh_domain)},
     )
+
+    def three_received() -> bool:
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        return len(received) >= 3
+
     try:
-        deadline = time.monotonic() + 20
-        while len(received) < 3:
-            assert time.monotonic() < deadline and proc.poll() is None, (
-                proc.stderr.read() if proc.stderr else ""
-            )
-            time.sleep(0.02)
+        wait_until_sync(three_received, 20, what="three Twists from rmb pub", interval=0.02)
         proc.send_signal(sig)
         _out, err = proc.communicate(timeout=20)
     finally:
@@ -674,9 +671,12 @@ def test_rmb_pub_killed_leaves_a_zero_twist_last(
         sub.undeclare()
     assert proc.returncode == 128 + sig, err
     assert "Traceback" not in err
-    deadline = time.monotonic() + 5  # the router may still be forwarding
-    while received[-1] != 0.0 and time.monotonic() < deadline:
-        time.sleep(0.02)
+    wait_until_sync(  # the router may still be forwarding
+        lambda: received[-1] == 0.0,
+        5,
+        what=lambda: f"the zero Twist last, got {received}",
+        interval=0.02,
+    )
     with lock:
         got = list(received)
     assert got[-1] == 0.0 and set(got[:-1]) == {0.3}, got

@@ -12,13 +12,13 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
+from _util import zenoh_options as options
 from peers.zenoh_router import ZenohRouter
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
@@ -60,10 +60,6 @@ def official_hash(ros_share: Path, type_name: str) -> str:
     source = f"{pkg}/{kind}/{name.split('_')[0] if kind == 'action' else name}.json"
     hashes = json.loads((ros_share / source).read_text())["type_hashes"]
     return next(h["hash_string"] for h in hashes if h["type_name"] == type_name)
-
-
-def options(domain: int, **kw: Any) -> rmb.ClientOptions:
-    return rmb.ClientOptions(domain_id=domain, **kw)
 
 
 async def connected(client: rmb.Client, ros_share: Path) -> None:

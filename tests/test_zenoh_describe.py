@@ -23,6 +23,7 @@ from mcap.reader import make_reader
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
+from _util import zenoh_options as options
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import DESCRIPTION_CACHE, CodecRegistry, description_hash
 
@@ -54,10 +55,6 @@ def _fresh_cache() -> Iterator[None]:
     DESCRIPTION_CACHE.clear()
     yield
     DESCRIPTION_CACHE.clear()
-
-
-def options(domain: int, **kw: Any) -> rmb.ClientOptions:
-    return rmb.ClientOptions(domain_id=domain, **kw)
 
 
 def talker(sdk: Callable[..., SdkNode], type_name: str, values: Any, *flags: str) -> SdkNode:

@@ -20,6 +20,7 @@ import pytest
 
 import ros_mobile_bridge as rmb
 from _util import routed, wait_until
+from _util import zenoh_options as options
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
@@ -42,10 +43,6 @@ def params_node(zenoh_router: Any, zenoh_domain: int, ros_share: Path) -> Iterat
         yield node
     finally:
         node.stop()
-
-
-def options(domain: int) -> rmb.ClientOptions:
-    return rmb.ClientOptions(domain_id=domain)
 
 
 def data_key(domain: int, topic: str, type_name: str) -> str:

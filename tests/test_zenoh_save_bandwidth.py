@@ -16,7 +16,8 @@ import pytest
 
 import ros_mobile_bridge as rmb
 from _util import take, wait_until
-from test_zenoh import STRING, attachment, cdr, data_key, options, pump_threads
+from _util import zenoh_options as options
+from test_zenoh import STRING, attachment, cdr, data_key, pump_threads
 
 pytest.importorskip("zenoh")
 

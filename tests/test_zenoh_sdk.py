@@ -18,6 +18,7 @@ import pytest
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
+from _util import zenoh_options as options
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 
@@ -31,10 +32,6 @@ OFFICIAL = {
     STRING: "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
     TWIST: "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
 }
-
-
-def options(domain: int, **kw: Any) -> rmb.ClientOptions:
-    return rmb.ClientOptions(domain_id=domain, **kw)
 
 
 def test_the_sdk_hashes_are_the_official_ones_and_ours(

@@ -23,6 +23,7 @@ import pytest
 
 import ros_mobile_bridge as rmb
 from _util import wait_until
+from _util import zenoh_options as options
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
 from ros_mobile_bridge.wire import rmw_zenoh as rz
@@ -34,10 +35,6 @@ zenoh = pytest.importorskip("zenoh")
 
 SET_BOOL = "std_srvs/srv/SetBool"
 TRIGGER = "std_srvs/srv/Trigger"
-
-
-def options(domain: int, **kw: Any) -> rmb.ClientOptions:
-    return rmb.ClientOptions(domain_id=domain, **kw)
 
 
 def client_of(sdk: Callable[..., SdkNode], name: str, type_: str, requests: list[Any]) -> SdkNode:
