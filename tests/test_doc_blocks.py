@@ -16,6 +16,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -249,6 +250,30 @@ def _started(proc: subprocess.Popen[str], what: str) -> None:
     assert proc.stdout.readline(), f"{what} ended at once: {proc.communicate()}"
 
 
+def _cpu_ticks(pid: int) -> int | None:
+    """The process's CPU time so far in clock ticks (Linux), else None."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return int(fields[11]) + int(fields[12])  # utime + stime
+
+
+def _settled(proc: subprocess.Popen[str]) -> None:
+    """Wait until the program has started and waits (its CPU time unchanged
+    over 0.3 s: the interpreter's start-up and its imports are over), at
+    most BLOCK_S: a Ctrl-C before then would hit the start-up, not the
+    program, on a machine busy enough to make the start-up slow."""
+    deadline = time.monotonic() + BLOCK_S
+    last = _cpu_ticks(proc.pid)
+    while last is not None and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.3)
+        now = _cpu_ticks(proc.pid)
+        if now == last:
+            return
+        last = now
+
+
 def _stop(proc: subprocess.Popen[str], what: str) -> None:
     """SIGINT (Ctrl-C); it must end cleanly (0, or rmb's 130)."""
     assert proc.poll() is None, f"{what} ended early ({proc.returncode}): {proc.communicate()}"
@@ -320,6 +345,7 @@ def run_shell(block: Block, url: str, tmp_path: Path) -> None:
                     raise AssertionError(
                         f"{what} did not end (mark `block: until-stopped`)"
                     ) from None
+                _settled(proc)
                 _stop(proc, what)
                 continue
             assert proc.returncode == 0, f"{what}: exit {proc.returncode}\n{out}\n{err}"
