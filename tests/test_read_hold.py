@@ -274,10 +274,14 @@ async def test_a_stopping_stream_still_delivers_its_last_message(server: SdkServ
                         if len(got) == 3:
                             break
                 last = ticker.sent - 1  # the stream has stopped
-                async for msg in sub:
-                    got.append(int(msg.data["data"]))
-                    if got[-1] == last:
-                        break
+                # (the third message may already be the last one sent: a
+                # busy machine's ticker thread may not log again before it
+                # is stopped)
+                if got[-1] != last:
+                    async for msg in sub:
+                        got.append(int(msg.data["data"]))
+                        if got[-1] == last:
+                            break
             assert ws.quiet_holds >= 1
             assert got == sorted(got)
 
