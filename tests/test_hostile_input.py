@@ -62,7 +62,9 @@ async def _fragmented(max_frame_size: int) -> tuple[rmb.Client, list[rmb.Message
     peak of memory the client allocated meanwhile (tracemalloc)."""
     got: list[rmb.Message] = []
     with HostileServer.start("one_byte_fragments", size=SIZE) as server:
-        opts = options(max_frame_size=max_frame_size)
+        # (no keep-alive: a pong waits behind the ~100k frames, which a busy
+        # machine's client, tracemalloc on, may take over 10 s to parse)
+        opts = options(max_frame_size=max_frame_size, keepalive_interval=0)
         with anyio.fail_after(60):
             async with rmb.connect(server.url, protocol="foxglove-ws", options=opts) as robot:
                 tracemalloc.start()

@@ -13,6 +13,7 @@ import base64
 import itertools
 import json
 import logging
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -264,8 +265,9 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) 
 
     Not the default 4 ms window: on a loaded machine the graph publishes
     at a few hundred Hz, a frame or two per 4 ms, and CI once counted 0.61
-    reads per frame there; at 20 ms the bound holds down to the 150 Hz the
-    test requires. Discovery polls at its default interval: each rosapi
+    reads per frame there. The reads are bounded by the windows the
+    stream took (one read a window), measured, not by a rate the machine
+    must reach. Discovery polls at its default interval: each rosapi
     answer is a frame the reader must handle, and the frames after it in
     its read go with it (the tests' 0.25 s polls left 15% of a 10 ms
     window's frames to the reader)."""
@@ -290,19 +292,27 @@ async def test_a_steady_stream_is_read_in_batches_over_rosbridge(peer: RosPeer) 
                     reads, waited, received = ws.reads, ws.coalesced, sub.stats.received
                     inline, paced = ws.inline_messages, ws.paced_reads
                     got = 0
-                    with anyio.move_on_after(2.0):
+                    start = time.monotonic()
+                    with anyio.move_on_after(10.0):  # (about 0.4 s on a quiet machine)
                         async for _msg in sub:
                             got += 1
+                            if got == 400:
+                                break
+                    elapsed = time.monotonic() - start
                     stats = sub.stats
                     frames = stats.received - received
-                    # the stream really was fast (the reads' bound needs 150 Hz)
-                    assert frames > (300 if window else 100), frames
+                    assert frames > 100, frames  # the stream flowed
                     assert stats.delivered - 1 == got  # nothing dropped or kept back
                     assert stats.dropped_throttle == stats.dropped_overflow == 0
                     assert ws.inline_messages - inline > frames * 0.9, (inline, frames)
                     if window:
                         assert ws.coalesced - waited > 0
-                        assert ws.reads - reads < frames * 0.6, (ws.reads - reads, frames)
+                        # at most a read per window (and a few for rosapi's
+                        # answers): far fewer than frames while they come
+                        # faster than one a window
+                        bound = elapsed / window * 1.5 + 5
+                        assert ws.reads - reads <= bound, (ws.reads - reads, bound, frames)
+                        assert ws.reads - reads < frames, (ws.reads - reads, frames)
                         in_callback = ws.paced_reads - paced
                         assert in_callback > (ws.reads - reads) // 2, (in_callback, ws.reads)
                     else:
