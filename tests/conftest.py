@@ -10,6 +10,7 @@ worker (one ROS graph and bridge per run)."""
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import random
@@ -84,22 +85,17 @@ def _one_loop(item: pytest.Item) -> str:
     return ("asyncio", "trio")[zlib.crc32(key.encode()) % 2]
 
 
-_peer_modules: dict[str, bool] = {}
-
-
+@functools.cache
 def _starts_servers(module: ModuleType) -> bool:
     """The module imports a server: the peers package (real peers, the
     scripted and hostile servers) or the demo robot."""
-    name = module.__name__
-    if name not in _peer_modules:
-        _peer_modules[name] = any(
-            (getattr(value, "__module__", None) or getattr(value, "__name__", "")).startswith(
-                ("peers", "ros_mobile_bridge.demo")
-            )
-            for value in vars(module).values()
-            if isinstance(value, type | ModuleType) or callable(value)
+    return any(
+        (getattr(value, "__module__", None) or getattr(value, "__name__", "")).startswith(
+            ("peers", "ros_mobile_bridge.demo")
         )
-    return _peer_modules[name]
+        for value in vars(module).values()
+        if isinstance(value, type | ModuleType) or callable(value)
+    )
 
 
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the xdist_group marks
