@@ -156,7 +156,7 @@ def test_foxglove_node_list_is_one_error_line(server: SdkServer) -> None:
     result = rmb("node", "list", "-u", server.url)
     assert result.returncode == 1
     lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "does not report ROS nodes" in lines[0], result.stderr
+    assert len(lines) == 1 and "offers no list of ROS nodes" in lines[0], result.stderr
 
 
 # -- Zenoh -------------------------------------------------------------------------------------

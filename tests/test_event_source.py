@@ -21,34 +21,32 @@ class Sink:
 
 
 def source() -> EventSource:
-    s = EventSource()
-    s._init_events()
-    return s
+    return EventSource()
 
 
 async def test_the_reader_delivers_in_order_and_elsewhere_posts() -> None:
     s, sink = source(), Sink()
-    s._emit(TopicState("/a", True))  # before the reader: kept
-    s._post()  # no sink yet: nothing goes anywhere
-    s._attach(sink)
-    s._reject("malformed", "x")
-    await s._deliver()
+    s.emit(TopicState("/a", True))  # before the reader: kept
+    s.post()  # no sink yet: nothing goes anywhere
+    s.attach(sink)
+    s.reject("malformed", "x")
+    await s.deliver()
     assert sink.delivered == [[TopicState("/a", True), Rejected("malformed", "x")]]
-    await s._deliver()  # an inbound message with no events still reaches the sink
+    await s.deliver()  # an inbound message with no events still reaches the sink
     assert sink.delivered[-1] == []
-    s._emit(TopicState("/a", False))
-    s._post()
+    s.emit(TopicState("/a", False))
+    s.post()
     assert sink.posted == [TopicState("/a", False)]
-    s._post()  # nothing left: nothing posted twice
+    s.post()  # nothing left: nothing posted twice
     assert len(sink.posted) == 1
 
 
 async def test_events_before_the_reader_are_bounded_and_the_drop_is_counted() -> None:
     s, sink = source(), Sink()
     for i in range(_KEPT_BEFORE_RUN + 44):
-        s._emit(TopicState(f"/t{i}", True))
-    s._attach(sink)
-    await s._deliver()
+        s.emit(TopicState(f"/t{i}", True))
+    s.attach(sink)
+    await s.deliver()
     (events,) = sink.delivered
     assert len(events) == _KEPT_BEFORE_RUN + 1
     assert events[0] == TopicState("/t0", True)
@@ -57,6 +55,6 @@ async def test_events_before_the_reader_are_bounded_and_the_drop_is_counted() ->
     assert (overflow.reason, overflow.count) == ("overflow", 44)
     # once the reader runs, nothing is dropped
     for i in range(_KEPT_BEFORE_RUN + 1):
-        s._emit(TopicState(f"/u{i}", True))
-    await s._deliver()
+        s.emit(TopicState(f"/u{i}", True))
+    await s.deliver()
     assert len(sink.delivered[-1]) == _KEPT_BEFORE_RUN + 1

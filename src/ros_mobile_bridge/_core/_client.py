@@ -37,6 +37,7 @@ from .._types import (
     Status,
     TopicInfo,
 )
+from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
 from ..flow import Subscription, Watcher
 from ._action import ActionGoal
@@ -148,7 +149,8 @@ class Client:
         ``NotSupportedError``. There is no node watch: the graph command
         (``rmb graph --watch``) polls this."""
         self._conn.require_connected()
-        return await self._conn.adapter.nodes()
+        adapter = self._conn.adapter
+        return await require(adapter.node_list, "node_list", adapter.protocol).nodes()
 
     async def wait_for_topic(self, topic: str, *, timeout: float | None = None) -> TopicInfo:
         """The topic's :class:`~ros_mobile_bridge.TopicInfo` once the robot
@@ -420,11 +422,16 @@ class Client:
     async def fetch_definition(self, name: str) -> bool:
         """Whether a definition of message type ``name`` is known now, after
         asking the server for one where its protocol can (rosbridge:
-        ``/rosapi/message_details``; Foxglove and Zenoh only check what is
-        known). ``NotConnected`` when the connection is not up."""
+        ``/rosapi/message_details``; Zenoh: the type description service of
+        a node that uses it; Foxglove sends definitions only with its
+        channels, so there it only checks what is known). ``NotConnected``
+        when the connection is not up."""
         check_schema(name)
         self._conn.require_connected()
-        return await self._conn.adapter.fetch_definition(name)
+        adapter = self._conn.adapter
+        if adapter.descriptions is None:
+            return adapter.codecs.resolves(name)
+        return await adapter.descriptions.fetch_definition(name)
 
     async def publish_zero_twist(self, topic: str = "/cmd_vel", schema: str | None = None) -> None:
         """Publish a zero velocity at control priority. ``schema`` defaults to
@@ -558,7 +565,10 @@ class Client:
     ) -> AsyncIterator[ServiceRequests]:
         conn = self._conn
         conn.require_connected()
-        async with conn.served.serve(name, service_type, timeout, buffer, conn.current) as served:
+        require(conn.adapter.serving, "serving", conn.adapter.protocol)
+        async with conn.served.serve(
+            name, service_type, timeout, buffer, conn.current_host
+        ) as served:
             yield served
 
     async def _request(
@@ -585,6 +595,10 @@ class Client:
         return result
 
     # -- parameters ---------------------------------------------------------
+    def _parameters(self) -> ParameterAccess:
+        """The connection's parameter part (``NotSupportedError`` when it has none)."""
+        adapter = self._conn.adapter
+        return require(adapter.parameters, "parameters", adapter.protocol)
 
     async def get_parameters(
         self, names: Sequence[str], *, timeout: float | None = None
@@ -601,7 +615,7 @@ class Client:
             raise TypeError("names must be a sequence of str")
         names = list(names)
         values = await self._request(
-            "getParameters", lambda _limit: self._conn.adapter.get_parameters(names), timeout
+            "getParameters", lambda _limit: self._parameters().get_parameters(names), timeout
         )
         missing = [n for n in names if n not in values]
         if missing:
@@ -620,7 +634,7 @@ class Client:
     async def list_parameters(self, *, timeout: float | None = None) -> dict[str, Any]:
         """Every parameter the server exposes, with its value."""
         return await self._request(
-            "getParameters", lambda _limit: self._conn.adapter.get_parameters([]), timeout
+            "getParameters", lambda _limit: self._parameters().get_parameters([]), timeout
         )
 
     async def set_parameters(
@@ -645,7 +659,7 @@ class Client:
         reasons: dict[str, str] = {}
         try:
             after = await self._request(
-                "setParameters", lambda _limit: self._conn.adapter.set_parameters(values), timeout
+                "setParameters", lambda _limit: self._parameters().set_parameters(values), timeout
             )
         except ParameterError as exc:
             after, reasons = exc.values, exc.reasons
@@ -723,15 +737,16 @@ class Client:
         conn = self._conn
         conn.require_connected()
         adapter = conn.adapter
+        actions = require(adapter.actions, "actions", adapter.protocol)
         goal_id: list[str] = []
 
         async def cancel() -> None:
             if goal_id and conn.current() is adapter:
-                await adapter.cancel_action_goal(action, goal_id[0])
+                await actions.cancel_action_goal(action, goal_id[0])
 
         handle = ActionGoal(action, cancel)
         try:
-            goal_id.append(await adapter.send_action_goal(action, action_type, dict(goal), handle))
+            goal_id.append(await actions.send_action_goal(action, action_type, dict(goal), handle))
         except MessageError as exc:
             raise exc.in_call(f"send_action_goal {action}") from None
         try:

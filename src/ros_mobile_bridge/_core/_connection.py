@@ -20,7 +20,7 @@ from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError
 from .._loop._wakeup import serve_timers
 from .._options import ClientOptions
 from .._types import Status
-from ..adapters import Adapter
+from ..adapters import Adapter, ServiceHost
 from ..codec import same_type_name
 from ..flow import Bucket, ThrottleMode, Watchable, participate
 from ._outbound import Outbound
@@ -98,6 +98,10 @@ class Connection:
     def current(self) -> Adapter | None:
         """The adapter while connected, else None."""
         return self.adapter if self.connected else None
+
+    def current_host(self) -> ServiceHost | None:
+        """The adapter's serving part while connected, else None."""
+        return self.adapter.serving if self.connected else None
 
     # -- tasks -----------------------------------------------------------------
     def start(self, tg: anyio.abc.TaskGroup) -> None:
@@ -232,7 +236,7 @@ class Connection:
             # unconfirmed: the new connection's reader starts after this
             await adapter.advertise(topic, schema, confirm=False)
         await self.router.restore()
-        await self.served.restore(adapter)
+        await self.served.restore(adapter.serving)
 
     async def next_connection(self, lost: Adapter | None) -> bool:
         """Wait until a connection other than ``lost`` is up (the reader

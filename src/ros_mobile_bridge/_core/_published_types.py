@@ -54,9 +54,10 @@ class PublishTypes:
         resolved = adapter.codecs.resolves(schema) or any(
             same_type_name(t.schema_name, schema) for t in graph
         )
-        if not resolved and not (check_velocity and velocity_topic):
+        describer = adapter.descriptions
+        if not resolved and describer is not None and not (check_velocity and velocity_topic):
             # (a velocity topic refuses an unresolved type anyway: no round trip)
-            resolved = await adapter.fetch_definition(schema)
+            resolved = await describer.fetch_definition(schema)
         if not resolved:
             raise SchemaError(
                 f"unknown type {schema!r} for {topic}: no definition is bundled, the server "

@@ -31,6 +31,7 @@ from ..adapters import (
     Replayed,
     SubscribeHints,
     TopicState,
+    require,
 )
 from ..flow import (
     AdaptiveThrottle,
@@ -366,8 +367,10 @@ class Router:
         self.graph_now()
         for topic in list(self._routes):
             await self.sync_topic(topic)
-        if self._watched_parameters:
-            await self.adapter.subscribe_parameters(sorted(self._watched_parameters))
+        parameters = self.adapter.parameters
+        if self._watched_parameters and parameters is not None:
+            # (a server restarted without parameters: the watches wait)
+            await parameters.subscribe_parameters(sorted(self._watched_parameters))
 
     def connection_lost(self) -> None:
         """Every subscription is pending again; breaker timers die with the
@@ -401,7 +404,10 @@ class Router:
     async def watch_parameters(self, names: list[str]) -> AsyncIterator[None]:
         """Keep ``names`` watched at the bridge (counted per name, restored
         after a reconnect) for the block."""
-        await self.adapter.subscribe_parameters(names)
+        adapter = self.adapter
+        await require(adapter.parameters, "parameters", adapter.protocol).subscribe_parameters(
+            names
+        )
         for name in names:
             self._watched_parameters[name] = self._watched_parameters.get(name, 0) + 1
         try:
@@ -415,9 +421,10 @@ class Router:
                 else:
                     self._watched_parameters.pop(name, None)
                     unwatched.append(name)
-            if self._connected and unwatched:
+            parameters = self.adapter.parameters
+            if self._connected and unwatched and parameters is not None:
                 with contextlib.suppress(ConnectError):
-                    await self.adapter.unsubscribe_parameters(unwatched)
+                    await parameters.unsubscribe_parameters(unwatched)
 
     # -- reliability -----------------------------------------------------------
     async def run_reliability(self) -> None:

@@ -22,8 +22,15 @@ from typing import Any, Final, Literal
 
 import anyio
 
-from .._errors import ConnectError, MessageError, NotConnected, RosBridgeError, ServiceError
-from ..adapters import Adapter
+from .._errors import (
+    ConnectError,
+    MessageError,
+    NotConnected,
+    NotSupportedError,
+    RosBridgeError,
+    ServiceError,
+)
+from ..adapters import ServiceHost
 
 __all__ = ["ServeStats", "ServedServices", "ServiceRequest", "ServiceRequests", "Serving"]
 
@@ -65,18 +72,18 @@ class _Call:
     connection that carried it, the server's id, the deadline, how it was
     answered (None while open) and the user's face, :attr:`request`."""
 
-    __slots__ = ("adapter", "deadline", "id", "outcome", "request")
+    __slots__ = ("deadline", "host", "id", "outcome", "request")
 
     def __init__(
         self,
-        adapter: Adapter,
+        host: ServiceHost,
         request_id: str,
         args: dict[str, Any],
         deadline: float,
         service: str,
         answer: Answer,
     ) -> None:
-        self.adapter = adapter
+        self.host = host
         self.id = request_id
         self.deadline = deadline
         self.outcome: Outcome | None = None
@@ -186,7 +193,7 @@ class Serving:
         *,
         timeout: float,
         buffer: int,
-        current: Callable[[], Adapter | None],
+        current: Callable[[], ServiceHost | None],
         teardown_timeout: float,
         logger: logging.Logger,
     ) -> None:
@@ -217,15 +224,13 @@ class Serving:
         return ServeStats(**self._counts)
 
     # -- from the adapter's reader ------------------------------------------------
-    async def on_service_request(self, adapter: Adapter, request_id: str, args: Any) -> None:
+    async def on_service_request(self, host: ServiceHost, request_id: str, args: Any) -> None:
         """Queue a forwarded call; answer ``result: false`` at once when
         serving ended or ``buffer`` requests already wait."""
         self._counts["received"] += 1
         if self._closed:
             self._counts["unanswered"] += 1
-            await adapter.respond_service(
-                self.name, request_id, "the service is shutting down", False
-            )
+            await host.respond_service(self.name, request_id, "the service is shutting down", False)
             return
         if len(self._queue) >= self.buffer:  # drop the ones answered while queued
             self._queue = deque(c for c in self._queue if c.outcome is None)
@@ -236,7 +241,7 @@ class Serving:
                 self.name,
                 self.buffer,
             )
-            await adapter.respond_service(
+            await host.respond_service(
                 self.name,
                 request_id,
                 f"the service is busy: {self.buffer} requests already wait",
@@ -244,7 +249,7 @@ class Serving:
             )
             return
         deadline = anyio.current_time() + self.timeout
-        call = _Call(adapter, request_id, args, deadline, self.name, self.answer)
+        call = _Call(host, request_id, args, deadline, self.name, self.answer)
         self._queue.append(call)
         self._unsettled[call] = None
         self._wake.set()
@@ -272,7 +277,7 @@ class Serving:
                     # answer is cancelled unsent, the deadline or the block's
                     # end answers it, never the consumer)
                     continue
-                if call.adapter is not self._current():
+                if call.host is not self._current():
                     self._settle(call, "lost")
                     continue
                 self._taken = call
@@ -304,8 +309,8 @@ class Serving:
             raise ServiceError(
                 self.name, f"request {call.id} was answered already ({call.outcome})"
             )
-        adapter = call.adapter
-        if adapter is not self._current():
+        host = call.host
+        if host is not self._current():
             self._settle(call, "lost")
             raise NotConnected(
                 f"the connection that carried request {call.id} to {self.name} is gone;"
@@ -316,7 +321,7 @@ class Serving:
         # shielded): when it raises, nothing was sent; once it returns, the
         # answer is out, whatever cancellation lands next
         try:
-            await adapter.respond_service(self.name, call.id, values, result)
+            await host.respond_service(self.name, call.id, values, result)
         except MessageError as exc:
             self._unclaim(call)  # still the caller's to answer
             raise exc.in_call(f"reply to {self.name}") from exc
@@ -337,14 +342,14 @@ class Serving:
         (never raises; a lost connection counts the request as lost)."""
         if call.outcome is not None:
             return
-        adapter = call.adapter
-        if adapter is not self._current():
+        host = call.host
+        if host is not self._current():
             self._settle(call, "lost")
             return
         self._log.info("%s: request %s answered result false: %s", self.name, call.id, reason)
         call.outcome = "unanswered"  # claimed, as in answer
         try:
-            await adapter.respond_service(self.name, call.id, reason, False)
+            await host.respond_service(self.name, call.id, reason, False)
         except RosBridgeError as exc:
             self._settle(call, "lost")
             self._log.debug("%s: could not answer %s: %s", self.name, call.id, exc)
@@ -413,15 +418,15 @@ class ServedServices:
         service_type: str,
         timeout: float,
         buffer: int,
-        current: Callable[[], Adapter | None],
+        current: Callable[[], ServiceHost | None],
     ) -> AsyncIterator[ServiceRequests]:
         """The body of ``Client.serve`` (arguments checked, connected):
         advertise, yield the requests, answer what is open and unadvertise on
         every exit."""
         if name in self._served:
             raise ValueError(f"{name} is served by this client already")
-        adapter = current()
-        if adapter is None:
+        host = current()
+        if host is None:
             raise NotConnected("the connection is not up")
         served = Serving(
             name,
@@ -434,7 +439,7 @@ class ServedServices:
         )
         self._served[name] = served
         try:
-            await adapter.advertise_service(name, service_type, served)
+            await host.advertise_service(name, service_type, served)
         except BaseException:
             # the bridge may serve it though (sent, not confirmed): answer the
             # calls that came, then unadvertise (the bridge drops calls still
@@ -458,7 +463,7 @@ class ServedServices:
         name: str,
         served: Serving,
         reason: str,
-        current: Callable[[], Adapter | None],
+        current: Callable[[], ServiceHost | None],
     ) -> None:
         """Answer what is open, then unadvertise ``name``: shielded, within
         the teardown deadline, half of it at most for the answers so that the
@@ -466,21 +471,27 @@ class ServedServices:
         budget = self._teardown_timeout
         with anyio.CancelScope(shield=True), anyio.move_on_after(budget):
             await served.close(reason, budget / 2)
-            adapter = current()
-            if adapter is not None:
+            host = current()
+            if host is not None:
                 try:
-                    await adapter.unadvertise_service(name)
+                    await host.unadvertise_service(name)
                 except RosBridgeError as exc:
                     self._log.debug("unadvertising %s failed: %s", name, exc)
 
-    async def restore(self, adapter: Adapter) -> None:
-        """Advertise every served service on a fresh connection, unconfirmed:
-        a refusal arrives later, through the new reader, and ends that
-        ``serve()`` block (``on_service_failed``)."""
+    async def restore(self, host: ServiceHost | None) -> None:
+        """Advertise every served service on a fresh connection (``host``,
+        its serving part), unconfirmed: a refusal arrives later, through the
+        new reader, and ends that ``serve()`` block (``on_service_failed``).
+        A connection that cannot serve (None) ends every block with
+        ``NotSupportedError``."""
+        if host is None:
+            if self._served:
+                self.fail_all(NotSupportedError("the new connection cannot serve services"))
+            return
         for name, served in list(self._served.items()):
             if self._served.get(name) is not served:
                 continue  # its serve() block ended while this loop awaited
-            await adapter.advertise_service(name, served.service_type, served, confirm=False)
+            await host.advertise_service(name, served.service_type, served, confirm=False)
 
     def fail_all(self, error: RosBridgeError) -> None:
         """Every ``serve()`` iteration raises ``error`` (once the requests

@@ -19,7 +19,6 @@ from .._errors import (
     ConnectError,
     DecodeError,
     NotSupportedError,
-    ParameterError,
     ProtocolMismatchError,
     RosBridgeError,
     SchemaError,
@@ -32,10 +31,10 @@ from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..transport import WebSocket
 from ..wire import foxglove as fx
 from ..wire._limits import truncate_for_log
+from ._foxglove_parameters import FoxgloveParameters
 from ._pauses import PauseSchedule
 from ._seam import (
     EventSink,
-    GoalEvents,
     GraphChanged,
     ParameterValues,
     Replayed,
@@ -45,10 +44,7 @@ from ._seam import (
 from ._shared import (
     Advertisement,
     Advertisements,
-    CannotServe,
-    CountsWebSocket,
     EventSource,
-    Publishes,
     codec_registry,
     open_websocket,
     socket_frame,
@@ -133,12 +129,18 @@ def _greeted(engine: fx.FoxgloveEngine) -> bool:
     return engine.server_info is not None
 
 
-class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
-    """One Foxglove WebSocket connection (see :class:`~.Adapter`)."""
+class FoxgloveAdapter:
+    """One Foxglove WebSocket connection (see :class:`~.Adapter`). Its one
+    optional part is :attr:`parameters`, when the server offers them; the
+    protocol has no actions, no ROS nodes, no type descriptions, and a
+    client cannot serve a service over it."""
 
     protocol = "foxglove-ws"
     wire_timeout_slack = 0.0  # the protocol carries no timeout
-    serve_refusal = "the Foxglove protocol lets a client call services, not offer them"
+    node_list: None = None
+    actions: None = None
+    serving: None = None
+    descriptions: None = None
 
     def __init__(
         self,
@@ -168,15 +170,29 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         self._pauses: PauseSchedule[fx.Channel] = PauseSchedule()
         self._pubs: Advertisements[_ClientChannel] = Advertisements()
         self._calls: PendingRequests[Any] = PendingRequests()
-        self._params: PendingRequests[dict[str, Any]] = PendingRequests()
         self._call_ids = itertools.count(1)
-        self._param_ids = itertools.count(1)
-        self._init_events()
+        self._events = EventSource()
         self._early = early_events
         info = engine.server_info
         assert info is not None
         self.server_info = self._server_info(info)
+        self._parameters = FoxgloveParameters(
+            engine,
+            send_request=self._send_request,
+            send=ws.send,
+            check_pending=self._check_pending,
+            capabilities=lambda: self.server_info.capabilities,
+            closed=lambda: ws.closed,
+        )
+        self._params = self._parameters.requests
+        self.parameters: FoxgloveParameters | None = None
+        self._offer_parameters()
         self._index_channels(tuple(engine.channels.values()), ())
+
+    def _offer_parameters(self) -> None:
+        """:attr:`parameters` as the server's capabilities say now."""
+        offered = "parameters" in self.server_info.capabilities
+        self.parameters = self._parameters if offered else None
 
     def _server_info(self, info: fx.ServerInfo) -> ServerInfo:
         return ServerInfo(
@@ -271,11 +287,11 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             raise error
 
     async def _read(self, sink: EventSink) -> None:
-        self._attach(sink)
+        self._events.attach(sink)
         early, self._early = self._early, []
         for event in early:
             await self._handle(event)
-        await self._deliver()
+        await self._events.deliver()
         ws = self._ws
         engine = self._engine
         saving = self._pauses.rates  # (updated in place)
@@ -287,21 +303,21 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
                 if text:  # UTF-8 bytes: the engine reports invalid ones
                     for event in engine.receive_text(message):
                         await self._handle(event)
-                    await self._deliver()
+                    await self._events.deliver()
                     continue
                 received_ns = time.time_ns()
-                pending = self._pending
+                pending = self._events.pending
                 for event in engine.receive_binary(message):
                     if type(event) is fx.MessageData:
                         if saving and event.channel.topic in saving:
                             await self._saved_frame(event, received_ns)
-                            pending = self._pending  # (a subscribe call may have posted)
+                            pending = self._events.pending  # (a subscribe call may have posted)
                         else:
                             pending.append(self._frame(event, received_ns))
                     else:
                         await self._handle(event)
-                        pending = self._pending
-                self._pending = []
+                        pending = self._events.pending
+                self._events.pending = []
                 await sink.deliver(pending)  # (self._deliver, inlined on the hot path)
         finally:
             ws.handle_inline(None)
@@ -314,14 +330,14 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         with no event or event list built. Anything else, anything while
         events wait for the sink, and a topic in bandwidth mode (its pause
         is the reader's) is left to the reader (False), unchanged."""
-        if text or self._pending:
+        if text or self._events.pending:
             return False
         peeked = self._engine.peek_message_data(data, start, stop)
         if peeked is None:
             return False
         channel, log_time_ns, payload = peeked
         entry = self._decoders.get(channel.id)
-        sink = self._sink
+        sink = self._events.sink
         if entry is None or entry[0] is not channel or sink is None:
             return False  # the reader builds the decoder
         saving = self._pauses.rates
@@ -342,7 +358,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         """The WebSocket's :meth:`~WebSocket.hold_reads` callable: the sink's
         :meth:`~EventSink.quiet_until`, unless a request waits for its answer
         or a topic saves bandwidth (its pauses are timed by the reader)."""
-        sink = self._sink
+        sink = self._events.sink
         if sink is None or self._calls or self._params or self._pauses.rates:
             return 0.0
         return sink.quiet_until(now)
@@ -385,7 +401,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         if isinstance(built, SchemaError):
             what = f"channel {channel.id} ({channel.topic}, {channel.schema_name})"
             if isinstance(built, SchemaTooLarge):
-                self._reject("schema_too_large", f"{what}: {built}")
+                self._events.reject("schema_too_large", f"{what}: {built}")
             else:
                 self._log.warning(
                     "%s: no decoder, messages will be delivered raw: %s",
@@ -440,7 +456,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
                     and topic not in self._pauses.paused
                 ):
                     await self._subscribe_channel(ch)
-            self._emit(self._graph())
+            self._events.emit(self._graph())
         elif isinstance(event, fx.Unadvertise):
             self._index_channels((), event.channels)
             for ch in event.channels:
@@ -448,20 +464,20 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
                 paused = self._pauses.paused.get(ch.topic)
                 if paused is not None and paused[1] == ch:
                     self._pauses.unpause(ch.topic)  # resubscribed below if another carries it
-                    self._emit(TopicState(ch.topic, False))
+                    self._events.emit(TopicState(ch.topic, False))
                     other = self._channel_for(ch.topic)
                     if other is not None and ch.topic in self._wanted:
                         await self._subscribe_channel(other)
                 elif sub_id is not None and self._engine.subscription_channel(sub_id) == ch:
                     del self._active[ch.topic]
-                    self._emit(TopicState(ch.topic, False))
+                    self._events.emit(TopicState(ch.topic, False))
                     # another channel may still carry the topic
                     other = self._channel_for(ch.topic)
                     if other is not None and ch.topic in self._wanted:
                         await self._subscribe_channel(other)
-            self._emit(self._graph())
+            self._events.emit(self._graph())
         elif isinstance(event, fx.AdvertiseServices | fx.UnadvertiseServices):
-            self._emit(self._graph())
+            self._events.emit(self._graph())
         elif isinstance(event, fx.ServiceCallResponse):
             self._calls.resolve(event.call_id, event)
         elif isinstance(event, fx.ServiceCallFailure):
@@ -476,7 +492,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         elif isinstance(event, fx.ParameterValues):
             values = {p.name: p.value for p in event.parameters}
             if event.id is None or not self._params.resolve(event.id, values):
-                self._emit(ParameterValues(values))
+                self._events.emit(ParameterValues(values))
         elif isinstance(event, fx.Status):
             level = {0: logging.INFO, 1: logging.WARNING}.get(event.level, logging.ERROR)
             self._log.log(level, "server status: %s", truncate_for_log(event.message))
@@ -484,12 +500,13 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             # A later serverInfo resets the server's tables; the engine has
             # already reported the old channels and services as unadvertised.
             self.server_info = self._server_info(event)
+            self._offer_parameters()
             self._decoders.clear()
-            self._emit(self._graph())
+            self._events.emit(self._graph())
         elif isinstance(event, fx.ProtocolViolation):
-            self._reject(event.kind, event.reason, event.count)
+            self._events.reject(event.kind, event.reason, event.count)
         elif isinstance(event, fx.MessageData):
-            self._pending.append(self._frame(event, time.time_ns()))
+            self._events.pending.append(self._frame(event, time.time_ns()))
 
     async def _subscribe_channel(self, channel: fx.Channel) -> None:
         await self._prepare_decoder(channel)
@@ -500,7 +517,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         sub_id, message = self._engine.subscribe(channel.id)
         self._active[channel.topic] = sub_id
         await self._ws.send(message)
-        self._emit(TopicState(channel.topic, True))
+        self._events.emit(TopicState(channel.topic, True))
 
     # -- bandwidth mode (SubscribeHints.pause_hz) -----------------------------
     async def _saved_frame(self, event: fx.MessageData, received_ns: int) -> None:
@@ -512,9 +529,9 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         topic = channel.topic
         now = anyio.current_time()
         if not self._pauses.take(topic, now, event.payload):
-            self._emit(Replayed(topic, event.payload.nbytes))  # wait for the next one
+            self._events.emit(Replayed(topic, event.payload.nbytes))  # wait for the next one
             return
-        self._pending.append(self._frame(event, received_ns))
+        self._events.pending.append(self._frame(event, received_ns))
         sub_id = self._active.pop(topic, None)
         if sub_id is None:  # a late frame after an unsubscribe: nothing to pause
             return
@@ -538,7 +555,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             return
         if self._engine.channels.get(channel.id) is not paused_on:
             await self._subscribe_channel(channel)  # another channel: a fresh start
-            self._post()
+            self._events.post()
             return
         sub_id, message = self._engine.subscribe(channel.id)
         self._active[topic] = sub_id
@@ -558,7 +575,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         channel = self._channel_for(topic)
         if channel is not None:
             await self._subscribe_channel(channel)
-            self._post()
+            self._events.post()
 
     async def unsubscribe(self, topic: str) -> None:
         self._wanted.pop(topic, None)
@@ -604,11 +621,6 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             raise
         finally:
             ready.set()
-
-    async def nodes(self) -> list[str]:
-        """The Foxglove protocol has no ROS nodes (its connection graph
-        names publishers of topics, not nodes)."""
-        raise NotSupportedError("the Foxglove protocol does not report ROS nodes")
 
     async def unadvertise(self, topic: str) -> None:
         channel = self._pubs.pop(topic, None)
@@ -686,20 +698,7 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
         except DecodeError as exc:
             raise ServiceError(name, f"the response does not decode: {exc}") from exc
 
-    # -- actions --------------------------------------------------------------
-    async def send_action_goal(
-        self, action: str, action_type: str, goal: Any, events: GoalEvents
-    ) -> str:
-        raise NotSupportedError("the Foxglove protocol has no action operations")
-
-    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
-        raise NotSupportedError("the Foxglove protocol has no action operations")
-
-    # -- parameters ---------------------------------------------------------
-    def _require(self, capability: str) -> None:
-        if capability not in self.server_info.capabilities:
-            raise NotSupportedError(f"the server does not offer {capability!r}")
-
+    # -- requests -----------------------------------------------------------
     def _check_pending(self, what: str) -> None:
         """``ServiceError`` at once when ``max_pending_requests`` requests
         already wait for an answer on this connection."""
@@ -709,47 +708,9 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
                 what, f"{limit} requests already wait for an answer (max_pending_requests)"
             )
 
-    async def _parameter_request(self, build: Any) -> dict[str, Any]:
-        self._check_pending("parameters")
-        request_id = f"rmb-{next(self._param_ids)}"
-        return await self._params.request(request_id, lambda: self._send_request(build(request_id)))
-
-    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
-        self._require("parameters")
-        names = list(names)
-        return await self._parameter_request(lambda rid: self._engine.get_parameters(names, rid))
-
-    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
-        """Set ``values``; the server answers with the values it holds
-        afterwards. The protocol carries no refusal, so a name whose reported
-        value is not the one sent was refused: ``ParameterError`` naming
-        what the robot kept, after every accepted value was applied."""
-        self._require("parameters")
-        params = [fx.Parameter(name, value) for name, value in values.items()]
-        after = await self._parameter_request(lambda rid: self._engine.set_parameters(params, rid))
-        reasons = {
-            name: f"the robot kept {after[name]!r} (the Foxglove protocol gives no reason)"
-            for name, value in values.items()
-            if name in after and not _same_value(after[name], value)
-        }
-        if reasons:
-            raise ParameterError(reasons, after)
-        return after
-
-    async def subscribe_parameters(self, names: Sequence[str]) -> None:
-        self._require("parametersSubscribe")
-        await self._ws.send(self._engine.subscribe_parameter_updates(list(names)))
-
-    async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
-        if "parametersSubscribe" in self.server_info.capabilities and not self._ws.closed:
-            await self._ws.send(self._engine.unsubscribe_parameter_updates(list(names)))
-
     # -- lifecycle ----------------------------------------------------------
     async def send(self, message: WireMessage) -> None:
         await self._ws.send(socket_frame(message))
-
-    async def fetch_definition(self, schema: str) -> bool:
-        return self.codecs.resolves(schema)  # definitions come only with channels
 
     async def confirm_delivery(self) -> None:
         pong = await self._ws.ping()
@@ -768,22 +729,22 @@ class FoxgloveAdapter(EventSource, Publishes, CountsWebSocket, CannotServe):
             )
 
     @property
+    def bytes_received(self) -> int:
+        return self._ws.bytes_received
+
+    @property
+    def messages_received(self) -> int:
+        return self._ws.messages_received
+
+    def publishing(self) -> Mapping[str, str]:
+        return self._pubs.schemas()
+
+    def advertised(self, topic: str) -> str | None:
+        return self._pubs.ready_schema(topic)
+
+    @property
     def closed(self) -> bool:
         return self._ws.closed
 
     async def aclose(self) -> None:
         await self._ws.aclose()
-
-
-def _same_value(held: Any, sent: Any) -> bool:
-    """Whether the value a server reports is the one sent (``2`` and
-    ``2.0`` are; ``True`` and ``1`` are not; sequences element by element)."""
-    held, sent = (v.tolist() if hasattr(v, "tolist") else v for v in (held, sent))
-    if isinstance(held, bool) or isinstance(sent, bool):
-        return type(held) is type(sent) and held == sent
-    if isinstance(held, (list, tuple, bytes)) and isinstance(sent, (list, tuple, bytes)):
-        return len(held) == len(sent) and all(map(_same_value, held, sent))
-    try:
-        return bool(held == sent)
-    except Exception:  # a numpy array or another odd value: not provably the same
-        return False

@@ -218,7 +218,7 @@ class RosbridgeAdapter(
         self._calls: PendingRequests[rb.ServiceResponse] = PendingRequests()
         self._call_names: dict[str, str] = {}
         self._goals: dict[str, tuple[str, GoalEvents]] = {}
-        self._init_events()
+        self._events = EventSource()
         self._rosapi_warned = False
         self._discovery_ok = False
         self._no_definition: set[str] = set()
@@ -227,6 +227,12 @@ class RosbridgeAdapter(
         self._served: dict[str, _Served] = {}
         self._failed_answers: dict[str, str] = {}  # request id -> service, answered false
         self._init_parameters()
+        # (parts: the adapter is each of them until they are objects of their own)
+        self.node_list = self
+        self.parameters = self
+        self.actions = self
+        self.serving = self
+        self.descriptions = self
 
     # -- helpers ---------------------------------------------------------------
     def _next_id(self, kind: str) -> str:
@@ -307,8 +313,8 @@ class RosbridgeAdapter(
 
     # -- the reader --------------------------------------------------------------
     async def run(self, sink: EventSink) -> None:
-        self._attach(sink)
-        await self._deliver()  # what the first discovery found
+        self._events.attach(sink)
+        await self._events.deliver()  # what the first discovery found
         error: ConnectError | None = None
         async with anyio.create_task_group() as tg:
             tg.start_soon(self._poll_discovery)
@@ -327,7 +333,7 @@ class RosbridgeAdapter(
         they are read when they can be (:meth:`_take_inline`)."""
         ws = self._ws
         engine = self._engine
-        sink = self._sink if reading else None
+        sink = self._events.sink if reading else None
         if sink is not None:
             ws.handle_inline(self._take_inline)
         try:
@@ -347,12 +353,14 @@ class RosbridgeAdapter(
                             if sink is not None:
                                 self._on_event(event, received_ns)
                         else:
-                            if sink is not None and self._pending:  # what came before goes first
-                                pending, self._pending = self._pending, []
+                            if (
+                                sink is not None and self._events.pending
+                            ):  # what came before goes first
+                                pending, self._events.pending = self._events.pending, []
                                 await sink.deliver(pending)
                             await self._handle(event)
                 if sink is not None:  # (self._deliver, inlined on the hot path)
-                    pending, self._pending = self._pending, []
+                    pending, self._events.pending = self._events.pending, []
                     await sink.deliver(pending)
         finally:
             if sink is not None:
@@ -368,14 +376,14 @@ class RosbridgeAdapter(
         logs it), a message of an earlier compression still in flight,
         ``/parameter_events`` (the parameter watch reads it), and anything
         while events wait for the sink."""
-        if not text or self._pending:
+        if not text or self._events.pending:
             return False
         raw = data[start:stop]
         topic = self._engine.publish_topic(raw)
         if topic is None or topic not in self._live or topic == PARAMETER_EVENTS:
             return False
         wire = self._subs.get(topic)
-        sink = self._sink
+        sink = self._events.sink
         if wire is None or wire.compression is not None or sink is None:
             return False
         frame = RawFrame(
@@ -430,7 +438,7 @@ class RosbridgeAdapter(
                 decode = self._make_decoder(topic, kind, schema or None)
         if topic not in self._live:
             self._set_live(topic, True)
-        self._pending.append(
+        self._events.pending.append(
             RawFrame(
                 topic,
                 schema,
@@ -461,7 +469,7 @@ class RosbridgeAdapter(
                     truncate_for_log(str(exc)),
                 )
                 if isinstance(exc, SchemaTooLarge):
-                    self._reject("schema_too_large", f"{topic}: {exc}")
+                    self._events.reject("schema_too_large", f"{topic}: {exc}")
         self._decoders[(topic, kind)] = decode
         return decode
 
@@ -491,7 +499,7 @@ class RosbridgeAdapter(
             self._foreign = event.reason
             self._calls.fail_all(ProtocolMismatchError("rosbridge", event.detected, event.reason))
         elif isinstance(event, rb.ProtocolViolation):
-            self._reject(event.kind, event.reason)
+            self._events.reject(event.kind, event.reason)
 
     def _on_status(self, event: rb.Status) -> None:
         key = event.id or ""
@@ -537,7 +545,7 @@ class RosbridgeAdapter(
             self._live.add(topic)
         else:
             self._live.discard(topic)
-        self._emit(TopicState(topic, live))
+        self._events.emit(TopicState(topic, live))
 
     # -- subscriptions -----------------------------------------------------------
     def _desired(self, topic: str, hints: SubscribeHints) -> _WireSub:
@@ -622,7 +630,7 @@ class RosbridgeAdapter(
             raise ValueError(f"compression must be one of {COMPRESSIONS} or None")
         self._wanted[topic] = hints
         await self._sync(topic)
-        self._post()
+        self._events.post()
 
     async def _send_subscribe(self, topic: str, sub: SentSubscription) -> None:
         """The bridge's ``subscribe`` op for ``topic`` as ``sub`` describes it."""

@@ -13,7 +13,8 @@ import anyio
 from .._errors import ConnectError, NotConnected, ServiceError
 from .._options import ClientOptions
 from .._types import ServiceInfo, TopicInfo
-from ._seam import Event, GraphChanged, SubscribeHints
+from ._seam import GraphChanged, SubscribeHints
+from ._shared import EventSource
 
 _INTERNAL_TIMEOUT: Final = 5.0
 """Seconds for the adapter's own rosapi requests (discovery, parameters)."""
@@ -39,9 +40,7 @@ class RosbridgeDiscovery:
     _over_limit: set[str]  # graph limits exceeded at the last poll
     _rosapi: Callable[..., Awaitable[Any]]
     _sync: Callable[[str], Awaitable[None]]
-    _emit: Callable[[Event], None]
-    _reject: Callable[[str, str], None]
-    _post: Callable[[], None]
+    _events: EventSource
 
     @property
     def topics(self) -> list[TopicInfo]:
@@ -105,7 +104,7 @@ class RosbridgeDiscovery:
                 f"/rosapi/{what}: {len(names) - limit} of {len(names)} {what} refused: the "
                 f"connection keeps at most {limit}"
             )
-            self._reject(reason, detail)
+            self._events.reject(reason, detail)
         return names[:limit]
 
     async def _lookup_service_types(self) -> bool:
@@ -133,10 +132,10 @@ class RosbridgeDiscovery:
                 first = False
                 changed |= await self._lookup_service_types()
                 if changed:
-                    self._emit(GraphChanged(self.topics, self.services))
+                    self._events.emit(GraphChanged(self.topics, self.services))
                 for topic in list(self._wanted):
                     await self._sync(topic)
-                self._post()
+                self._events.post()
                 await anyio.sleep(interval)
         except (ConnectError, NotConnected):
             return  # the reader reports the loss

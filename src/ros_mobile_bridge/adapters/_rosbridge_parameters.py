@@ -42,6 +42,7 @@ from ..wire import rosbridge as rb
 from ._parameter_events import PARAMETER_EVENT_TYPE, PARAMETER_EVENTS, by_node, watched_values
 from ._rosbridge_discovery import _names
 from ._seam import ParameterValues
+from ._shared import EventSource
 
 
 class SentSubscription(Protocol):
@@ -73,11 +74,11 @@ class RosbridgeParameters:
     _watched_parameters: set[str]
     _parameter_sub_id: str | None  # the watch's subscribe id while it exists
 
+    _events: EventSource
+
     if TYPE_CHECKING:  # the adapter's core and EventSource provide these
 
         def _next_id(self, kind: str) -> str: ...
-        def _reject(self, reason: str, detail: str, count: int = 1) -> None: ...
-        def _emit(self, event: Any) -> None: ...
         async def _send_subscribe(self, topic: str, sub: SentSubscription) -> None: ...
 
     def _init_parameters(self) -> None:
@@ -189,10 +190,10 @@ class RosbridgeParameters:
                     decode = self.codecs.decoder(PARAMETER_EVENT_TYPE, "cdr")
                 message = decode(event.payload)
         except (DecodeError, SchemaError, ValueError, RecursionError) as exc:
-            self._reject("decode", f"{PARAMETER_EVENTS}: {exc}")
+            self._events.reject("decode", f"{PARAMETER_EVENTS}: {exc}")
             return
         values = watched_values(message, self._watched_parameters)
         if values is None:
-            self._reject("malformed", f"{PARAMETER_EVENTS}: not a {PARAMETER_EVENT_TYPE}")
+            self._events.reject("malformed", f"{PARAMETER_EVENTS}: not a {PARAMETER_EVENT_TYPE}")
         elif values:
-            self._emit(ParameterValues(values))
+            self._events.emit(ParameterValues(values))

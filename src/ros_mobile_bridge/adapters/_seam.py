@@ -11,25 +11,31 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Final, Literal, Protocol, TypeVar
 
-from .._errors import RosBridgeError
+from .._errors import NotSupportedError, RosBridgeError
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry
 from ..flow import RawFrame, WireMessage
 
 __all__ = [
+    "ActionClient",
     "Adapter",
     "Event",
     "EventSink",
     "GoalEvents",
     "GraphChanged",
+    "NodeLister",
+    "ParameterAccess",
     "ParameterValues",
     "Rejected",
     "Replayed",
     "ServiceHandler",
+    "ServiceHost",
     "SubscribeHints",
     "TopicState",
+    "TypeDescriber",
+    "require",
 ]
 
 
@@ -67,12 +73,13 @@ class GoalEvents(Protocol):
 class ServiceHandler(Protocol):
     """Where an adapter hands the calls to a service this client serves."""
 
-    async def on_service_request(self, adapter: Adapter, request_id: str, args: Any) -> None:
-        """A call arrived on ``adapter`` (runs in the reader task: it may send
-        an answer, and must not wait for anything else)."""
+    async def on_service_request(self, host: ServiceHost, request_id: str, args: Any) -> None:
+        """A call arrived through ``host`` (the connection's serving part,
+        which takes the answer; runs in the reader task: it may send an
+        answer, and must not wait for anything else)."""
 
     def on_service_failed(self, error: RosBridgeError) -> None:
-        """The bridge refused the service after :meth:`Adapter.advertise_service`
+        """The bridge refused the service after :meth:`ServiceHost.advertise_service`
         returned (a late refusal, or one to an unconfirmed advertisement):
         ``error`` is a ``SchemaError`` or ``ServiceError``. Runs in the reader
         task; must not block."""
@@ -162,13 +169,121 @@ class EventSink(Protocol):
         newest of it, as its cap would have."""
 
 
+class NodeLister(Protocol):
+    """The ROS nodes of the graph (rosbridge: ``/rosapi/nodes``; Zenoh: the
+    liveliness tokens). The Foxglove protocol reports none."""
+
+    async def nodes(self) -> list[str]:
+        """The nodes now, full names, sorted (this client's own node left
+        out). ``ServiceError`` when the bridge cannot say."""
+        ...
+
+
+class ParameterAccess(Protocol):
+    """Reading, setting and watching parameters, named ``/node:param`` (or
+    as the Foxglove server names them)."""
+
+    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
+        """The values of ``names`` the robot has (all of them for an empty
+        ``names``); a name it does not have is absent."""
+        ...
+
+    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]:
+        """Set ``values``; the values held afterwards. ``ParameterError``
+        naming each refused name, after the others were applied."""
+        ...
+
+    async def subscribe_parameters(self, names: Sequence[str]) -> None:
+        """Report changes of ``names`` as :class:`ParameterValues` events
+        (``NotSupportedError`` where the server can report none)."""
+
+    async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
+        """Stop reporting changes of ``names``."""
+
+
+class ActionClient(Protocol):
+    """Sending goals to ROS 2 action servers."""
+
+    async def send_action_goal(
+        self, action: str, action_type: str, goal: Any, events: GoalEvents
+    ) -> str:
+        """Send a goal; returns its id once the action server accepted it
+        (``ActionGoalError`` when it refused). ``events`` hears what becomes
+        of it."""
+        ...
+
+    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
+        """Ask the server to cancel goal ``goal_id``."""
+
+
+class ServiceHost(Protocol):
+    """Offering a service on the robot's graph; its calls go to a
+    :class:`ServiceHandler`."""
+
+    async def advertise_service(
+        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
+    ) -> None:
+        """Serve ``name`` (type ``pkg/srv/Name``): calls go to ``handler``.
+        With ``confirm``, returns once the server accepted it (this needs the
+        reader running) and raises ``SchemaError`` (unknown type) or
+        ``ServiceError`` when it refused; without, returns once sent (a
+        refusal is logged: restoring after a reconnect, before the new
+        connection's reader runs). When it raises after the advertisement
+        may have taken effect (sent, neither confirmed nor refused: a
+        timeout, a cancellation), calls may still arrive: the caller answers
+        them and then calls :meth:`unadvertise_service`."""
+
+    async def unadvertise_service(self, name: str) -> None:
+        """Stop serving ``name`` (a no-op when not served)."""
+
+    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
+        """Answer the call ``request_id`` to ``name``: ``values`` is the
+        response (``result`` True) or the reason text (False). ``DecodeError``
+        when the response does not fit the type. The frame's write is the
+        last step and is not cut by cancellation: when this raises, nothing
+        was sent; once the write happened, it returns normally."""
+
+
+class TypeDescriber(Protocol):
+    """Asking the robot for a message type's definition."""
+
+    async def fetch_definition(self, schema: str) -> bool:
+        """Whether a definition of message type ``schema`` is known now,
+        after asking the robot for one (rosbridge:
+        ``/rosapi/message_details``; Zenoh: the publishing node's type
+        description service)."""
+        ...
+
+
 class Adapter(Protocol):
     """One connection to one bridge. Built connected by the adapter's
-    ``open_*`` function; closed by :meth:`aclose`."""
+    ``open_*`` function; closed by :meth:`aclose`.
+
+    The core below is what every transport does. What only some do is an
+    optional part: :attr:`node_list`, :attr:`parameters`, :attr:`actions`,
+    :attr:`serving`, :attr:`descriptions`, each None where this connection
+    cannot (the protocol has no such operation, or this server does not
+    offer it). The client checks a part once, with :func:`require`, which
+    raises the one ``NotSupportedError`` for all."""
 
     protocol: str
     server_info: ServerInfo
     codecs: CodecRegistry
+
+    @property
+    def node_list(self) -> NodeLister | None: ...
+
+    @property
+    def parameters(self) -> ParameterAccess | None: ...
+
+    @property
+    def actions(self) -> ActionClient | None: ...
+
+    @property
+    def serving(self) -> ServiceHost | None: ...
+
+    @property
+    def descriptions(self) -> TypeDescriber | None: ...
 
     @property
     def topics(self) -> list[TopicInfo]: ...
@@ -189,11 +304,6 @@ class Adapter(Protocol):
     def messages_received(self) -> int:
         """Messages (or zenoh items) received on this connection so far."""
         ...
-
-    async def nodes(self) -> list[str]:
-        """The ROS nodes of the graph now, full names, sorted (this client's
-        own node left out). ``NotSupportedError`` where the protocol does
-        not report nodes; ``ServiceError`` when the bridge cannot say."""
 
     async def run(self, sink: EventSink) -> None:
         """The reader loop: hands every event to ``sink`` (events that
@@ -242,55 +352,8 @@ class Adapter(Protocol):
     async def call_service(self, name: str, request: Any, timeout: float) -> Any:
         """Call ``name`` and return the decoded response. ``timeout`` is
         forwarded where the protocol carries one; the client owns the
-        deadline. Raises ``ServiceError`` on failure."""
-
-    async def advertise_service(
-        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
-    ) -> None:
-        """Serve ``name`` (type ``pkg/srv/Name``): calls go to ``handler``.
-        With ``confirm``, returns once the server accepted it (this needs the
-        reader running) and raises ``SchemaError`` (unknown type) or
-        ``ServiceError`` when it refused; without, returns once sent (a
-        refusal is logged: restoring after a reconnect, before the new
-        connection's reader runs). ``NotSupportedError`` where the protocol
-        cannot serve. When it raises after the advertisement may have taken
-        effect (sent, neither confirmed nor refused: a timeout, a
-        cancellation), calls may still arrive: the caller answers them and
-        then calls :meth:`unadvertise_service`."""
-
-    async def unadvertise_service(self, name: str) -> None:
-        """Stop serving ``name`` (a no-op when not served)."""
-
-    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
-        """Answer the call ``request_id`` to ``name``: ``values`` is the
-        response (``result`` True) or the reason text (False). ``DecodeError``
-        when the response does not fit the type. The frame's write is the
-        last step and is not cut by cancellation: when this raises, nothing
-        was sent; once the write happened, it returns normally."""
-
-    async def send_action_goal(
-        self, action: str, action_type: str, goal: Any, events: GoalEvents
-    ) -> str:
-        """Send a goal; returns its id. ``events`` hears what becomes of it.
-        ``NotSupportedError`` where the protocol has no actions."""
-
-    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
-        """Ask the server to cancel goal ``goal_id``."""
-
-    async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]: ...
-
-    async def set_parameters(self, values: Mapping[str, Any]) -> dict[str, Any]: ...
-
-    async def subscribe_parameters(self, names: Sequence[str]) -> None: ...
-
-    async def unsubscribe_parameters(self, names: Sequence[str]) -> None: ...
-
-    async def fetch_definition(self, schema: str) -> bool:
-        """Whether a definition of message type ``schema`` is known now,
-        after asking the server for one if its protocol can (rosbridge:
-        ``/rosapi/message_details``; Foxglove sends definitions only with its
-        channels, so there it only checks what is known)."""
-        ...
+        deadline. Raises ``ServiceError`` on failure (``NotSupportedError``
+        when the server takes no calls)."""
 
     async def confirm_delivery(self) -> None:
         """Return once everything sent so far has reached the server (a
@@ -304,3 +367,27 @@ class Adapter(Protocol):
 
     async def aclose(self) -> None:
         """Close the connection (never raises)."""
+
+
+Part = Literal["node_list", "parameters", "actions", "serving"]
+"""The optional parts of an :class:`Adapter` a call may require."""
+
+_OFFERS: Final[dict[str, str]] = {
+    "node_list": "no list of ROS nodes",
+    "parameters": "no parameters",
+    "actions": "no actions",
+    "serving": "no way to serve a service",
+}
+_PROTOCOL_NAMES: Final = {"foxglove-ws": "Foxglove", "rosbridge": "rosbridge", "zenoh": "Zenoh"}
+
+P = TypeVar("P")
+
+
+def require(part: P | None, name: Part, protocol: str) -> P:
+    """``part`` (the adapter's attribute ``name``), or ``NotSupportedError``
+    when the connection has none: the one check and the one message for
+    every optional part. ``protocol`` is ``Adapter.protocol``."""
+    if part is None:
+        shown = _PROTOCOL_NAMES.get(protocol, protocol)
+        raise NotSupportedError(f"this {shown} connection offers {_OFFERS[name]}")
+    return part

@@ -168,24 +168,33 @@ class CountsWebSocket:
 
 
 class EventSource:
-    """How an adapter hands its events up. Every emitting place calls
-    :meth:`_emit`; the reader passes what collected to the sink after each
-    inbound message (:meth:`_deliver`); a call from outside the reader (a
-    subscribe, a discovery poll) passes them on at its end (:meth:`_post`).
-    Before :meth:`_attach` (the bootstrap, before the reader runs) they wait,
-    :data:`_KEPT_BEFORE_RUN` at most."""
+    """How an adapter hands its events up: one per connection, held by the
+    adapter and by each of its parts that emits. Every emitting place calls
+    :meth:`emit` (or :meth:`reject`); the reader passes what collected to
+    the sink after each inbound message (:meth:`deliver`); a call from
+    outside the reader (a subscribe, a discovery poll) passes them on at its
+    end (:meth:`post`). Before :meth:`attach` (the bootstrap, before the
+    reader runs) they wait, :data:`_KEPT_BEFORE_RUN` at most.
 
-    def _init_events(self) -> None:
-        self._sink: EventSink | None = None
-        self._pending: list[Event] = []
+    :attr:`pending` and :attr:`sink` are public for a reader's hot path,
+    which appends frames to ``pending`` and hands the list to the sink
+    itself (then sets ``pending`` to a new list), as :meth:`deliver` does."""
+
+    __slots__ = ("_dropped_before_run", "pending", "sink")
+
+    def __init__(self) -> None:
+        self.sink: EventSink | None = None
+        """Where events go once the reader runs (None before)."""
+        self.pending: list[Event] = []
+        """Events not handed up yet, in order."""
         self._dropped_before_run = 0
 
-    def _attach(self, sink: EventSink) -> None:
+    def attach(self, sink: EventSink) -> None:
         """The reader starts: from now on events go to ``sink``."""
-        self._sink = sink
+        self.sink = sink
         if self._dropped_before_run:
             dropped = self._dropped_before_run
-            self._pending.append(
+            self.pending.append(
                 Rejected(
                     "overflow",
                     f"{dropped} events before the reader started were dropped",
@@ -194,30 +203,31 @@ class EventSource:
             )
             self._dropped_before_run = 0
 
-    def _emit(self, event: Event) -> None:
-        if self._sink is None and len(self._pending) >= _KEPT_BEFORE_RUN:
+    def emit(self, event: Event) -> None:
+        """Queue ``event`` for the next :meth:`deliver` or :meth:`post`."""
+        if self.sink is None and len(self.pending) >= _KEPT_BEFORE_RUN:
             self._dropped_before_run += 1
             return
-        self._pending.append(event)
+        self.pending.append(event)
 
-    def _reject(self, reason: str, detail: str, count: int = 1) -> None:
+    def reject(self, reason: str, detail: str, count: int = 1) -> None:
         """Hand a rejection up (the router counts it over the client's life
         and logs it)."""
-        self._emit(Rejected(reason, detail, count))
+        self.emit(Rejected(reason, detail, count))
 
-    async def _deliver(self) -> None:
+    async def deliver(self) -> None:
         """The reader's turn: hand what collected to the sink (even nothing:
         the sink writes queued control frames before the next message)."""
-        sink = self._sink
+        sink = self.sink
         if sink is not None:
-            pending, self._pending = self._pending, []
+            pending, self.pending = self.pending, []
             await sink.deliver(pending)
 
-    def _post(self) -> None:
+    def post(self) -> None:
         """Outside the reader: hand what collected to the sink at once."""
-        sink = self._sink
-        if sink is not None and self._pending:
-            pending, self._pending = self._pending, []
+        sink = self.sink
+        if sink is not None and self.pending:
+            pending, self.pending = self.pending, []
             for event in pending:
                 sink.post(event)
 

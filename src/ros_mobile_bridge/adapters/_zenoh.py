@@ -172,7 +172,7 @@ class ZenohAdapter(
             metadata={"domain_id": str(self.domain), "zid": session.zid},
             session_id=session.zid,
         )
-        self._init_events()
+        self._events = EventSource()
         self._init_describe()
         self._held: dict[str, _Held] = {}  # topic -> samples waiting for a description
         self._ids = itertools.count(0)  # node and entity ids, as rmw_zenoh counts them
@@ -205,6 +205,12 @@ class ZenohAdapter(
         self._bootstrapped = False
         self._node_key = self._token_key(rz.EntityKind.NODE, self._node_id)
         self._node_token = session.declare_token(self._node_key)
+        # (parts: the adapter is each of them until they are objects of their own)
+        self.node_list = self
+        self.parameters = self
+        self.actions = self
+        self.serving = self
+        self.descriptions = self
 
     # -- identity ---------------------------------------------------------------------
     def _token(
@@ -281,12 +287,14 @@ class ZenohAdapter(
         try:
             token = rz.parse_token(key)
         except rz.MalformedKey as exc:
-            self._reject("malformed_token", f"{key}: {exc}")
+            self._events.reject("malformed_token", f"{key}: {exc}")
             return False
         if token.domain != self.domain:
             return False
         if len(self._graph) >= self._options.max_channels:
-            self._reject("channel_limit", f"more than {self._options.max_channels} graph tokens")
+            self._events.reject(
+                "channel_limit", f"more than {self._options.max_channels} graph tokens"
+            )
             return False
         self._graph[key] = token
         return True
@@ -312,7 +320,7 @@ class ZenohAdapter(
         for topic in self._wanted:
             was, now = topic in before, topic in publishers
             if was != now:
-                self._emit(TopicState(topic, now))
+                self._events.emit(TopicState(topic, now))
         for topic, sub in self._subs.items():
             if sub.token is None and topic in topics:
                 self._declare_subscription_token(sub, topics[topic])
@@ -374,7 +382,7 @@ class ZenohAdapter(
             raise lost
 
     async def _read(self, sink: EventSink) -> None:
-        self._attach(sink)
+        self._events.attach(sink)
         inbox = self._session.inbox
         by_tag = self._by_tag
         saving = self._pauses.rates  # (updated in place)
@@ -404,11 +412,11 @@ class ZenohAdapter(
                     else:
                         samples, at = item.samples, item.receive_time_ns
                         for start in range(0, len(samples), _DELIVER_EVERY):
-                            built = len(self._pending)
+                            built = len(self._events.pending)
                             self._on_samples(sub, samples[start : start + _DELIVER_EVERY], at)
-                            if saving and sub.topic in saving and len(self._pending) > built:
+                            if saving and sub.topic in saving and len(self._events.pending) > built:
                                 self._pause(sub)
-                            if len(self._pending) >= _DELIVER_EVERY:
+                            if len(self._events.pending) >= _DELIVER_EVERY:
                                 behind = left + len(samples) - start + inbox.waiting[0]
                                 await self._hand_up(behind < pace_below)
                 elif type(item) is rz.LivelinessChange:
@@ -431,18 +439,18 @@ class ZenohAdapter(
                 for tag, count in by.items():
                     sub = by_tag.get(tag)
                     what = sub.topic if sub is not None else f"tag {tag}"
-                    self._reject(
+                    self._events.reject(
                         "backlog_overflow",
                         f"{what}: the reader fell behind by more than the zenoh backlog",
                         count,
                     )
             if graph_changed:
                 self._rebuild_graph()
-                self._emit(GraphChanged(self.topics, self.services))
+                self._events.emit(GraphChanged(self.topics, self.services))
             for request in requests:
                 await self._on_request(request)
             self._count_refused_queries()
-            await self._deliver()
+            await self._events.deliver()
 
     async def _hand_up(self, pace: bool) -> None:
         """Hand the frames built so far up; with ``pace``, then give the other
@@ -457,7 +465,7 @@ class ZenohAdapter(
         ahead, so that under a lasting overload the subscriptions' own
         policies (``buffer``, ``dispatch``) choose what is dropped, not the
         inbox (which can only refuse the newest)."""
-        await self._deliver()
+        await self._events.deliver()
         if pace:
             await anyio.lowlevel.checkpoint()
 
@@ -486,8 +494,8 @@ class ZenohAdapter(
             if gid_size != _GID_SIZE:
                 self._on_sample(sub, key, payload, attachment, receive_time_ns)
                 continue
-            # self._pending each time: an event handed up in between replaces it
-            self._pending.append(
+            # self._events.pending each time: an event handed up in between replaces it
+            self._events.pending.append(
                 RawFrame(
                     topic,
                     entry[0],
@@ -516,7 +524,7 @@ class ZenohAdapter(
             try:
                 older = rz.decode_attachment(attachment)
             except rz.MalformedAttachment:
-                self._reject(
+                self._events.reject(
                     "attachment",
                     f"{sub.topic}: a sample without a valid rmw_zenoh attachment "
                     f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
@@ -540,7 +548,7 @@ class ZenohAdapter(
             if len(sub.keys) < _MAX_KEYS_PER_TOPIC:
                 sub.keys[key] = entry
         schema, decode = entry
-        self._pending.append(
+        self._events.pending.append(
             RawFrame(
                 sub.topic,
                 schema,
@@ -557,7 +565,7 @@ class ZenohAdapter(
         self, topic: str, held: _Held, key: str, payload: bytes, attachment: bytes | None
     ) -> None:
         if len(held.samples) >= self._options.type_description_hold:
-            self._reject(
+            self._events.reject(
                 "description_hold_overflow",
                 f"{topic}: more than {self._options.type_description_hold} samples arrived "
                 f"while the description of {held.type_name} was fetched "
@@ -578,7 +586,7 @@ class ZenohAdapter(
                 continue
             for key, payload, attachment in held.samples:
                 self._on_sample(sub, key, payload, attachment)
-        self._post()
+        self._events.post()
 
     def _key_entry(self, topic: str, key: str) -> tuple[str, Any] | None:
         """The type and decoder for samples on ``key``; None (counted) for a
@@ -586,10 +594,10 @@ class ZenohAdapter(
         try:
             parsed = rz.parse_key(key)
         except rz.MalformedKey as exc:
-            self._reject("malformed", f"{topic}: data key {key!r}: {exc}")
+            self._events.reject("malformed", f"{topic}: data key {key!r}: {exc}")
             return None
         if parsed.name != topic or parsed.domain != self.domain:
-            self._reject("malformed", f"{topic}: data key {key!r} names another topic")
+            self._events.reject("malformed", f"{topic}: data key {key!r} names another topic")
             return None
         return parsed.type_name, self._decoder_for(parsed)
 
@@ -661,8 +669,8 @@ class ZenohAdapter(
         if type_name is not None:
             self._declare_subscription_token(sub, type_name)
         if topic in self._publishers_of:
-            self._emit(TopicState(topic, True))
-        self._post()
+            self._events.emit(TopicState(topic, True))
+        self._events.post()
 
     def _data_selector(self, topic: str) -> str:
         return f"{self.domain}/{topic.lstrip('/')}/*/*"

@@ -21,6 +21,7 @@ from ..flow import Decoder, PendingRequests
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ._seam import GoalEvents
+from ._shared import EventSource
 from ._zenoh_values import (
     Goal,
     Query,
@@ -66,9 +67,10 @@ class ZenohCalls:
     _goals: dict[bytes, Goal]
     _feedback_subs: dict[str, Subscription]
 
+    _events: EventSource
+
     if TYPE_CHECKING:  # the adapter's core and EventSource provide these
 
-        def _reject(self, reason: str, detail: str, count: int = 1) -> None: ...
         def _service_type(self, name: str) -> str | None: ...
         def _type_hash(self, type_name: str) -> str: ...
         def _token_key(self, kind: rz.EntityKind, entity_id: int, **kw: Any) -> str: ...
@@ -275,7 +277,7 @@ class ZenohCalls:
         """One ``_action/feedback`` sample: to the goal its uuid names (the
         topic carries every client's goals; others' are ignored)."""
         if not valid_attachment(attachment):
-            self._reject("attachment", f"{sub.topic}: a sample without a valid attachment")
+            self._events.reject("attachment", f"{sub.topic}: a sample without a valid attachment")
             return
         goals = [g for g in self._goals.values() if g.action == sub.feedback_of]
         if not goals:
@@ -286,7 +288,7 @@ class ZenohCalls:
         try:
             message = decode(memoryview(payload))
         except DecodeError as exc:
-            self._reject("decode", f"{sub.topic}: {exc}")
+            self._events.reject("decode", f"{sub.topic}: {exc}")
             return
         raw = ros_field(ros_field(message, "goal_id"), "uuid")
         try:

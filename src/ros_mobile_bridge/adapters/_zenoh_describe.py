@@ -53,6 +53,7 @@ from ..codec import (
 )
 from ..wire import rmw_zenoh as rz
 from ..wire._limits import truncate_for_log
+from ._shared import EventSource
 
 __all__ = ["DESCRIBE_SERVICE_TYPE", "ZenohDescribe"]
 
@@ -84,9 +85,10 @@ class ZenohDescribe:
     _log: logging.Logger
     _graph: dict[str, rz.Token]
 
+    _events: EventSource
+
     if TYPE_CHECKING:  # the adapter's core, ZenohCalls and EventSource provide these
 
-        def _reject(self, reason: str, detail: str, count: int = 1) -> None: ...
         def _type_hash(self, type_name: str) -> str: ...
         async def _request(
             self, service: str, srv_type: str, request: Any, timeout: float
@@ -252,7 +254,7 @@ class ZenohDescribe:
                 max_fields=self._options.max_schema_fields,
             )
         except HashMismatch as exc:
-            self._reject("type_hash_mismatch", f"node {node}: {exc}")
+            self._events.reject("type_hash_mismatch", f"node {node}: {exc}")
             raise SchemaError(f"node {node} described another {type_name}: {exc}") from exc
         if described.type_name != type_name:
             raise SchemaError(

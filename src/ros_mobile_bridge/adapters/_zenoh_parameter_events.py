@@ -26,7 +26,7 @@ Contract:
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import anyio
 
@@ -36,6 +36,7 @@ from ..flow import Decoder
 from ..transport._zenoh import ZenohSession
 from ._parameter_events import PARAMETER_EVENT_TYPE, PARAMETER_EVENTS, by_node, watched_values
 from ._seam import ParameterValues
+from ._shared import EventSource
 from ._zenoh_values import Subscription, valid_attachment
 
 __all__ = ["PARAMETER_EVENTS", "PARAMETER_EVENT_TYPE", "ZenohParameterEvents"]
@@ -55,10 +56,10 @@ class ZenohParameterEvents:
     _parameter_key: str  # the exact data key of our ParameterEvent type
     _parameter_decode: Decoder | None
 
+    _events: EventSource
+
     if TYPE_CHECKING:  # the adapter's core and EventSource provide these
 
-        def _reject(self, reason: str, detail: str, count: int = 1) -> None: ...
-        def _emit(self, event: Any) -> None: ...
         def _key(self, name: str, type_name: str) -> str: ...
 
     def _init_parameter_events(self) -> None:
@@ -105,11 +106,13 @@ class ZenohParameterEvents:
     def _on_parameter_event(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         """One ``/parameter_events`` sample (see the module's contract)."""
         if not valid_attachment(attachment):
-            self._reject("attachment", f"{PARAMETER_EVENTS}: a sample without a valid attachment")
+            self._events.reject(
+                "attachment", f"{PARAMETER_EVENTS}: a sample without a valid attachment"
+            )
             return
         decode = self._parameter_decode
         if key != self._parameter_key or decode is None:
-            self._reject(
+            self._events.reject(
                 "malformed",
                 f"{PARAMETER_EVENTS}: data key {key[:200]!r} is not {PARAMETER_EVENT_TYPE}",
             )
@@ -117,10 +120,10 @@ class ZenohParameterEvents:
         try:
             event = decode(memoryview(payload))
         except DecodeError as exc:
-            self._reject("decode", f"{PARAMETER_EVENTS}: {exc}")
+            self._events.reject("decode", f"{PARAMETER_EVENTS}: {exc}")
             return
         values = watched_values(event, self._watched_parameters)
         if values is None:
-            self._reject("malformed", f"{PARAMETER_EVENTS}: not a {PARAMETER_EVENT_TYPE}")
+            self._events.reject("malformed", f"{PARAMETER_EVENTS}: not a {PARAMETER_EVENT_TYPE}")
         elif values:
-            self._emit(ParameterValues(values))
+            self._events.emit(ParameterValues(values))

@@ -26,7 +26,7 @@ import logging
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import anyio
 
@@ -37,7 +37,8 @@ from ..flow import Decoder
 from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ..wire._limits import truncate_for_log
-from ._seam import Adapter, ServiceHandler
+from ._seam import ServiceHandler
+from ._shared import EventSource
 
 __all__ = ["ZenohServing"]
 
@@ -84,9 +85,10 @@ class ZenohServing:
     _ids: Iterator[int]  # node and entity ids
     _tags: Iterator[int]  # inbox tags
 
+    _events: EventSource
+
     if TYPE_CHECKING:  # the adapter's core and EventSource provide these
 
-        def _reject(self, reason: str, detail: str, count: int = 1) -> None: ...
         def _type_hash(self, type_name: str) -> str: ...
         def _token_key(self, kind: rz.EntityKind, entity_id: int, **kw: Any) -> str: ...
         async def _round_trip(self, timeout: float) -> bool: ...
@@ -199,12 +201,12 @@ class ZenohServing:
             return
         request_id = str(item.query_id)
         self._open_calls[request_id] = _Open(name, attachment)
-        await served.handler.on_service_request(cast("Adapter", self), request_id, args)
+        await served.handler.on_service_request(self, request_id, args)
 
     def _refuse(self, item: rz.Request, name: str, reason: str, text: str) -> None:
         self._session.reply_error(item.query_id, text)
         self._log.warning("%s: a call was refused: %s", name, truncate_for_log(text))
-        self._reject(reason, f"{name}: {text}")
+        self._events.reject(reason, f"{name}: {text}")
 
     def _count_refused_queries(self) -> None:
         """Count the calls the session refused past its open-query bound."""
@@ -212,7 +214,7 @@ class ZenohServing:
         if refused != self._refused_seen:
             new = refused - self._refused_seen
             self._refused_seen = refused
-            self._reject(
+            self._events.reject(
                 "service_limit",
                 f"{new} calls to served services were refused: "
                 f"{self._session.max_open_queries} already waited for an answer",
