@@ -688,9 +688,9 @@ async def test_reconnect_restores_a_published_topic_without_waiting_on_the_bridg
     # published topic's advertise waited out the internal call timeout, the
     # status "reconnecting" meanwhile). With that timeout made an hour, such
     # a wait would hang this test instead of slowing it.
-    from ros_mobile_bridge.adapters import _rosbridge
+    from ros_mobile_bridge.adapters import _rosbridge_calls
 
-    monkeypatch.setattr(_rosbridge, "_INTERNAL_TIMEOUT", 3600.0)
+    monkeypatch.setattr(_rosbridge_calls, "_INTERNAL_TIMEOUT", 3600.0)
     bridge = rosbridge_factory()
     port = bridge.port
     topic = unique("/rmb_restore")

@@ -360,7 +360,7 @@ def test_message_details_become_a_definition_the_codec_reads() -> None:
     primitive names, ``pkg/Name`` types, -1 / 0 / N array lengths) turns
     into ``.msg`` text that decodes CDR (the cbor-raw path for types the
     bundled definitions lack)."""
-    from ros_mobile_bridge.adapters._rosbridge import _typedefs_to_msg
+    from ros_mobile_bridge.adapters._rosbridge_definitions import typedefs_to_msg
     from ros_mobile_bridge.codec import CodecRegistry
 
     answer = {
@@ -379,7 +379,7 @@ def test_message_details_become_a_definition_the_codec_reads() -> None:
             },
         ]
     }
-    text = _typedefs_to_msg("my_pkg/msg/Reading", answer)
+    text = typedefs_to_msg("my_pkg/msg/Reading", answer)
     assert "bool ok" in text and "byte raw" in text and "float32 gain" in text
     assert "float64[] values" in text and "float64[4] corners" in text
     codecs = CodecRegistry()
@@ -390,7 +390,7 @@ def test_message_details_become_a_definition_the_codec_reads() -> None:
     assert decoded["ok"] is True and decoded["raw"] == 7 and decoded["gain"] == 0.5
     assert list(decoded["values"]) == [1.5, 2.5] and list(decoded["corners"]) == [1, 2, 3, 4]
     with pytest.raises(ValueError, match="do not define"):
-        _typedefs_to_msg("other/msg/Thing", answer)
+        typedefs_to_msg("other/msg/Thing", answer)
 
 
 # -- limits: skipped or refused, counted, never fatal ---------------------------------
@@ -469,7 +469,7 @@ async def test_call_beyond_max_pending_requests_raises_at_once() -> None:
                 async with anyio.create_task_group() as tg:
                     # a non-rosapi service the fake bridge never answers
                     tg.start_soon(robot.call_service, "/set_flag", {"data": True})
-                    await wait_until(lambda: len(robot._conn.adapter._calls) == 1)  # type: ignore[attr-defined]
+                    await wait_until(lambda: len(robot._conn.adapter._calls.pending) == 1)  # type: ignore[attr-defined]
                     with anyio.fail_after(1):
                         with pytest.raises(rmb.ServiceError, match="max_pending_requests"):
                             await robot.call_service("/set_flag", {"data": False})

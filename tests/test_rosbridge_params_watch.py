@@ -43,7 +43,7 @@ async def next_update(updates: AsyncIterator[dict[str, Any]]) -> dict[str, Any]:
 
 
 def subscribed(client: rmb.Client) -> bool:
-    return bool(client._conn.adapter.parameter_events_subscribed)  # type: ignore[attr-defined]
+    return bool(client._conn.adapter.parameters.parameter_events_subscribed)  # type: ignore[attr-defined]
 
 
 async def first_update(setter: rmb.Client, updates: AsyncIterator[dict[str, Any]]) -> Any:

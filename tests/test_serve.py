@@ -302,7 +302,7 @@ async def test_a_serve_cancelled_while_confirming_answers_its_calls_and_unadvert
             confirming.set()
             await anyio.sleep(3600)
 
-        monkeypatch.setattr(server._conn.adapter, "_confirm_served", never_confirmed)
+        monkeypatch.setattr(server._conn.adapter.serving, "_confirm_served", never_confirmed)
         entering = anyio.CancelScope()
 
         async def enter() -> None:

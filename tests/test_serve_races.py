@@ -189,21 +189,21 @@ async def test_a_refusal_after_the_advertisement_ends_the_iteration(
     async def confirmed(name: str, served: Any) -> None:
         pass  # the graph showed it (a real bridge may refuse only later)
 
-    monkeypatch.setattr(backend, "_confirm_served", confirmed)
-    serving = served(backend)
-    await backend.advertise_service(NAME, "nosuch_pkg/srv/Nope", serving, confirm=confirm)
-    served_id = backend._served[NAME].id
+    monkeypatch.setattr(backend.serving, "_confirm_served", confirmed)
+    serving = served(backend.serving)
+    await backend.serving.advertise_service(NAME, "nosuch_pkg/srv/Nope", serving, confirm=confirm)
+    served_id = backend.serving._served[NAME].id
     backend._on_status(rb.Status("error", "unknown service type nosuch_pkg/srv/Nope", served_id))
     with anyio.fail_after(5), pytest.raises(rmb.SchemaError, match="nosuch_pkg"):
         await serving.requests.__anext__()
-    assert NAME not in backend._served  # refused: nothing to unadvertise
+    assert NAME not in backend.serving._served  # refused: nothing to unadvertise
 
 
 async def test_another_client_refusal_after_a_restore_is_a_service_error() -> None:
     backend, _ws = rosbridge_backend()
-    serving = served(backend)
-    await backend.advertise_service(NAME, SETBOOL, serving, confirm=False)
-    served_id = backend._served[NAME].id
+    serving = served(backend.serving)
+    await backend.serving.advertise_service(NAME, SETBOOL, serving, confirm=False)
+    served_id = backend.serving._served[NAME].id
     backend._on_status(rb.Status("error", "served by another client", served_id))
     with anyio.fail_after(5), pytest.raises(rmb.ServiceError, match="another client"):
         await serving.requests.__anext__()
@@ -220,9 +220,9 @@ async def test_an_advertisement_failing_after_its_frame_is_unadvertised(
             raise rmb.ServiceError(name, "the bridge did not confirm serving it")
         await anyio.sleep(3600)
 
-    monkeypatch.setattr(backend, "_confirm_served", unconfirmed)
-    monkeypatch.setattr(backend, "_round_trip", no_round_trip)
-    serving = served(backend)
+    monkeypatch.setattr(backend.serving, "_confirm_served", unconfirmed)
+    monkeypatch.setattr(backend._calls, "round_trip", no_round_trip)
+    serving = served(backend.serving)
     backend_ids: list[str] = []
     advertise = backend._engine.advertise_service
 
@@ -233,21 +233,21 @@ async def test_an_advertisement_failing_after_its_frame_is_unadvertised(
     monkeypatch.setattr(backend._engine, "advertise_service", remember)
     if how == "timeout":
         with pytest.raises(rmb.ServiceError):
-            await backend.advertise_service(NAME, SETBOOL, serving)
+            await backend.serving.advertise_service(NAME, SETBOOL, serving)
     else:
         with anyio.move_on_after(0.05):
-            await backend.advertise_service(NAME, SETBOOL, serving)
+            await backend.serving.advertise_service(NAME, SETBOOL, serving)
     # maybe served: calls still reach the handler until the caller (the
     # client, after answering them) unadvertises
     await backend._handle(rb.ServiceRequest("q1", NAME, {"data": True}))
     assert serving.requests.stats.received == 1
     await serving.close("closing")
-    await backend.unadvertise_service(NAME)
+    await backend.serving.unadvertise_service(NAME)
     assert [(m["op"], m.get("id"), m.get("values")) for m in ws.sent][1:] == [
         ("service_response", "q1", "closing"),
         ("unadvertise_service", backend_ids[0], None),
     ]
-    assert NAME not in backend._served
+    assert NAME not in backend.serving._served
 
 
 async def test_a_refused_advertisement_is_not_unadvertised(
@@ -258,9 +258,9 @@ async def test_a_refused_advertisement_is_not_unadvertised(
     async def refused(name: str, served: Any) -> None:
         served.error = "served by another client"
 
-    monkeypatch.setattr(backend, "_confirm_served", refused)
+    monkeypatch.setattr(backend.serving, "_confirm_served", refused)
     with pytest.raises(rmb.ServiceError, match="another client"):
-        await backend.advertise_service(NAME, SETBOOL, served(backend))
+        await backend.serving.advertise_service(NAME, SETBOOL, served(backend.serving))
     # the name may be the other client's: no unadvertise_service for it
     assert [m["op"] for m in ws.sent] == ["advertise_service"]
 

@@ -5,8 +5,6 @@ bridge's ``/rosapi/*`` services; messages arrive as JSON, CBOR or cbor-raw
 
 from __future__ import annotations
 
-import contextlib
-import itertools
 import logging
 import math
 import time
@@ -18,7 +16,6 @@ import anyio
 import anyio.to_thread
 
 from .._errors import (
-    ActionGoalError,
     ConnectError,
     DecodeError,
     NotConnected,
@@ -26,30 +23,27 @@ from .._errors import (
     RosBridgeError,
     SchemaError,
     ServiceError,
-    ServiceTimeout,
 )
 from .._options import ClientOptions
-from .._types import ServerInfo
+from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, SchemaTooLarge, same_type_name
-from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
+from ..flow import Decoder, RawFrame, WireMessage
 from ..transport import HandshakeRejected, WebSocket
 from ..wire import foxglove as fx
 from ..wire import rosbridge as rb
 from ..wire._limits import truncate_for_log
 from ._parameter_events import PARAMETER_EVENTS
+from ._rosbridge_actions import RosbridgeActions
+from ._rosbridge_calls import RosbridgeCalls
 from ._rosbridge_definitions import RosbridgeDefinitions
-from ._rosbridge_definitions import _typedefs_to_msg as _typedefs_to_msg
-from ._rosbridge_discovery import _INTERNAL_TIMEOUT as _INTERNAL_TIMEOUT
-from ._rosbridge_discovery import RosbridgeDiscovery, _names
+from ._rosbridge_discovery import RosbridgeDiscovery
 from ._rosbridge_parameters import RosbridgeParameters, SentSubscription
-from ._rosbridge_serving import RosbridgeServing, _Served
-from ._seam import EventSink, GoalEvents, SubscribeHints, TopicState
+from ._rosbridge_serving import RosbridgeServing
+from ._seam import EventSink, SubscribeHints, TopicState
 from ._shared import (
     Advertisement,
     Advertisements,
-    CountsWebSocket,
     EventSource,
-    Publishes,
     check_fits,
     codec_registry,
     open_websocket,
@@ -58,7 +52,6 @@ from ._shared import (
 
 __all__ = ["RosbridgeAdapter", "open_rosbridge", "start_rosbridge"]
 
-# _rosapi and _round_trip read this module's _INTERNAL_TIMEOUT (a test patches it)
 
 _WIRE_SLACK: Final = 0.5
 """The client's deadline for a call runs this long past the forwarded one,
@@ -179,17 +172,11 @@ class _Publisher(Advertisement):
     error: str | None = None
 
 
-class RosbridgeAdapter(
-    EventSource,
-    Publishes,
-    CountsWebSocket,
-    RosbridgeDiscovery,
-    RosbridgeDefinitions,
-    RosbridgeServing,
-    RosbridgeParameters,
-):
-    """One rosbridge v2 connection (see :class:`~.Adapter`). Discovery,
-    definitions, serving and parameters are its mixins' (sibling modules)."""
+class RosbridgeAdapter:
+    """One rosbridge v2 connection (see :class:`~.Adapter`). Its parts are
+    objects of sibling modules, built here and given what each needs: the
+    requests (:class:`RosbridgeCalls`), discovery (also the node list),
+    definitions (the type descriptions), serving, parameters and actions."""
 
     protocol = "rosbridge"
     wire_timeout_slack = _WIRE_SLACK
@@ -198,16 +185,14 @@ class RosbridgeAdapter(
         self._ws = ws
         self._options = options
         self._log: logging.Logger = options.logger
-        self._engine = rb.RosbridgeEngine(
+        self._engine = engine = rb.RosbridgeEngine(
             max_message_size=options.max_frame_size,
             fragment_timeout=options.fragment_timeout,
             max_json_depth=options.max_json_depth,
         )
-        self.codecs = codec_registry(options)
+        self.codecs = codecs = codec_registry(options)
         self.server_info = ServerInfo(name="rosbridge", protocol=self.protocol)
-        self._ids = itertools.count(1)
-        self._topics: dict[str, str] = {}  # name -> type, from /rosapi/topics
-        self._services: dict[str, str] = {}  # name -> type ("" until looked up)
+        self._events = events = EventSource()
         self._wanted: dict[str, SubscribeHints] = {}
         self._subs: dict[str, _WireSub] = {}
         self._sub_topics: dict[str, str] = {}  # subscribe id -> topic
@@ -215,65 +200,60 @@ class RosbridgeAdapter(
         self._decoders: dict[tuple[str, str], Decoder | None] = {}
         self._stray: set[str] = set()  # topics we were sent but never subscribed
         self._pubs: Advertisements[_Publisher] = Advertisements()
-        self._calls: PendingRequests[rb.ServiceResponse] = PendingRequests()
-        self._call_names: dict[str, str] = {}
-        self._goals: dict[str, tuple[str, GoalEvents]] = {}
-        self._events = EventSource()
-        self._rosapi_warned = False
-        self._discovery_ok = False
-        self._no_definition: set[str] = set()
         self._foreign: str | None = None  # why the server looks like Foxglove
-        self._over_limit: set[str] = set()  # graph limits exceeded at the last poll
-        self._served: dict[str, _Served] = {}
-        self._failed_answers: dict[str, str] = {}  # request id -> service, answered false
-        self._init_parameters()
-        # (parts: the adapter is each of them until they are objects of their own)
-        self.node_list = self
-        self.parameters = self
-        self.actions = self
-        self.serving = self
-        self.descriptions = self
+        # the parts
+        self._calls = calls = RosbridgeCalls(ws, engine, options)
+        self._discovery = RosbridgeDiscovery(calls, options, events, self._resync)
+        self._definitions = RosbridgeDefinitions(codecs, calls, self._log)
+        self._serving = RosbridgeServing(ws, engine, calls, codecs, self._log)
+        self._parameters = RosbridgeParameters(
+            ws,
+            engine,
+            calls,
+            codecs,
+            events,
+            options,
+            subscriptions=self._subs,
+            decoders=self._decoders,
+            send_subscribe=self._send_subscribe,
+        )
+        self._actions = RosbridgeActions(ws, engine, calls, self._definitions, codecs, self._log)
 
-    # -- helpers ---------------------------------------------------------------
-    def _next_id(self, kind: str) -> str:
-        return f"rmb:{kind}:{next(self._ids)}"
+    @property
+    def node_list(self) -> RosbridgeDiscovery:
+        return self._discovery
 
-    async def _call(self, name: str, args: Any, timeout: float | None) -> Any:
-        """One ``call_service`` round trip; the response's ``values``.
-        Raises ``ServiceError`` (``ServiceTimeout`` for the server's
-        timeout) when it fails. No local deadline here."""
-        self._check_pending(name, ServiceError)
-        call_id = self._next_id("call")
-        frame = self._engine.call_service(name, args, id=call_id, timeout=timeout)
-        self._call_names[call_id] = name
-        try:
-            response = await self._calls.request(call_id, lambda: self._ws.send(frame))
-        finally:
-            self._call_names.pop(call_id, None)
-        if not response.result:
-            text = truncate_for_log(
-                response.values
-                if isinstance(response.values, str)
-                else rb.as_text(response.values),
-                2000,
-            )
-            if timeout is not None and "timeout" in text.lower():
-                # "Timeout exceeded while waiting for service response"
-                raise ServiceTimeout(name, timeout, f"the bridge: {text}")
-            raise ServiceError(name, text)
-        return response.values
+    @property
+    def parameters(self) -> RosbridgeParameters:
+        return self._parameters
 
-    def _check_pending(self, what: str, error: type[ServiceError] | type[ActionGoalError]) -> None:
-        """Raise ``error`` at once when ``max_pending_requests`` calls and
-        goals already wait for an answer on this connection."""
-        limit = self._options.max_pending_requests
-        if len(self._calls) + len(self._goals) >= limit:
-            raise error(what, f"{limit} requests already wait for an answer (max_pending_requests)")
+    @property
+    def actions(self) -> RosbridgeActions:
+        return self._actions
 
-    async def _rosapi(self, name: str, args: Any = None) -> Any:
-        """A ``/rosapi/*`` call under the adapter's own deadline."""
-        with anyio.fail_after(_INTERNAL_TIMEOUT):
-            return await self._call(name, args if args is not None else {}, _INTERNAL_TIMEOUT)
+    @property
+    def serving(self) -> RosbridgeServing:
+        return self._serving
+
+    @property
+    def descriptions(self) -> RosbridgeDefinitions:
+        return self._definitions
+
+    @property
+    def topics(self) -> list[TopicInfo]:
+        return self._discovery.topics
+
+    @property
+    def services(self) -> list[ServiceInfo]:
+        return self._discovery.services
+
+    @property
+    def bytes_received(self) -> int:
+        return self._ws.bytes_received
+
+    @property
+    def messages_received(self) -> int:
+        return self._ws.messages_received
 
     # -- connecting ------------------------------------------------------------
     async def bootstrap(self, deadline: float) -> None:
@@ -287,14 +267,14 @@ class RosbridgeAdapter(
                 await self._read(reading=False)
             except ConnectError as exc:
                 lost.append(exc)
-                self._calls.fail_all(exc)
+                self._calls.pending.fail_all(exc)
 
         failure: RosBridgeError | None = None
         with anyio.move_on_after(max(deadline - anyio.current_time(), 0.0)) as scope:
             async with anyio.create_task_group() as tg:
                 tg.start_soon(read)
                 try:
-                    await self._discover(first=True)
+                    await self._discovery.discover(first=True)
                 except RosBridgeError as exc:  # raised below, outside the task group
                     failure = exc
                 tg.cancel_scope.cancel()
@@ -317,7 +297,7 @@ class RosbridgeAdapter(
         await self._events.deliver()  # what the first discovery found
         error: ConnectError | None = None
         async with anyio.create_task_group() as tg:
-            tg.start_soon(self._poll_discovery)
+            tg.start_soon(self._discovery.poll)
             try:
                 await self._read(reading=True)
             except ConnectError as exc:
@@ -388,7 +368,7 @@ class RosbridgeAdapter(
             return False
         frame = RawFrame(
             topic,
-            wire.type or self._topics.get(topic, ""),
+            wire.type or self._discovery.topic_types.get(topic, ""),
             "json",
             memoryview(raw),
             None,
@@ -399,8 +379,8 @@ class RosbridgeAdapter(
 
     def _on_event(self, event: rb.Publish, received_ns: int) -> None:
         topic = event.topic
-        if topic == PARAMETER_EVENTS and self._parameter_sub_id is not None:
-            self._on_parameter_event(event)  # the watch's, and the user's if any
+        if topic == PARAMETER_EVENTS and self._parameters.parameter_events_subscribed:
+            self._parameters.on_parameter_event(event)  # the watch's, and the user's if any
         self._on_publish(
             topic, event.kind, event.payload, received_ns, event.message, event.log_time_ns
         )
@@ -417,7 +397,7 @@ class RosbridgeAdapter(
         """Queue one received message for delivery (a Publish event's fields)."""
         wire = self._subs.get(topic)
         if wire is None:
-            if topic == PARAMETER_EVENTS and self._parameter_sub_id is not None:
+            if topic == PARAMETER_EVENTS and self._parameters.parameter_events_subscribed:
                 return
             if topic not in self._stray and len(self._stray) < _STRAY_LOGGED:
                 self._stray.add(topic)  # logged once per topic, for a bounded set
@@ -428,7 +408,7 @@ class RosbridgeAdapter(
             return
         if kind != wire.compression and kind in COMPRESSIONS:
             return  # still in flight from before a change of compression
-        schema = wire.type or self._topics.get(topic, "")
+        schema = wire.type or self._discovery.topic_types.get(topic, "")
         if kind == "parsed":
             decode: Decoder | None = lambda _payload: message  # noqa: E731
         else:
@@ -475,41 +455,30 @@ class RosbridgeAdapter(
 
     async def _handle(self, event: rb.Event) -> None:
         if isinstance(event, rb.ServiceResponse):
-            if event.id is None or not self._calls.resolve(event.id, event):
+            if not self._calls.resolve(event):
                 self._log.debug("a service_response nobody waits for (id %r)", event.id)
         elif isinstance(event, rb.ServiceRequest):
-            served = self._served.get(event.service)
-            if served is None:  # not (or no longer) ours: never leave it waiting
-                await self.respond_service(
-                    event.service, event.id, "this client does not serve it", False
-                )
-            else:
-                await served.handler.on_service_request(self, event.id, event.args)
+            await self._serving.on_request(event)
         elif isinstance(event, rb.ActionFeedback):
-            goal = self._goals.get(event.id or "")
-            if goal is not None:
-                goal[1].on_feedback(event.values)
+            self._actions.on_feedback(event)
         elif isinstance(event, rb.ActionResult):
-            entry = self._goals.pop(event.id or "", None)
-            if entry is not None:
-                entry[1].on_result(event.status, event.values, event.result)
+            self._actions.on_result(event)
         elif isinstance(event, rb.Status):
             self._on_status(event)
         elif isinstance(event, rb.ForeignProtocol):
             self._foreign = event.reason
-            self._calls.fail_all(ProtocolMismatchError("rosbridge", event.detected, event.reason))
+            self._calls.pending.fail_all(
+                ProtocolMismatchError("rosbridge", event.detected, event.reason)
+            )
         elif isinstance(event, rb.ProtocolViolation):
             self._events.reject(event.kind, event.reason)
 
     def _on_status(self, event: rb.Status) -> None:
         key = event.id or ""
         error = event.level == "error"
-        if error and key in self._call_names:
-            self._calls.fail(key, ServiceError(self._call_names[key], event.msg))
-            return
-        if error and key in self._goals:
-            _action, goal = self._goals.pop(key)
-            goal.on_failed(event.msg)
+        if error and (
+            self._calls.fail_status(key, event.msg) or self._actions.on_error_status(key, event.msg)
+        ):
             return
         for pub in self._pubs.values():
             if pub.id == key and error:
@@ -517,7 +486,7 @@ class RosbridgeAdapter(
                 if pub.ready.is_set():  # nobody waits for it (restored unconfirmed)
                     self._log.error("the bridge refused to advertise a topic: %s", event.msg)
                 return
-        if self._on_serving_status(event):
+        if self._serving.on_status(event):
             return
         topic = self._sub_topics.get(key)
         if topic is not None and error:
@@ -555,8 +524,8 @@ class RosbridgeAdapter(
         a topic not in the graph yet would stay there beside the real type.
         Without either the type is omitted (the bridge infers it from the
         graph, or refuses until discovery learns it)."""
-        discovered = self._topics.get(topic) or None
-        schema = discovered or (None if self._discovery_ok else hints.schema)
+        discovered = self._discovery.topic_types.get(topic) or None
+        schema = discovered or (None if self._discovery.works else hints.schema)
         if discovered and hints.schema and not same_type_name(discovered, hints.schema):
             self._log.warning(
                 "%s: subscribed as %s, but the graph has %s; using %s",
@@ -569,8 +538,14 @@ class RosbridgeAdapter(
         if hints.max_hz is not None and hints.max_hz > 0 and math.isfinite(hints.max_hz):
             rate = max(1, int(1000.0 / hints.max_hz))
         current = self._subs.get(topic)
-        sub_id = current.id if current is not None else self._next_id(f"subscribe:{topic}")
+        sub_id = current.id if current is not None else self._calls.next_id(f"subscribe:{topic}")
         return _WireSub(sub_id, schema, rate, 1 if rate else 0, hints.compression)
+
+    async def _resync(self) -> None:
+        """Every wanted subscription in line with the graph (after each
+        discovery poll)."""
+        for topic in list(self._wanted):
+            await self._sync(topic)
 
     async def _sync(self, topic: str) -> None:
         """Bring the bridge's subscription to ``topic`` in line with what the
@@ -581,16 +556,11 @@ class RosbridgeAdapter(
         want = self._desired(topic, hints)
         current = self._subs.get(topic)
         if current == want:
-            if topic in self._topics and topic not in self._live:
+            if topic in self._discovery.topic_types and topic not in self._live:
                 self._set_live(topic, True)
             return
-        if (
-            want.compression == "cbor-raw"
-            and want.type
-            and want.type not in self._no_definition
-            and not self.codecs.has_schema(want.type)
-        ):
-            await self._fetch_definition(want.type)
+        if want.compression == "cbor-raw" and want.type:
+            await self._definitions.fetch_definition(want.type)  # once per connection
         if current is not None and (
             (current.type is not None and current.type != want.type)
             or current.compression != want.compression
@@ -603,7 +573,7 @@ class RosbridgeAdapter(
         if want.compression == "cbor-raw" and want.type:
             await self._prepare_decoder(topic, want.type)
         await self._send_subscribe(topic, want)
-        if topic in self._topics and topic not in self._live:
+        if topic in self._discovery.topic_types and topic not in self._live:
             self._set_live(topic, True)
 
     async def _prepare_decoder(self, topic: str, schema: str) -> None:
@@ -655,7 +625,7 @@ class RosbridgeAdapter(
             if not self._ws.closed:
                 await self._ws.send(self._engine.unsubscribe(topic, id=wire.id))
             if topic == PARAMETER_EVENTS:
-                await self._user_left_parameter_events()
+                await self._parameters.user_left_parameter_events()
 
     # -- publishing --------------------------------------------------------------
     async def advertise(
@@ -666,7 +636,7 @@ class RosbridgeAdapter(
         pub = _Publisher(
             schema,
             anyio.Event(),
-            self._next_id(f"advertise:{topic}"),
+            self._calls.next_id(f"advertise:{topic}"),
             self.codecs.encoder(schema, "json"),
             # a known type is checked here (the bridge would only log a bad
             # field, with no id to tell whose publish it was)
@@ -679,7 +649,7 @@ class RosbridgeAdapter(
                 self._engine.advertise(topic, schema, id=pub.id, latch=latch, queue_size=100)
             )
             if confirm:
-                await self._round_trip()  # a refusal arrives before this answer
+                await self._calls.round_trip()  # a refusal arrives before this answer
             if pub.error is not None:
                 raise SchemaError(
                     f"the bridge refused to advertise {topic} as {schema}: {pub.error}"
@@ -697,7 +667,7 @@ class RosbridgeAdapter(
         pub = self._pubs.pop(topic, None)
         if pub is not None:
             # rosbridge_server_rs drops a publish sent right before unadvertise
-            await self._round_trip()
+            await self._calls.round_trip()
             await self._ws.send(self._engine.unadvertise(topic, id=pub.id))
 
     def encode_publish(self, topic: str, data: Any) -> WireMessage:
@@ -709,64 +679,30 @@ class RosbridgeAdapter(
     # -- services ------------------------------------------------------------------
     async def call_service(self, name: str, request: Any, timeout: float) -> Any:
         args = dict(request) if request is not None else {}
-        service_type = self._services.get(name)
+        service_type = self._discovery.service_types.get(name)
         if service_type:
             request_type = CodecRegistry.service_type_names(service_type)[0]
-            await self.fetch_part(request_type)  # once per type and connection
+            await self._definitions.fetch_part(request_type)  # once per type and connection
             check_fits(self.codecs, request_type, args)
-        return await self._call(name, args, timeout)
-
-    # -- actions ---------------------------------------------------------------------
-    async def send_action_goal(
-        self, action: str, action_type: str, goal: Any, events: GoalEvents
-    ) -> str:
-        # The bridge never answers a goal for an action nobody serves, so
-        # such a goal would wait forever: refuse it here.
-        try:
-            servers = _names(await self._rosapi("/rosapi/action_servers"), "action_servers")
-        except (ServiceError, TimeoutError) as exc:
-            self._log.debug("cannot list action servers (%s); sending the goal anyway", exc)
-        else:
-            if action not in servers:
-                raise ActionGoalError(action, "no action server offers it")
-        parts = action_type.split("/")
-        goal_type = f"{parts[0]}/action/{parts[-1]}_Goal"
-        await self.fetch_part(goal_type)  # once per type and connection
-        check_fits(self.codecs, goal_type, goal)
-        self._check_pending(action, ActionGoalError)
-        goal_id = self._next_id(f"goal:{action}")
-        frame = self._engine.send_action_goal(action, action_type, goal, id=goal_id)
-        self._goals[goal_id] = (action, events)
-        try:
-            await self._ws.send(frame)
-        except BaseException:
-            self._goals.pop(goal_id, None)
-            raise
-        return goal_id
-
-    async def cancel_action_goal(self, action: str, goal_id: str) -> None:
-        await self._ws.send(self._engine.cancel_action_goal(action, id=goal_id))
+        return await self._calls.call(name, args, timeout)
 
     # -- lifecycle -------------------------------------------------------------------
     async def send(self, message: WireMessage) -> None:
         await self._ws.send(socket_frame(message))
 
-    async def _round_trip(self) -> None:
-        """Return once the bridge has answered a request sent now, so every
-        frame sent before it has been handled. Any answer counts (an error
-        too): only its arrival matters."""
-        with contextlib.suppress(ServiceError):
-            await self._call("/rosapi/get_time", {}, _INTERNAL_TIMEOUT)
-
     async def confirm_delivery(self) -> None:
-        await self._round_trip()
+        await self._calls.round_trip()
 
     def fail_pending(self, error: Exception) -> None:
         assert isinstance(error, RosBridgeError)
-        self._calls.fail_all(error)
-        goals, self._goals = self._goals, {}
-        for _action, goal in goals.values():
-            goal.on_failed("disconnected")
+        self._calls.pending.fail_all(error)
+        self._actions.fail_all()
+
+    def publishing(self) -> Mapping[str, str]:
+        return self._pubs.schemas()
+
+    def advertised(self, topic: str) -> str | None:
+        return self._pubs.ready_schema(topic)
 
     async def keepalive(self) -> None:
         async with anyio.create_task_group() as tg:
@@ -785,7 +721,7 @@ class RosbridgeAdapter(
             await anyio.sleep(interval)
             start = time.perf_counter()
             try:
-                await self._rosapi("/rosapi/get_time")
+                await self._calls.rosapi("/rosapi/get_time")
             except (ServiceError, TimeoutError) as exc:
                 self._log.info("latency probe off for this connection: %s", exc)
                 return

@@ -5,12 +5,13 @@ codecs. A part of :class:`~._rosbridge.RosbridgeAdapter`."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import Mapping
 from typing import Any, Final
 
 from .._errors import SchemaError, ServiceError
 from ..codec import CodecRegistry, same_type_name
 from ..wire._limits import truncate_for_log
+from ._rosbridge_calls import RosbridgeCalls
 
 _IDL_TO_MSG: Final[Mapping[str, str]] = {
     "boolean": "bool",
@@ -23,15 +24,16 @@ _IDL_TO_MSG: Final[Mapping[str, str]] = {
 
 class RosbridgeDefinitions:
     """The definitions fetched from the bridge, once per connection and
-    type (``_no_definition`` keeps the types it could not give). The adapter
-    owns the state and helpers declared here."""
+    type (the types it could not give are remembered); the connection's
+    ``Adapter.descriptions``."""
 
-    codecs: CodecRegistry
-    _log: logging.Logger
-    _no_definition: set[str]
-    _rosapi: Callable[..., Awaitable[Any]]
+    def __init__(self, codecs: CodecRegistry, calls: RosbridgeCalls, log: logging.Logger) -> None:
+        self._codecs = codecs
+        self._rosapi = calls.rosapi
+        self._log = log
+        self._none: set[str] = set()  # asked, and the bridge gave none
 
-    async def _fetch_definition(self, schema: str, *, quiet: bool = False) -> None:
+    async def _fetch(self, schema: str, *, quiet: bool = False) -> None:
         """Register ``schema`` from ``/rosapi/message_details`` (for cbor-raw
         of a type the bundled definitions lack); an action's goal
         (``pkg/action/X_Goal``) from ``/rosapi/action_goal_details`` and a
@@ -41,9 +43,9 @@ class RosbridgeDefinitions:
         service, args = _details_request(schema)
         try:
             answer = await self._rosapi(service, args)
-            self.codecs.add_schema(schema, "ros2msg", _typedefs_to_msg(schema, answer))
+            self._codecs.add_schema(schema, "ros2msg", typedefs_to_msg(schema, answer))
         except (ServiceError, TimeoutError, SchemaError, ValueError) as exc:
-            self._no_definition.add(schema)  # asked once per connection
+            self._none.add(schema)  # asked once per connection
             self._log.log(
                 logging.DEBUG if quiet else logging.WARNING,
                 "no definition of %s from %s: %s",
@@ -57,16 +59,16 @@ class RosbridgeDefinitions:
         (``/rosapi/message_details``, once per connection and type) when it
         is not. The client asks before publishing a type it cannot resolve
         from the bundled definitions, the graph or the user's own."""
-        if schema not in self._no_definition and not self.codecs.has_schema(schema):
-            await self._fetch_definition(schema)
-        return self.codecs.resolves(schema)
+        if schema not in self._none and not self._codecs.has_schema(schema):
+            await self._fetch(schema)
+        return self._codecs.resolves(schema)
 
     async def fetch_part(self, schema: str) -> None:
         """Fetch the definition of a request or goal type ``schema`` once per
         connection, unless it is known (quietly: a bridge without it only
         means the bridge checks what is sent)."""
-        if schema not in self._no_definition and not self.codecs.has_schema(schema):
-            await self._fetch_definition(schema, quiet=True)
+        if schema not in self._none and not self._codecs.has_schema(schema):
+            await self._fetch(schema, quiet=True)
 
 
 def _details_request(schema: str) -> tuple[str, dict[str, str]]:
@@ -79,7 +81,7 @@ def _details_request(schema: str) -> tuple[str, dict[str, str]]:
     return "/rosapi/message_details", {"type": schema}
 
 
-def _typedefs_to_msg(schema: str, answer: Any) -> str:
+def typedefs_to_msg(schema: str, answer: Any) -> str:
     """``/rosapi/message_details`` typedefs as concatenated ``.msg`` text."""
     typedefs = answer.get("typedefs") if isinstance(answer, dict) else None
     if not isinstance(typedefs, list) or not typedefs:

@@ -1,6 +1,6 @@
 """Discovery over rosbridge: the graph's topics and services, polled through
 the bridge's ``/rosapi/*`` services and bounded by the connection's limits.
-A part of :class:`~._rosbridge.RosbridgeAdapter`."""
+A part of :class:`~._rosbridge.RosbridgeAdapter`, and its node list."""
 
 from __future__ import annotations
 
@@ -13,11 +13,10 @@ import anyio
 from .._errors import ConnectError, NotConnected, ServiceError
 from .._options import ClientOptions
 from .._types import ServiceInfo, TopicInfo
-from ._seam import GraphChanged, SubscribeHints
+from ._rosbridge_calls import RosbridgeCalls
+from ._seam import GraphChanged
 from ._shared import EventSource
 
-_INTERNAL_TIMEOUT: Final = 5.0
-"""Seconds for the adapter's own rosapi requests (discovery, parameters)."""
 _EMPTY_RETRY_DELAY: Final = 0.25
 _TYPE_LOOKUPS_PER_POLL: Final = 4
 """Service types looked up per discovery poll: a burst of rosapi calls makes
@@ -27,65 +26,77 @@ rosbridge_server_rs drop messages of busy topics (measured at 5 kHz)."""
 class RosbridgeDiscovery:
     """The graph as ``/rosapi`` reports it: the topic and service tables,
     their polling (``options.discovery_interval``), the service types looked
-    up a few per poll, and the ``max_channels`` / ``max_services`` bounds. The
-    adapter owns the state and helpers declared here."""
+    up a few per poll, and the ``max_channels`` / ``max_services`` bounds.
+    Also the connection's node list (``Adapter.node_list``)."""
 
-    _options: ClientOptions
-    _log: logging.Logger
-    _topics: dict[str, str]  # name -> type, from /rosapi/topics
-    _services: dict[str, str]  # name -> type ("" until looked up)
-    _wanted: dict[str, SubscribeHints]
-    _rosapi_warned: bool
-    _discovery_ok: bool
-    _over_limit: set[str]  # graph limits exceeded at the last poll
-    _rosapi: Callable[..., Awaitable[Any]]
-    _sync: Callable[[str], Awaitable[None]]
-    _events: EventSource
+    def __init__(
+        self,
+        calls: RosbridgeCalls,
+        options: ClientOptions,
+        events: EventSource,
+        resync: Callable[[], Awaitable[None]],
+    ) -> None:
+        """``resync`` brings every wanted subscription in line with the
+        graph; each poll calls it."""
+        self._rosapi = calls.rosapi
+        self._options = options
+        self._log: logging.Logger = options.logger
+        self._events = events
+        self._resync = resync
+        self.topic_types: dict[str, str] = {}
+        """Topic name -> type, from the last ``/rosapi/topics`` (replaced,
+        not changed, by each poll)."""
+        self.service_types: dict[str, str] = {}
+        """Service name -> type (``""`` until looked up)."""
+        self.works = False
+        """Whether the last poll got an answer."""
+        self._warned = False
+        self._over_limit: set[str] = set()  # graph limits exceeded at the last poll
 
     @property
     def topics(self) -> list[TopicInfo]:
-        return [TopicInfo(name, schema) for name, schema in sorted(self._topics.items())]
+        return [TopicInfo(name, schema) for name, schema in sorted(self.topic_types.items())]
 
     @property
     def services(self) -> list[ServiceInfo]:
-        return [ServiceInfo(name, schema) for name, schema in sorted(self._services.items())]
+        return [ServiceInfo(name, schema) for name, schema in sorted(self.service_types.items())]
 
     async def nodes(self) -> list[str]:
         """The graph's nodes as ``/rosapi/nodes`` lists them (bounded by
         ``max_channels``, as the topic table is); ``ServiceError`` when the
         bridge offers no rosapi, ``TimeoutError`` after 5 s."""
-        names = sorted(set(_names(await self._rosapi("/rosapi/nodes"), "nodes")))
+        names = sorted(set(names_in(await self._rosapi("/rosapi/nodes"), "nodes")))
         return names[: self._options.max_channels]
 
-    async def _discover(self, *, first: bool = False) -> bool:
+    async def discover(self, *, first: bool = False) -> bool:
         """Poll the graph once; True when it changed. A failing rosapi is
         reported once and leaves the tables as they were."""
         try:
             answer = await self._rosapi("/rosapi/topics")
-            if first and not _names(answer, "topics"):
+            if first and not names_in(answer, "topics"):
                 await anyio.sleep(_EMPTY_RETRY_DELAY)  # a bridge that just started
                 answer = await self._rosapi("/rosapi/topics")
             services = await self._rosapi("/rosapi/services")
         except (ServiceError, TimeoutError) as exc:
-            if not self._rosapi_warned:
-                self._rosapi_warned = True
+            if not self._warned:
+                self._warned = True
                 self._log.warning(
                     "discovery through /rosapi failed (%s): topic and service lists stay empty;"
                     " subscribe with schema= and publish still work",
                     exc,
                 )
-            self._discovery_ok = False
+            self.works = False
             return False
-        self._discovery_ok = True
-        names = self._bounded(_names(answer, "topics"), "channel_limit", "topics")
-        types = _names(answer, "types")
+        self.works = True
+        names = self._bounded(names_in(answer, "topics"), "channel_limit", "topics")
+        types = names_in(answer, "types")
         topics = {n: (types[i] if i < len(types) else "") for i, n in enumerate(names)}
-        service_names = self._bounded(_names(services, "services"), "service_limit", "services")
-        old_services = self._services
+        service_names = self._bounded(names_in(services, "services"), "service_limit", "services")
+        old_services = self.service_types
         new_services = {n: old_services.get(n, "") for n in service_names}
-        changed = topics != self._topics or new_services != self._services
-        self._topics = topics
-        self._services = new_services
+        changed = topics != self.topic_types or new_services != old_services
+        self.topic_types = topics
+        self.service_types = new_services
         return changed
 
     def _bounded(self, names: list[str], reason: str, what: str) -> list[str]:
@@ -108,7 +119,7 @@ class RosbridgeDiscovery:
         return names[:limit]
 
     async def _lookup_service_types(self) -> bool:
-        unknown = [n for n, t in self._services.items() if not t][:_TYPE_LOOKUPS_PER_POLL]
+        unknown = [n for n, t in self.service_types.items() if not t][:_TYPE_LOOKUPS_PER_POLL]
         changed = False
         for name in unknown:
             try:
@@ -116,32 +127,33 @@ class RosbridgeDiscovery:
             except (ServiceError, TimeoutError):
                 continue
             schema = answer.get("type") if isinstance(answer, dict) else None
-            if isinstance(schema, str) and schema and name in self._services:
-                self._services[name] = schema
+            if isinstance(schema, str) and schema and name in self.service_types:
+                self.service_types[name] = schema
                 changed = True
         return changed
 
-    async def _poll_discovery(self) -> None:
+    async def poll(self) -> None:
         """Keep the graph current: right away (after a (re)connect), then every
         ``options.discovery_interval``."""
         interval = self._options.discovery_interval
         first = True
         try:
             while True:
-                changed = await self._discover() if not first else False
+                changed = await self.discover() if not first else False
                 first = False
                 changed |= await self._lookup_service_types()
                 if changed:
                     self._events.emit(GraphChanged(self.topics, self.services))
-                for topic in list(self._wanted):
-                    await self._sync(topic)
+                await self._resync()
                 self._events.post()
                 await anyio.sleep(interval)
         except (ConnectError, NotConnected):
             return  # the reader reports the loss
 
 
-def _names(answer: Any, key: str) -> list[str]:
+def names_in(answer: Any, key: str) -> list[str]:
+    """The strings listed under ``key`` in a rosapi answer (none when it is
+    not a list)."""
     values = answer.get(key) if isinstance(answer, dict) else None
     if not isinstance(values, list):
         return []

@@ -1,4 +1,5 @@
-"""Parameters over rosbridge, a part of :class:`~._rosbridge.RosbridgeAdapter`:
+"""Parameters over rosbridge, the parameters part of
+:class:`~._rosbridge.RosbridgeAdapter`:
 read and written through the bridge's ``/rosapi/*_param*`` services, and
 watched through the nodes' ``/parameter_events``
 (``rcl_interfaces/msg/ParameterEvent``), which every rclpy and rclcpp node
@@ -31,7 +32,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Awaitable, Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 from .._errors import DecodeError, ParameterError, SchemaError
 from .._options import ClientOptions
@@ -40,7 +41,8 @@ from ..flow import Decoder
 from ..transport import WebSocket
 from ..wire import rosbridge as rb
 from ._parameter_events import PARAMETER_EVENT_TYPE, PARAMETER_EVENTS, by_node, watched_values
-from ._rosbridge_discovery import _names
+from ._rosbridge_calls import RosbridgeCalls
+from ._rosbridge_discovery import names_in
 from ._seam import ParameterValues
 from ._shared import EventSource
 
@@ -61,34 +63,41 @@ class SentSubscription(Protocol):
 
 
 class RosbridgeParameters:
-    """Getting, setting and watching parameters. The adapter owns the state
-    and helpers declared here."""
+    """Getting, setting and watching parameters (``Adapter.parameters``)."""
 
-    _options: ClientOptions
-    codecs: CodecRegistry
-    _ws: WebSocket
-    _engine: rb.RosbridgeEngine
-    _subs: Mapping[str, SentSubscription]
-    _decoders: dict[tuple[str, str], Decoder | None]
-    _call: Callable[[str, Any, float | None], Awaitable[Any]]
-    _watched_parameters: set[str]
-    _parameter_sub_id: str | None  # the watch's subscribe id while it exists
-
-    _events: EventSource
-
-    if TYPE_CHECKING:  # the adapter's core and EventSource provide these
-
-        def _next_id(self, kind: str) -> str: ...
-        async def _send_subscribe(self, topic: str, sub: SentSubscription) -> None: ...
-
-    def _init_parameters(self) -> None:
-        self._watched_parameters = set()
-        self._parameter_sub_id = None
+    def __init__(
+        self,
+        ws: WebSocket,
+        engine: rb.RosbridgeEngine,
+        calls: RosbridgeCalls,
+        codecs: CodecRegistry,
+        events: EventSource,
+        options: ClientOptions,
+        *,
+        subscriptions: Mapping[str, SentSubscription],
+        decoders: Mapping[tuple[str, str], Decoder | None],
+        send_subscribe: Callable[[str, SentSubscription], Awaitable[None]],
+    ) -> None:
+        """``subscriptions`` and ``decoders`` are the adapter's tables of
+        the user's subscriptions (read only: the watch follows the user's
+        ``/parameter_events`` encoding), ``send_subscribe`` sends one of
+        them again."""
+        self._ws = ws
+        self._engine = engine
+        self._calls = calls
+        self._codecs = codecs
+        self._events = events
+        self._options = options
+        self._subs = subscriptions
+        self._decoders = decoders
+        self._send_subscribe = send_subscribe
+        self._watched: set[str] = set()
+        self._sub_id: str | None = None  # the watch's subscribe id while it exists
 
     async def get_parameters(self, names: Sequence[str]) -> dict[str, Any]:
         if not names:
             answer = await self._param_call("/rosapi/get_param_names", {})
-            names = _names(answer, "names")
+            names = names_in(answer, "names")
         values: dict[str, Any] = {}
         for name in names:
             answer = await self._param_call("/rosapi/get_param", {"name": name})
@@ -118,33 +127,33 @@ class RosbridgeParameters:
         return after
 
     async def _param_call(self, service: str, args: Any) -> Any:
-        return await self._call(service, args, self._options.service_timeout)
+        return await self._calls.call(service, args, self._options.service_timeout)
 
     # -- watching: /parameter_events ------------------------------------------------
     @property
     def parameter_events_subscribed(self) -> bool:
         """Whether the watch's ``/parameter_events`` subscription exists (it
         does while at least one parameter is watched)."""
-        return self._parameter_sub_id is not None
+        return self._sub_id is not None
 
     async def subscribe_parameters(self, names: Sequence[str]) -> None:
         by_node(names)  # ValueError for a name that is not /node:param
-        if self._parameter_sub_id is None and names:
-            sub_id = self._next_id(f"subscribe:{PARAMETER_EVENTS}:parameters")
-            self._parameter_sub_id = sub_id
+        if self._sub_id is None and names:
+            sub_id = self._calls.next_id(f"subscribe:{PARAMETER_EVENTS}:parameters")
+            self._sub_id = sub_id
             try:
                 await self._send_parameter_subscribe(sub_id)
             except BaseException:
-                self._parameter_sub_id = None
+                self._sub_id = None
                 raise
-        self._watched_parameters.update(names)
+        self._watched.update(names)
 
     async def unsubscribe_parameters(self, names: Sequence[str]) -> None:
-        self._watched_parameters.difference_update(names)
-        sub_id = self._parameter_sub_id
-        if sub_id is None or self._watched_parameters:
+        self._watched.difference_update(names)
+        sub_id = self._sub_id
+        if sub_id is None or self._watched:
             return
-        self._parameter_sub_id = None
+        self._sub_id = None
         if self._ws.closed:
             return
         await self._ws.send(self._engine.unsubscribe(PARAMETER_EVENTS, id=sub_id))
@@ -166,14 +175,14 @@ class RosbridgeParameters:
             )
         )
 
-    async def _user_left_parameter_events(self) -> None:
+    async def user_left_parameter_events(self) -> None:
         """The user's subscription to ``/parameter_events`` ended: while the
         watch lives, ask for its own encoding again."""
-        sub_id = self._parameter_sub_id
+        sub_id = self._sub_id
         if sub_id is not None and not self._ws.closed:
             await self._send_parameter_subscribe(sub_id)
 
-    def _on_parameter_event(self, event: rb.Publish) -> None:
+    def on_parameter_event(self, event: rb.Publish) -> None:
         """One message on ``/parameter_events`` while the watch lives (see
         the module's contract), whatever its encoding."""
         kind = event.kind
@@ -187,12 +196,12 @@ class RosbridgeParameters:
             else:  # cbor-raw, asked for by the user's subscription
                 decode = self._decoders.get((PARAMETER_EVENTS, kind))
                 if decode is None:  # the user's is not built yet
-                    decode = self.codecs.decoder(PARAMETER_EVENT_TYPE, "cdr")
+                    decode = self._codecs.decoder(PARAMETER_EVENT_TYPE, "cdr")
                 message = decode(event.payload)
         except (DecodeError, SchemaError, ValueError, RecursionError) as exc:
             self._events.reject("decode", f"{PARAMETER_EVENTS}: {exc}")
             return
-        values = watched_values(message, self._watched_parameters)
+        values = watched_values(message, self._watched)
         if values is None:
             self._events.reject("malformed", f"{PARAMETER_EVENTS}: not a {PARAMETER_EVENT_TYPE}")
         elif values:

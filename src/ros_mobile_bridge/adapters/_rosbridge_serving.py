@@ -1,13 +1,12 @@
 """Serving a service over rosbridge (``advertise_service``): the record of
 each service this connection serves, the bridge's refusals of them and its
-complaints about the answers sent to their callers. A part of
-:class:`~._rosbridge.RosbridgeAdapter`."""
+complaints about the answers sent to their callers. The serving part
+of :class:`~._rosbridge.RosbridgeAdapter`."""
 
 from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any, Final
 
@@ -18,7 +17,7 @@ from ..codec import CodecRegistry, same_type_name
 from ..transport import WebSocket
 from ..wire import rosbridge as rb
 from ..wire._limits import truncate_for_log
-from ._rosbridge_discovery import _INTERNAL_TIMEOUT
+from ._rosbridge_calls import _INTERNAL_TIMEOUT, RosbridgeCalls
 from ._seam import ServiceHandler
 
 
@@ -44,28 +43,34 @@ _FAILED_ANSWERS_KEPT: Final = 256
 
 
 class RosbridgeServing:
-    """The services a rosbridge connection serves: advertising them (and
-    confirming that through the graph), answering their callers, and the
-    bridge's error statuses about either (:meth:`_on_serving_status`). The
-    adapter forwards each call to the handler itself; it owns the state and
-    helpers declared here."""
+    """The services a rosbridge connection serves (``Adapter.serving``):
+    advertising them (and confirming that through the graph), handing each
+    call the reader reads to its handler (:meth:`on_request`), answering the
+    callers, and the bridge's error statuses about either
+    (:meth:`on_status`)."""
 
-    _ws: WebSocket
-    _engine: rb.RosbridgeEngine
-    _log: logging.Logger
-    codecs: CodecRegistry
-    _served: dict[str, _Served]
-    _failed_answers: dict[str, str]  # request id -> service, answered false
-    _next_id: Callable[[str], str]
-    _rosapi: Callable[..., Awaitable[Any]]
-    _round_trip: Callable[[], Awaitable[None]]
+    def __init__(
+        self,
+        ws: WebSocket,
+        engine: rb.RosbridgeEngine,
+        calls: RosbridgeCalls,
+        codecs: CodecRegistry,
+        log: logging.Logger,
+    ) -> None:
+        self._ws = ws
+        self._engine = engine
+        self._calls = calls
+        self._codecs = codecs
+        self._log = log
+        self._served: dict[str, _Served] = {}
+        self._failed_answers: dict[str, str] = {}  # request id -> service, answered false
 
     async def advertise_service(
         self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
     ) -> None:
         if name in self._served:
             raise ValueError(f"{name} is served by this client already")
-        served = _Served(service_type, handler, self._next_id(f"advertise_service:{name}"))
+        served = _Served(service_type, handler, self._calls.next_id(f"advertise_service:{name}"))
         self._served[name] = served
         sent = False
         try:
@@ -96,7 +101,7 @@ class RosbridgeServing:
         with anyio.move_on_after(_INTERNAL_TIMEOUT):
             while served.error is None:
                 try:
-                    answer = await self._rosapi("/rosapi/service_type", {"service": name})
+                    answer = await self._calls.rosapi("/rosapi/service_type", {"service": name})
                 except ServiceError:
                     answer = None
                 found = answer.get("type") if isinstance(answer, dict) else None
@@ -111,11 +116,23 @@ class RosbridgeServing:
             name, f"the bridge did not confirm serving it in {_INTERNAL_TIMEOUT:g} s"
         )
 
+    async def on_request(self, event: rb.ServiceRequest) -> None:
+        """A call the reader read: to the service's handler, or answered
+        ``result: false`` at once when this connection does not serve it
+        (never left waiting)."""
+        served = self._served.get(event.service)
+        if served is None:
+            await self.respond_service(
+                event.service, event.id, "this client does not serve it", False
+            )
+        else:
+            await served.handler.on_service_request(self, event.id, event.args)
+
     async def unadvertise_service(self, name: str) -> None:
         served = self._served.pop(name, None)
         if served is not None and not self._ws.closed:
             await self._ws.send(self._engine.unadvertise_service(name, id=served.id))
-            await self._round_trip()  # served no more once this returns
+            await self._calls.round_trip()  # served no more once this returns
 
     async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
         if result:
@@ -123,9 +140,9 @@ class RosbridgeServing:
             body: str | bytes
             if served is not None:
                 response = CodecRegistry.service_type_names(served.type)[1]
-                if self.codecs.has_schema(response):
-                    self.codecs.encoder(response, "cdr")(values)  # DecodeError naming the field
-                body = self.codecs.encoder(response, "json")(values)
+                if self._codecs.has_schema(response):
+                    self._codecs.encoder(response, "cdr")(values)  # DecodeError naming the field
+                body = self._codecs.encoder(response, "json")(values)
             else:
                 body = json.dumps(values)
         else:
@@ -135,7 +152,7 @@ class RosbridgeServing:
             self._failed_answers[request_id] = name
         await self._ws.send(self._engine.service_response(name, body, id=request_id, result=result))
 
-    def _on_serving_status(self, event: rb.Status) -> bool:
+    def on_status(self, event: rb.Status) -> bool:
         """Handle an error status about a served service (the bridge refused
         to serve it) or about an answer sent to one of its callers; True when
         it was one of those."""
