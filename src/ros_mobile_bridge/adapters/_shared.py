@@ -1,7 +1,6 @@
 """What every adapter shares, written once: opening a WebSocket with the
 client's options, the bookkeeping of advertised topics, handing events to the
-sink (:class:`EventSource`), and the refusal of what a protocol cannot do
-(:class:`CannotServe`)."""
+sink (:class:`EventSource`)."""
 
 from __future__ import annotations
 
@@ -11,18 +10,16 @@ from typing import Any, Final, TypeVar
 
 import anyio
 
-from .._errors import NotSupportedError
 from .._options import HTTPX_MISSING, ClientOptions
 from ..codec import CodecRegistry, same_type_name
 from ..codec._workspace import interface_paths_for
 from ..flow import TopicMessage, WireMessage
 from ..transport import WebSocket, connect_websocket
-from ._seam import Event, EventSink, Rejected, ServiceHandler
+from ._seam import Event, EventSink, Rejected
 
 __all__ = [
     "Advertisement",
     "Advertisements",
-    "CannotServe",
     "EventSource",
     "Publishes",
     "check_fits",
@@ -151,22 +148,6 @@ class Publishes:
         return self._pubs.ready_schema(topic)
 
 
-class CountsWebSocket:
-    """The traffic counters of an adapter over one :class:`WebSocket`
-    (``_ws``): ``bytes_received`` and ``messages_received``, as the socket
-    counts them."""
-
-    _ws: WebSocket
-
-    @property
-    def bytes_received(self) -> int:
-        return self._ws.bytes_received
-
-    @property
-    def messages_received(self) -> int:
-        return self._ws.messages_received
-
-
 class EventSource:
     """How an adapter hands its events up: one per connection, held by the
     adapter and by each of its parts that emits. Every emitting place calls
@@ -230,24 +211,6 @@ class EventSource:
             pending, self.pending = self.pending, []
             for event in pending:
                 sink.post(event)
-
-
-class CannotServe:
-    """The serving half of :class:`~._seam.Adapter` for a protocol that
-    cannot offer a service: refused with :attr:`serve_refusal`."""
-
-    serve_refusal: str
-
-    async def advertise_service(
-        self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
-    ) -> None:
-        raise NotSupportedError(self.serve_refusal)
-
-    async def unadvertise_service(self, name: str) -> None:
-        return None
-
-    async def respond_service(self, name: str, request_id: str, values: Any, result: bool) -> None:
-        raise NotSupportedError(self.serve_refusal)
 
 
 def codec_registry(options: ClientOptions) -> CodecRegistry:
