@@ -71,7 +71,7 @@ async def services_seen(client: rmb.Client) -> None:
 
 
 def subscribed(client: rmb.Client) -> bool:
-    return bool(client._conn.adapter.parameter_events_subscribed)  # type: ignore[attr-defined]
+    return bool(client._conn.adapter.parameters.parameter_events_subscribed)  # type: ignore[attr-defined]
 
 
 def test_the_peer_publishes_the_official_event_type(params_node: SdkNode) -> None:

@@ -1,5 +1,6 @@
-"""Types the Zenoh adapter learns from the robot, as a mixin of
-:class:`~._zenoh.ZenohAdapter`: REP-2011 ``get_type_description``.
+"""Types a Zenoh connection learns from the robot (:class:`ZenohDescriptions`,
+the type descriptions part of :class:`~._zenoh.ZenohAdapter`): REP-2011
+``get_type_description``.
 
 Every rmw_zenoh key and liveliness token names its type with the type's
 RIHS01 hash. When the codec has no definition of a type, or ours hashes
@@ -33,15 +34,14 @@ on this connection.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Final
+from typing import Any, Final
 
 import anyio
 from anyio.abc import TaskGroup
 
 from .._errors import SchemaError, ServiceError
-from .._options import ClientOptions
 from ..codec import (
     DESCRIPTION_CACHE,
     CodecRegistry,
@@ -53,9 +53,12 @@ from ..codec import (
 )
 from ..wire import rmw_zenoh as rz
 from ..wire._limits import truncate_for_log
-from ._shared import EventSource
+from ._seam import ServiceHost
+from ._zenoh_calls import ZenohQueries
+from ._zenoh_node import ZenohNode
+from ._zenoh_serving import ZenohServing
 
-__all__ = ["DESCRIBE_SERVICE_TYPE", "ZenohDescribe"]
+__all__ = ["DESCRIBE_SERVICE_TYPE", "ZenohDescriptions"]
 
 DESCRIBE_SERVICE_TYPE: Final = "type_description_interfaces/srv/GetTypeDescription"
 _SERVICE_SUFFIX: Final = "/get_type_description"
@@ -76,37 +79,39 @@ class _Fetch:
     error: SchemaError | None = None
 
 
-class ZenohDescribe:
-    """REP-2011 type descriptions fetched from the graph's nodes (a mixin of
-    :class:`~._zenoh.ZenohAdapter`, which calls :meth:`_init_describe`)."""
+class ZenohDescriptions:
+    """REP-2011 type descriptions fetched from the graph's nodes, and our
+    node's own ``get_type_description`` (see the module docstring); a
+    :class:`~._seam.TypeDescriber`."""
 
-    codecs: CodecRegistry
-    _options: ClientOptions
-    _log: logging.Logger
-    _graph: dict[str, rz.Token]
-
-    _events: EventSource
-
-    if TYPE_CHECKING:  # the adapter's core, ZenohCalls and EventSource provide these
-
-        def _type_hash(self, type_name: str) -> str: ...
-        async def _request(
-            self, service: str, srv_type: str, request: Any, timeout: float
-        ) -> Any: ...
-        def _on_described(self, type_name: str, type_hash: str) -> None: ...
-        def _published_types(self) -> list[str]: ...
-        async def advertise_service(
-            self, name: str, service_type: str, handler: Any, *, confirm: bool = True
-        ) -> None: ...
-        async def respond_service(
-            self, name: str, request_id: str, values: Any, result: bool
-        ) -> None: ...
-
-    _node_name: str
-
-    def _init_describe(self) -> None:
+    def __init__(
+        self,
+        node: ZenohNode,
+        queries: ZenohQueries,
+        serving: ZenohServing,
+        *,
+        published: Callable[[], Mapping[str, str]],
+        on_described: Callable[[str, str], None],
+    ) -> None:
+        """``published`` is what this client publishes now (topic -> type:
+        the types our node describes); ``on_described(type, hash)`` is
+        called when a fetch ends, whatever its outcome (the samples held
+        for it can go on)."""
+        self._codecs = node.codecs
+        self._options = node.options
+        self._log = node.log
+        self._events = node.events
+        self._graph = node.graph
+        self._type_hash = node.type_hash
+        self._node_name = node.node_name
+        self._queries = queries
+        self._serving = serving
+        self._published = published
+        self._on_described = on_described
         self._fetches: dict[tuple[str, str], _Fetch] = {}
-        self._describe_group: TaskGroup | None = None
+        self.group: TaskGroup | None = None
+        """The reader's task group, where fetches run (None while no reader
+        runs: a fetch then runs in the task that needs it)."""
         self.description_requests = 0
         """get_type_description requests this connection sent."""
         self.descriptions_served = 0
@@ -114,7 +119,7 @@ class ZenohDescribe:
         self._describing = False
 
     # -- what is known ----------------------------------------------------------------
-    def _knows(self, type_name: str, type_hash: str) -> bool:
+    def knows(self, type_name: str, type_hash: str) -> bool:
         """Whether our definition of ``type_name`` has ``type_hash``; a
         description in the process cache is registered on the way."""
         try:
@@ -126,29 +131,23 @@ class ZenohDescribe:
         if cached is None or cached.type_name != type_name:
             return False
         try:
-            self.codecs.add_description(cached)
+            self._codecs.add_description(cached)
         except SchemaError:
             return False
         return True
 
-    def _describe_failed(self, type_name: str, type_hash: str) -> SchemaError | None:
+    def failed(self, type_name: str, type_hash: str) -> SchemaError | None:
         """The error of a finished, failed fetch of this (type, hash)."""
         fetch = self._fetches.get((type_name, type_hash))
         return fetch.error if fetch is not None and fetch.done.is_set() else None
 
-    def _graph_hash(self, name: str, kinds: tuple[rz.EntityKind, ...]) -> tuple[str, str] | None:
-        """``(type, hash)`` of the entity ``name`` of one of ``kinds`` in the graph."""
-        for token in self._graph.values():
-            if token.name == name and token.kind in kinds and token.type_name and token.type_hash:
-                return token.type_name, token.type_hash
-        return None
-
-    def _describers(self, type_name: str, type_hash: str) -> list[str]:
+    def describers(self, type_name: str, type_hash: str) -> list[str]:
         """The ``get_type_description`` services of the nodes that use
         (type, hash): publishers and servers first, then the others."""
+        tokens = self._graph.tokens
         services = {
             token.name
-            for token in self._graph.values()
+            for token in tokens.values()
             if token.kind is rz.EntityKind.SERVICE
             and token.type_name == DESCRIBE_SERVICE_TYPE
             and token.name is not None
@@ -160,7 +159,7 @@ class ZenohDescribe:
             rz.EntityKind.CLIENT: 1,
         }
         found: dict[str, int] = {}
-        for token in self._graph.values():
+        for token in tokens.values():
             if token.type_name != type_name or token.type_hash != type_hash:
                 continue
             namespace = token.namespace.rstrip("/")
@@ -171,27 +170,27 @@ class ZenohDescribe:
         return sorted(found, key=lambda s: (found[s], s))
 
     # -- fetching -----------------------------------------------------------------------
-    def _want_description(self, type_name: str, type_hash: str) -> _Fetch | None:
+    def want(self, type_name: str, type_hash: str) -> _Fetch | None:
         """The fetch of (type, hash), started in the reader's task group if
         none is under way; None when the reader is not running."""
         key = (type_name, type_hash)
         fetch = self._fetches.get(key)
         if fetch is not None:
             return fetch
-        group = self._describe_group
+        group = self.group
         if group is None:
             return None
         fetch = self._fetches[key] = _Fetch(type_name, type_hash)
         group.start_soon(self._run_fetch, fetch)
         return fetch
 
-    async def _ensure_described(self, type_name: str, type_hash: str) -> None:
+    async def ensure_described(self, type_name: str, type_hash: str) -> None:
         """Return once our definition of ``type_name`` has ``type_hash``,
         fetching it from a node if need be; :class:`SchemaError` (see the
         module docstring) when it cannot be learnt."""
-        if self._knows(type_name, type_hash):
+        if self.knows(type_name, type_hash):
             return
-        fetch = self._want_description(type_name, type_hash)
+        fetch = self.want(type_name, type_hash)
         if fetch is None:  # no reader (yet): fetch in the caller's task
             fetch = self._fetches.setdefault((type_name, type_hash), _Fetch(type_name, type_hash))
             if not fetch.done.is_set():
@@ -199,6 +198,24 @@ class ZenohDescribe:
         await fetch.done.wait()
         if fetch.error is not None:
             raise fetch.error
+
+    async def describe_entity(self, name: str, kind: rz.EntityKind) -> None:
+        """Learn the type of the graph's entity ``name`` from its node when
+        our definition lacks it or hashes differently; ``SchemaError`` when
+        it cannot be learnt."""
+        announced = self._graph.graph_hash(name, (kind,))
+        if announced is not None:
+            await self.ensure_described(*announced)
+
+    async def fetch_definition(self, schema: str) -> bool:
+        """Known, or learnt from a node of the graph that uses a type of
+        that name: whether a definition with the graph's hash is known now.
+        ``SchemaError`` when a node was asked and did not tell."""
+        announced = self._graph.announced(schema)
+        if announced is None:
+            return self._codecs.resolves(schema)
+        await self.ensure_described(*announced)
+        return True
 
     async def _run_fetch(self, fetch: _Fetch) -> None:
         try:
@@ -216,9 +233,9 @@ class ZenohDescribe:
             self._on_described(fetch.type_name, fetch.type_hash)
 
     async def _fetch(self, type_name: str, type_hash: str) -> None:
-        if self._knows(type_name, type_hash):
+        if self.knows(type_name, type_hash):
             return
-        services = self._describers(type_name, type_hash)
+        services = self.describers(type_name, type_hash)
         if not services:
             raise SchemaError(
                 f"no definition of {type_name} ({type_hash}) and no node using it serves "
@@ -229,7 +246,7 @@ class ZenohDescribe:
         timeout = self._options.type_description_timeout
         self.description_requests += 1
         try:
-            answer = await self._request(
+            answer = await self._queries.request(
                 service,
                 DESCRIBE_SERVICE_TYPE,
                 {"type_name": type_name, "type_hash": type_hash, "include_type_sources": True},
@@ -266,20 +283,20 @@ class ZenohDescribe:
     def _register_described(self, described: DescribedTypes) -> None:
         """Register in this connection's registry and build the codecs the
         first message will need (in a worker thread: code generation)."""
-        self.codecs.add_description(described)
+        self._codecs.add_description(described)
         name = described.type_name
         try:
             if name in described.defs:
-                self.codecs.decoder(name, "cdr")
+                self._codecs.decoder(name, "cdr")
             elif name.split("/")[1] == "srv":
                 request, response = CodecRegistry.service_type_names(name)
-                self.codecs.encoder(request, "cdr")
-                self.codecs.decoder(response, "cdr")
+                self._codecs.encoder(request, "cdr")
+                self._codecs.decoder(response, "cdr")
         except SchemaError:
             pass  # said by whoever asks for the codec
 
     # -- answering ----------------------------------------------------------------------
-    async def _serve_descriptions(self) -> None:
+    async def serve_descriptions(self) -> None:
         """Serve our node's ``get_type_description`` (once per connection;
         called when this client starts publishing). A failure to declare it
         is logged: publishing goes on."""
@@ -289,7 +306,9 @@ class ZenohDescribe:
         name = f"/{self._node_name}{_SERVICE_SUFFIX}"
         try:
             handler = _DescriptionServer(name, self.description_answer, self._log)
-            await self.advertise_service(name, DESCRIBE_SERVICE_TYPE, handler, confirm=False)
+            await self._serving.advertise_service(
+                name, DESCRIBE_SERVICE_TYPE, handler, confirm=False
+            )
         except Exception as exc:
             self._log.warning("cannot serve %s: %s", name, truncate_for_log(str(exc)))
 
@@ -300,7 +319,7 @@ class ZenohDescribe:
         self.descriptions_served += 1
         name = type_name if isinstance(type_name, str) else ""
         published = next(
-            (t for t in self._published_types() if name and same_type_name(t, name)), None
+            (t for t in self._published().values() if name and same_type_name(t, name)), None
         )
         if published is None:
             return _refusal(f"this node does not publish {name!r}")
@@ -308,7 +327,7 @@ class ZenohDescribe:
             ours = self._type_hash(published)
             if type_hash and type_hash != ours:
                 return _refusal(f"{published} has the hash {ours} here, not {type_hash}")
-            description = type_description(self.codecs, published)
+            description = type_description(self._codecs, published)
         except SchemaError as exc:
             return _refusal(str(exc))
         return {
@@ -331,9 +350,9 @@ class _DescriptionServer:
         self.answer = answer
         self.log = log
 
-    async def on_service_request(self, adapter: Any, request_id: str, args: Any) -> None:
+    async def on_service_request(self, host: ServiceHost, request_id: str, args: Any) -> None:
         response = self.answer(_field(args, "type_name"), _field(args, "type_hash"))
-        await adapter.respond_service(self.name, request_id, response, True)
+        await host.respond_service(self.name, request_id, response, True)
 
     def on_service_failed(self, error: Exception) -> None:
         self.log.warning("%s: %s", self.name, error)

@@ -1,5 +1,5 @@
-"""Serving a service over Zenoh, as rmw_zenoh_cpp's service servers do, as
-a mixin of :class:`~._zenoh.ZenohAdapter`.
+"""Serving a service over Zenoh, as rmw_zenoh_cpp's service servers do
+(:class:`ZenohServing`, the serving part of :class:`~._zenoh.ZenohAdapter`).
 
 A served service is a *complete* queryable on the service's data key (its
 type's RIHS01 hash included) and a service-server (``SS``) liveliness token
@@ -22,23 +22,20 @@ service (or closing) answers its open calls with an error."""
 
 from __future__ import annotations
 
-import logging
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import anyio
 
 from .._errors import ConnectError, DecodeError, SchemaError, ServiceError
-from .._options import ClientOptions
 from ..codec import CodecRegistry
 from ..flow import Decoder
-from ..transport._zenoh import ZenohSession
 from ..wire import rmw_zenoh as rz
 from ..wire._limits import truncate_for_log
 from ._seam import ServiceHandler
-from ._shared import EventSource
+from ._zenoh_calls import ZenohQueries
+from ._zenoh_node import ZenohNode
 
 __all__ = ["ZenohServing"]
 
@@ -68,31 +65,23 @@ class _Open:
 
 class ZenohServing:
     """``advertise_service`` / ``unadvertise_service`` / ``respond_service``
-    over zenoh queryables (a mixin of :class:`~._zenoh.ZenohAdapter`, which
-    sets up the state below and hands each ``Request`` item of its reader to
-    :meth:`_on_request`)."""
+    over zenoh queryables (a :class:`~._seam.ServiceHost`). The adapter's
+    reader hands each ``Request`` item of the inbox to :meth:`on_request`
+    and, after each batch, calls :meth:`count_refused_queries`."""
 
-    _session: ZenohSession
-    _options: ClientOptions
-    _log: logging.Logger
-    codecs: CodecRegistry
-    domain: int
-    _served: dict[str, _Served]
-    _served_by_tag: dict[int, _Served]
-    _open_calls: dict[str, _Open]  # request id -> the call
-    _refused_seen: int  # the session's refused_queries already counted
-
-    _ids: Iterator[int]  # node and entity ids
-    _tags: Iterator[int]  # inbox tags
-
-    _events: EventSource
-
-    if TYPE_CHECKING:  # the adapter's core and EventSource provide these
-
-        def _type_hash(self, type_name: str) -> str: ...
-        def _token_key(self, kind: rz.EntityKind, entity_id: int, **kw: Any) -> str: ...
-        async def _round_trip(self, timeout: float) -> bool: ...
-        def _check_alive(self) -> None: ...
+    def __init__(self, node: ZenohNode, queries: ZenohQueries) -> None:
+        """``queries`` confirms an advertisement with its round trip."""
+        self._node = node
+        self._session = node.session
+        self._options = node.options
+        self._log = node.log
+        self._codecs = node.codecs
+        self._events = node.events
+        self._queries = queries
+        self._served: dict[str, _Served] = {}
+        self._served_by_tag: dict[int, _Served] = {}
+        self._open_calls: dict[str, _Open] = {}  # request id -> the call
+        self._refused_seen = 0  # the session's refused_queries already counted
 
     async def advertise_service(
         self, name: str, service_type: str, handler: ServiceHandler, *, confirm: bool = True
@@ -103,14 +92,14 @@ class ZenohServing:
         declarations reached the router (a round trip)."""
         if name in self._served:
             raise ValueError(f"{name} is served by this client already")
-        self._check_alive()
+        self._node.check_alive()
         req_name, res_name = CodecRegistry.service_type_names(service_type)
 
         def build() -> tuple[str, Decoder, Any]:  # generating codecs can take a while
             return (
-                self._type_hash(service_type),
-                self.codecs.decoder(req_name, "cdr"),
-                self.codecs.encoder(res_name, "cdr"),
+                self._node.type_hash(service_type),
+                self._codecs.decoder(req_name, "cdr"),
+                self._codecs.encoder(res_name, "cdr"),
             )
 
         try:
@@ -119,22 +108,21 @@ class ZenohServing:
             raise SchemaError(f"cannot serve {name} as {service_type}: {exc}") from exc
         if name in self._served:  # served meanwhile, by a concurrent call
             raise ValueError(f"{name} is served by this client already")
-        key = rz.format_key(rz.TopicKey(self.domain, name, service_type, hash_))
-        token_key = self._token_key(
+        key = rz.format_key(rz.TopicKey(self._node.domain, name, service_type, hash_))
+        token_key = self._node.entity_key(
             rz.EntityKind.SERVICE,
-            next(self._ids),
             name=name,
             type_name=service_type,
             hash_=hash_,
             qos=rz.Qos(),  # the services' default: reliable, volatile, keep last 10
         )
-        tag = next(self._tags)
+        tag = self._node.new_tag()
         queryable = self._session.declare_queryable(key, tag)
         token = self._session.declare_token(token_key)
         served = _Served(name, service_type, handler, key, tag, decode, encode, queryable, token)
         self._served[name] = served
         self._served_by_tag[tag] = served
-        if confirm and not await self._round_trip(self._options.service_timeout):
+        if confirm and not await self._queries.round_trip(self._options.service_timeout):
             raise ServiceError(name, "the router did not confirm serving it in time")
 
     async def unadvertise_service(self, name: str) -> None:
@@ -178,7 +166,7 @@ class ZenohServing:
             raise ConnectError(f"zenoh: the reply to {name} failed: {exc}") from exc
 
     # -- from the reader ------------------------------------------------------------------
-    async def _on_request(self, item: rz.Request) -> None:
+    async def on_request(self, item: rz.Request) -> None:
         """One call to a served service: decoded and handed to its handler,
         or answered with an error (logged, counted) when it cannot be."""
         served = self._served_by_tag.get(item.tag)
@@ -208,7 +196,7 @@ class ZenohServing:
         self._log.warning("%s: a call was refused: %s", name, truncate_for_log(text))
         self._events.reject(reason, f"{name}: {text}")
 
-    def _count_refused_queries(self) -> None:
+    def count_refused_queries(self) -> None:
         """Count the calls the session refused past its open-query bound."""
         refused = self._session.refused_queries
         if refused != self._refused_seen:
@@ -220,3 +208,10 @@ class ZenohServing:
                 f"{self._session.max_open_queries} already waited for an answer",
                 new,
             )
+
+    def close(self) -> None:
+        """The session closes: forget every served service and open call
+        (closing the session undeclares them and answers the calls)."""
+        self._served.clear()
+        self._served_by_tag.clear()
+        self._open_calls.clear()

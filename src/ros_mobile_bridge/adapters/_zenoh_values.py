@@ -1,4 +1,4 @@
-"""Plain values of the Zenoh adapter (``adapters/_zenoh.py``): its records of
+"""Plain values of the Zenoh adapter (``adapters/_zenoh*.py``): its records of
 subscriptions, queries and goals, and the helpers that read and write ROS
 values (parameters, action type names, decoded fields, attachments)."""
 
@@ -46,7 +46,7 @@ class Subscription:
     token: int | None = None
     feedback_of: str | None = None  # the action whose feedback topic this is
     parameter_events: bool = False  # the internal /parameter_events subscription
-    # sample key -> (type name, decoder); bounded by _zenoh._MAX_KEYS_PER_TOPIC
+    # sample key -> (type name, decoder); bounded by _zenoh_samples._MAX_KEYS_PER_TOPIC
     keys: dict[str, tuple[str, Decoder | None]] = field(default_factory=dict)
 
 
@@ -65,7 +65,7 @@ class Goal:
     events: GoalEvents
     feedback_decode: Decoder | None
     # its get_result query ended without a reply (the router or the server
-    # went): the keep-alive asks again or fails it (see ZenohCalls)
+    # went): the keep-alive asks again or fails it (see ZenohActions)
     orphaned: bool = False
     asked: int = 0  # get_result queries sent
 
