@@ -21,7 +21,6 @@ __all__ = [
     "Advertisement",
     "Advertisements",
     "EventSource",
-    "Publishes",
     "check_fits",
     "open_websocket",
     "socket_frame",
@@ -132,20 +131,6 @@ class Advertisements(dict[str, A]):
             return False
         await existing.reuse(topic, schema)
         return True
-
-
-class Publishes:
-    """The publishing half of the seam every adapter answers alike, from
-    its :class:`Advertisements` (``_pubs``): ``publishing()`` and
-    ``advertised()``."""
-
-    _pubs: Advertisements[Any]
-
-    def publishing(self) -> Mapping[str, str]:
-        return self._pubs.schemas()
-
-    def advertised(self, topic: str) -> str | None:
-        return self._pubs.ready_schema(topic)
 
 
 class EventSource:
