@@ -1176,6 +1176,20 @@ def test_the_fast_message_constructor_builds_the_same_frozen_message() -> None:
     assert dataclasses.replace(fast, topic="/u") == Message("/u", *args[1:])
 
 
+def test_a_frame_becomes_the_same_frozen_message_as_message_would_build() -> None:
+    from dataclasses import FrozenInstanceError
+
+    from ros_mobile_bridge.flow._frame import frame_message
+
+    raw = RawFrame("/t", "std_msgs/msg/String", "cdr", memoryview(b"xy"), 7, 5, None, 41)
+    built = frame_message(raw, {"data": "x"}, 9, "why")
+    assert type(built) is Message
+    assert built == Message("/t", "std_msgs/msg/String", "cdr", {"data": "x"}, 5, 7, 9, "why", 41)
+    with pytest.raises(FrozenInstanceError):
+        built.topic = "/other"  # type: ignore[misc]
+    assert pickle.loads(pickle.dumps(built)) == built
+
+
 def test_an_unfrozen_twin_needs_a_slotted_class_deriving_from_object_alone() -> None:
     from ros_mobile_bridge._slots import unfrozen_twin
 

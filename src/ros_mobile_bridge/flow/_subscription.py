@@ -4,10 +4,12 @@ messages out to the consumer.
 Where a frame goes, in order:
 
 1. The reader calls :meth:`FrameQueue.offer` (synchronous, never blocks).
-2. The rate cap (``max_hz``) holds frames that arrive inside the current
-   window; the newest held frame is delivered when the window ends (trailing
-   delivery: the last message before a topic goes quiet always arrives, at
-   most one window late). Older held frames are dropped, never decoded.
+2. The rate cap (``max_hz``, tightened by the adaptive throttle: a
+   :class:`~._rate_window.RateWindow`) holds frames that arrive inside the
+   current window; the newest held frame is delivered when the window ends
+   (trailing delivery: the last message before a topic goes quiet always
+   arrives, at most one window late). Older held frames are dropped, never
+   decoded.
 3. Dispatch: ``"all"`` queues every frame that passed, up to ``buffer``; a
    consumer that falls behind loses the *oldest* queued frames (counted, never
    decoded). ``"latest"`` keeps only the newest frame (conflation).
@@ -32,27 +34,17 @@ import anyio.lowlevel
 
 from .._errors import DecodeError, NotConnected
 from .._loop._wakeup import Wakeup, new_wakeup
-from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats, new_message
+from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats
 from ._breaker import CircuitBreaker
-from ._frame import RawFrame
+from ._frame import RawFrame, frame_message
+from ._rate_window import Clock, RateWindow
 from ._throttle import AdaptiveThrottle
 
 __all__ = ["FrameQueue", "Subscription"]
 
-Clock = Callable[[], float]
 _YIELD_EVERY: Final = 32
 _LARGE_PAYLOAD: Final = 64 * 1024
 _LARGE_WEIGHT: Final = 17  # a large payload counts as one message more per 128 KiB
-_DUE_SLACK: Final = 1e-6
-_READ_TOGETHER: Final = 0.25
-"""The share of the interval after a rate-capped release at the end of a
-read hold (see :meth:`FrameQueue.quiet_until`) within which a newer frame
-replaces the released one while no consumer has taken it yet: the frames
-the hold gathered (read and handed over together) deliver the newest, as
-the cap would have, not the oldest."""
-_CADENCE_GRACE: Final = 0.25
-"""A capped release up to this share of the interval after its window ended
-starts the next window at that end, not at the release."""
 HOLD_BYTES: Final = 64 * 1024
 """Payload bytes a subscription lets wait in the kernel while its reads are
 held (:meth:`FrameQueue.quiet_until`): below a socket's default receive
@@ -62,6 +54,8 @@ buffer, so the server is never slowed by a hold."""
 class FrameQueue:
     """Rate cap, conflation and the bounded queue of one subscription.
 
+    The rate cap is a :class:`RateWindow` (``max_hz``, tightened by
+    ``adaptive``); the frames it releases come to :meth:`_enqueue`.
     ``clock`` (monotonic seconds) is injectable so the filter is testable
     exactly. Synchronous apart from :meth:`get`."""
 
@@ -75,11 +69,14 @@ class FrameQueue:
         adaptive: Callable[[], float] | None = None,
         clock: Clock = time.monotonic,
     ) -> None:
-        if max_hz is not None:
-            if isinstance(max_hz, bool) or not isinstance(max_hz, int | float):
-                raise TypeError(f"max_hz must be a number or None, not {type(max_hz).__name__}")
-            if not max_hz > 0:
-                raise ValueError(f"max_hz must be positive, got {max_hz!r}")
+        # (the window checks max_hz, first)
+        window = RateWindow(
+            max_hz,
+            release=self._enqueue,
+            supersede=self._supersede,
+            adaptive=adaptive,
+            clock=clock,
+        )
         if dispatch not in ("all", "latest"):
             raise ValueError(f"dispatch must be 'all' or 'latest', got {dispatch!r}")
         if isinstance(buffer, bool) or not isinstance(buffer, int):
@@ -93,9 +90,10 @@ class FrameQueue:
         self.buffer = 1 if dispatch == "latest" else buffer
         self.max_bytes = max_bytes
         self._bytes = 0
-        self._cap = 1.0 / max_hz if max_hz else 0.0
-        self._interval = self._cap
-        self._adaptive = adaptive
+        self._window = window
+        # the window's offer, or None where it would pass every frame (no cap,
+        # no adaptive throttle): the frame is then queued with no call more
+        self._admit = None if window.unlimited else window.offer
         self.blocked = False
         """Set while the subscription's circuit breaker is tripped: frames
         are counted and dropped."""
@@ -104,20 +102,11 @@ class FrameQueue:
         self._arrival_rate = 0.0
         self._clock = clock
         self._queue: deque[RawFrame] = deque()
-        self._held: RawFrame | None = None
-        self._last_release: float | None = None
-        self._due = 0.0  # when the held frame's window ends (set with _held by offer)
         # the consumer's wait (built at its first, on its loop), and whether
         # it waits with no time limit (a frame the cap holds must then wake
         # it, to arm its timer for the release)
         self._wakeup: Wakeup | None = None
         self._untimed = False
-        self._holding = False  # a frame was held since the last release
-        # the reader was told it may hold its reads (quiet_until); then the
-        # frame the cap released after the hold, and when (_READ_TOGETHER)
-        self._quiet = False
-        self._released: RawFrame | None = None
-        self._released_at = 0.0
         self._closed = False
         self.error: Exception | None = None
         """Why the subscription ended (the connection was lost), once it did."""
@@ -126,7 +115,6 @@ class FrameQueue:
         self._state_changed = anyio.Event()
         self.received = 0
         self.delivered = 0
-        self.dropped_throttle = 0
         self.dropped_conflated = 0
         self.dropped_overflow = 0
         self.dropped_breaker = 0
@@ -136,12 +124,17 @@ class FrameQueue:
         """Payload bytes of every frame offered (``received``)."""
 
     @property
+    def dropped_throttle(self) -> int:
+        """Frames the rate cap replaced by a newer one (never delivered)."""
+        return self._window.replaced
+
+    @property
     def interval(self) -> float:
         """The effective minimum interval between delivered frames, seconds:
         the larger of the ``max_hz`` cap and the adaptive interval, as of the
         last frame that was not replaced inside a window (the adaptive
         interval is read once per window, when a frame arrives after it)."""
-        return self._interval
+        return self._window.interval
 
     @property
     def arrival_bytes_per_s(self) -> float:
@@ -151,11 +144,12 @@ class FrameQueue:
         return self._arrival_rate
 
     def __len__(self) -> int:
-        return len(self._queue) + (self._held is not None)
+        return len(self._queue) + (self._window.held is not None)
 
     # -- producer side (the reader) -----------------------------------------
     def offer(self, frame: RawFrame) -> None:
-        """Route one frame through the filters. Never blocks, never decodes."""
+        """Route one frame through the filters: count it, then the breaker,
+        the rate cap, the bounded queue. Never blocks, never decodes."""
         if self._closed:
             return
         self.received += 1
@@ -170,61 +164,11 @@ class FrameQueue:
         if self.blocked:
             self.dropped_breaker += 1
             return
-        if self._held is not None and now + _DUE_SLACK < self._due:
-            # inside the window of a held frame (the common case of a rate
-            # cap): the newer frame replaces it, released at the same time.
-            # The interval is read again when the window ends, not per frame
-            self.dropped_throttle += 1
-            self._held = frame
-            return
-        interval = self._cap
-        if self._adaptive is not None:
-            adaptive = self._adaptive()
-            if adaptive > interval:
-                interval = adaptive
-            self._interval = interval
-        if interval <= 0.0:
-            if self._held is not None:  # the cap was lifted: release what it held
-                self._release_due(now)
+        admit = self._admit
+        if admit is None:
             self._enqueue(frame)
-            return
-        self._release_due(now)
-        last = self._last_release
-        if last is None or now - last >= interval:
-            # a frame taken a little after the window ended (read after a
-            # hold, or late under load) keeps the cap's cadence: the next
-            # window starts where this one ended, so such delays do not add up
-            due = now if last is None else last + interval
-            self._last_release = due if now - due < interval * _CADENCE_GRACE else now
-            if self._quiet:  # the first frame read after a hold
-                self._quiet = False
-                self._released = frame
-                self._released_at = now
-            self._enqueue(frame)
-            return
-        released = self._released
-        queue = self._queue
-        if (
-            released is not None
-            and now - self._released_at < interval * _READ_TOGETHER
-            and queue
-            and queue[-1] is released
-        ):
-            # read together with the frame just released, which no consumer
-            # has taken yet: the newer one is delivered in its place
-            self.dropped_throttle += 1
-            queue[-1] = self._released = frame
-            self._bytes += size - released.payload.nbytes
-            return
-        if self._held is not None:
-            self.dropped_throttle += 1  # the newer frame replaces it; same release time
-            self._held = frame
-        else:
-            self._held = frame
-            self._holding = True
-            if self._untimed:
-                self._wake()  # the waiting consumer arms its timer for the release
-        self._due = last + interval
+        elif admit(frame, now) and self._untimed:
+            self._wake()  # the cap holds it: the waiting consumer arms its timer
 
     def quiet_until(self, now: float) -> float:
         """The monotonic time before which this subscription cannot take a
@@ -234,9 +178,12 @@ class FrameQueue:
         rate of the last second. 0.0 when it can take one now: no cap, no
         frame released yet, closed, or its breaker tripped. The connection's
         reader may leave the socket unread until then and read what came
-        meanwhile at once (see ``WebSocket.hold_reads``)."""
-        last = self._last_release
-        interval = self._interval
+        meanwhile at once (see ``WebSocket.hold_reads``); the window is then
+        :attr:`RateWindow.quiet`, so the frames read together at the end
+        deliver the newest."""
+        window = self._window
+        last = window.last_release
+        interval = window.interval
         if last is None or interval <= 0.0 or self._closed or self.blocked:
             return 0.0
         until = last + interval
@@ -247,7 +194,7 @@ class FrameQueue:
             rate = self._arrival_rate
         if rate > 0.0 and now + HOLD_BYTES / rate < until:
             until = now + HOLD_BYTES / rate
-        self._quiet = True
+        window.quiet = True
         return until
 
     def replayed(self, size: int) -> None:
@@ -259,22 +206,8 @@ class FrameQueue:
             self.bytes_received += size
             self.dropped_replay += 1
 
-    def _release_due(self, now: float) -> None:
-        held = self._held
-        if held is not None and self._last_release is not None:
-            due = self._last_release + self._interval
-            # within a microsecond counts as due: a timer that short cannot be
-            # armed, and waiting for it would spin
-            if now + _DUE_SLACK >= due:
-                self._held = None
-                self._last_release = due
-                if self._quiet:
-                    self._quiet = False
-                    self._released = held
-                    self._released_at = now
-                self._enqueue(held)
-
     def _enqueue(self, frame: RawFrame) -> None:
+        """Queue a frame the rate cap released, and wake the consumer."""
         queue = self._queue
         size = frame.payload.nbytes
         # bounded by count and by bytes (a queue of raw images is large);
@@ -287,7 +220,19 @@ class FrameQueue:
                 self.dropped_overflow += 1
         queue.append(frame)
         self._bytes += size
-        self._wake()
+        wakeup = self._wakeup  # (self._wake(), inline: once per frame)
+        if wakeup is not None:
+            wakeup.set()
+
+    def _supersede(self, old: RawFrame, new: RawFrame) -> bool:
+        """Put ``new`` in the place of ``old`` if ``old`` is the newest
+        queued frame (no consumer has taken it yet); True if it did."""
+        queue = self._queue
+        if queue and queue[-1] is old:
+            queue[-1] = new
+            self._bytes += new.payload.nbytes - old.payload.nbytes
+            return True
+        return False
 
     def _wake(self) -> None:
         wakeup = self._wakeup
@@ -361,8 +306,9 @@ class FrameQueue:
     def take(self) -> RawFrame | None:
         """The next frame ready for delivery, or None (releases a held frame
         whose window has ended)."""
-        if self._held is not None:
-            self._release_due(self._clock())
+        window = self._window
+        if window.held is not None:
+            window.release_due()
         if self._queue:
             frame = self._queue.popleft()
             self._bytes -= frame.payload.nbytes
@@ -376,31 +322,22 @@ class FrameQueue:
             frame = self.take()
             if frame is not None:
                 return frame
-            held = self._held
+            window = self._window
             if self._closed:
+                held = window.take_held()
                 if held is None:
                     raise anyio.EndOfStream
-                self._held = None
                 return held
             wakeup = self._wakeup
             if wakeup is None:
                 wakeup = self._wakeup = new_wakeup()
-            last = self._last_release
-            if last is not None and (held is not None or self._holding):
+            if window.held is not None or window.holding:
                 # a held frame is released when its window ends; and where the
                 # cap held one in the last window (a stream faster than the
                 # cap), the next window's end is armed now: its frames are held
-                # without waking this task to arm it
-                self._holding = False
-                interval = self._interval
-                delay = last + interval - self._clock()
-                if self._quiet:
-                    # the reader holds its reads until the window ends, then
-                    # offers what came meanwhile (which releases the newest);
-                    # this timer releases the held frame only if it does not
-                    delay += interval * _CADENCE_GRACE
-                # (a window's end may be taken a millisecond late)
-                await wakeup.wait(delay if delay > 0.0 else 0.0, coarse=True)
+                # without waking this task to arm it. (A window's end may be
+                # taken a millisecond late.)
+                await wakeup.wait(window.arm(), coarse=True)
             else:
                 self._untimed = True
                 try:
@@ -532,19 +469,7 @@ class Subscription:
                     except Exception as exc:  # a codec bug must not end the subscription
                         append(undecoded(frame, exc))
                     else:
-                        append(
-                            new_message(
-                                frame.topic,
-                                frame.schema_name,
-                                frame.encoding,
-                                data,
-                                frame.receive_time_ns,
-                                frame.log_time_ns,
-                                size,
-                                None,
-                                frame.sequence,
-                            )
-                        )
+                        append(frame_message(frame, data, size, None))
                 if delivered >= max_size or size >= _LARGE_PAYLOAD:
                     break
                 more = take()
@@ -609,17 +534,7 @@ class Subscription:
             data = decode(payload)
         except Exception as exc:  # a codec bug must not end the subscription
             return self._undecoded(frame, exc)
-        return new_message(
-            frame.topic,
-            frame.schema_name,
-            frame.encoding,
-            data,
-            frame.receive_time_ns,
-            frame.log_time_ns,
-            size,
-            None,
-            frame.sequence,
-        )
+        return frame_message(frame, data, size, None)
 
     def _undecoded(self, frame: RawFrame, exc: Exception | None) -> Message:
         """A delivered frame whose payload did not decode (``exc``; None: no
@@ -639,34 +554,14 @@ class Subscription:
             payload.nbytes,
             error,
         )
-        return new_message(
-            frame.topic,
-            frame.schema_name,
-            frame.encoding,
-            payload,
-            frame.receive_time_ns,
-            frame.log_time_ns,
-            payload.nbytes,
-            error,
-            frame.sequence,
-        )
+        return frame_message(frame, payload, payload.nbytes, error)
 
     def _raw(self, frame: RawFrame) -> Message:
         """A subscription opened with ``decode=False``: the payload as it
         came (``memoryview``), the codec never called."""
         self._queue.delivered += 1
         payload = frame.payload
-        return new_message(
-            frame.topic,
-            frame.schema_name,
-            frame.encoding,
-            payload,
-            frame.receive_time_ns,
-            frame.log_time_ns,
-            payload.nbytes,
-            None,
-            frame.sequence,
-        )
+        return frame_message(frame, payload, payload.nbytes, None)
 
     def close(self) -> None:
         """Stop receiving; iteration ends after the queued frames."""
