@@ -60,13 +60,20 @@ def wait_until_sync(
 
 
 async def take(sub: rmb.Subscription, n: int, timeout: float = 15.0) -> list[rmb.Message]:
-    """The next ``n`` messages of ``sub``, in order; fail after ``timeout``."""
+    """The next ``n`` messages of ``sub``, in order; fail after ``timeout``
+    saying how many came (and the subscription's counters)."""
     got: list[rmb.Message] = []
-    with anyio.fail_after(timeout):
+    with anyio.move_on_after(timeout) as scope:
         async for msg in sub:
             got.append(msg)
             if len(got) == n:
                 break
+    if scope.cancelled_caught:
+        last = got[-1].data if got else None
+        raise TimeoutError(
+            f"{len(got)} of {n} messages on {sub.topic} within {timeout:g} s (the last: "
+            f"{last!r}); {sub.stats}"
+        )
     return got
 
 
