@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import socket
 import time
 from collections.abc import Callable
@@ -13,6 +14,26 @@ import pytest
 import ros_mobile_bridge as rmb
 
 T = TypeVar("T")
+
+SHORT_SEARCHES = os.environ.get("RMB_SHORT_SEARCHES", "") not in ("", "0")
+"""Set by scripts/test for its runs on the other Pythons (3.10, 3.13): there
+the random searches (the hypothesis properties, the fuzz harnesses' smoke
+runs) take a short budget, :func:`examples`; the main Python's run takes the
+full one. Why: what may differ from one Python to another under the same
+code is the interpreter and the standard library (int and str limits,
+``json``, ``struct``, ``memoryview``, ``typing``), which a search meets within
+its first examples (hypothesis draws empty, zero, extreme and the package's
+own constant values with raised probability from the first example on). The
+rest of a search looks for rarer inputs, which do not depend on the Python:
+the main run searches them in full, with fresh random examples, every run."""
+
+
+def examples(full: int) -> int:
+    """The budget of a random search (hypothesis examples, fuzz sessions)
+    whose full budget is ``full``: ``full`` on the main Python; a fifth of it,
+    at least 10, with :data:`SHORT_SEARCHES` (the two other Pythons then cost
+    two fifths of one full search, not two full searches)."""
+    return max(10, full // 5) if SHORT_SEARCHES else full
 
 
 def _timed_out(

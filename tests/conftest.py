@@ -20,7 +20,9 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 import pytest
+from hypothesis import settings
 
+from _util import SHORT_SEARCHES, examples
 from peers.zenoh_router import ZenohRouter
 
 if TYPE_CHECKING:
@@ -68,6 +70,15 @@ test_zenoh, test_flow, test_wakeup, test_trio_timers, test_lag, ...). Each
 test of these modules runs on one loop, picked from its name, so each module
 runs about half its tests on each loop. ``RMB_BOTH_LOOPS=1`` runs them on
 both."""
+
+
+# The properties that set no example count of their own take hypothesis's
+# default (100) on the main Python and a short search on the others
+# (tests/_util.py's SHORT_SEARCHES says why); those that set one use
+# ``examples(n)``.
+settings.register_profile("short-searches", max_examples=examples(100))
+if SHORT_SEARCHES:
+    settings.load_profile("short-searches")
 
 
 def _one_loop(item: pytest.Item) -> str:
