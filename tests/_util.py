@@ -136,6 +136,22 @@ async def routed(session: Any, key: str, timeout: float = 10.0, *, queryable: bo
         sender.undeclare()
 
 
+async def unrouted(session: Any, key: str, timeout: float = 10.0) -> None:
+    """Wait until the Zenoh router no longer routes puts on ``key`` to any
+    subscriber, as a raw eclipse-zenoh ``session``'s publisher sees it: an
+    undeclared subscriber's route lingers a while, and a later
+    :func:`routed` would see it instead of a new one's."""
+    publisher = session.declare_publisher(key)
+    try:
+        await wait_until(
+            lambda: not publisher.matching_status.matching,
+            timeout,
+            what=f"the router to drop its route of {key}",
+        )
+    finally:
+        publisher.undeclare()
+
+
 def fast_options(**kw: Any) -> rmb.ClientOptions:
     """Client options for a local test server (the Foxglove SDK server, the
     demo robot, the hostile server): no wait for advertisements to settle,
