@@ -136,20 +136,23 @@ async def routed(session: Any, key: str, timeout: float = 10.0, *, queryable: bo
         sender.undeclare()
 
 
-async def unrouted(session: Any, key: str, timeout: float = 10.0) -> None:
+async def unrouted(
+    session: Any, key: str, timeout: float = 10.0, *, queryable: bool = False
+) -> None:
     """Wait until the Zenoh router no longer routes puts on ``key`` to any
-    subscriber, as a raw eclipse-zenoh ``session``'s publisher sees it: an
-    undeclared subscriber's route lingers a while, and a later
-    :func:`routed` would see it instead of a new one's."""
-    publisher = session.declare_publisher(key)
+    subscriber (queries to any queryable, with ``queryable``), as a raw
+    eclipse-zenoh ``session``'s publisher (querier) sees it: an undeclared
+    subscriber's route lingers a while, and a later :func:`routed` would see
+    it instead of a new one's."""
+    sender = session.declare_querier(key) if queryable else session.declare_publisher(key)
     try:
         await wait_until(
-            lambda: not publisher.matching_status.matching,
+            lambda: not sender.matching_status.matching,
             timeout,
             what=f"the router to drop its route of {key}",
         )
     finally:
-        publisher.undeclare()
+        sender.undeclare()
 
 
 def fast_options(**kw: Any) -> rmb.ClientOptions:
