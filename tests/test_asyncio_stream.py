@@ -172,15 +172,13 @@ async def test_a_send_stuck_on_a_peer_that_does_not_read_raises_when_closed(
 
     async with anyio.create_task_group() as tg:
         tg.start_soon(writer)
-        with anyio.fail_after(10):
-            while True:  # until the writer has been waiting a while
-                before = sent
-                await anyio.sleep(0.2)
-                if sent == before:
-                    break
-        assert stream._protocol.write_paused
+        # the buffers are full, and the writer waits in send()
+        await wait_until(lambda: stream._protocol.write_paused, 10, "the transport paused")
+        await anyio.wait_all_tasks_blocked()
+        before = sent
         await stream.aclose()
     assert outcome == ["closed"]
+    assert sent == before  # the waiting send did not return
 
 
 @asyncio_only
