@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import socket
 import time
 from collections.abc import Callable
@@ -13,6 +14,26 @@ import pytest
 import ros_mobile_bridge as rmb
 
 T = TypeVar("T")
+
+SHORT_SEARCHES = os.environ.get("RMB_SHORT_SEARCHES", "") not in ("", "0")
+"""Set by scripts/test for its runs on the other Pythons (3.10, 3.13): there
+the random searches (the hypothesis properties, the fuzz harnesses' smoke
+runs) take a short budget, :func:`examples`; the main Python's run takes the
+full one. Why: what may differ from one Python to another under the same
+code is the interpreter and the standard library (int and str limits,
+``json``, ``struct``, ``memoryview``, ``typing``), which a search meets within
+its first examples (hypothesis draws empty, zero, extreme and the package's
+own constant values with raised probability from the first example on). The
+rest of a search looks for rarer inputs, which do not depend on the Python:
+the main run searches them in full, with fresh random examples, every run."""
+
+
+def examples(full: int) -> int:
+    """The budget of a random search (hypothesis examples, fuzz sessions)
+    whose full budget is ``full``: ``full`` on the main Python; a fifth of it,
+    at least 10, with :data:`SHORT_SEARCHES` (the two other Pythons then cost
+    two fifths of one full search, not two full searches)."""
+    return max(10, full // 5) if SHORT_SEARCHES else full
 
 
 def _timed_out(
@@ -117,6 +138,25 @@ async def routed(session: Any, key: str, timeout: float = 10.0, *, queryable: bo
             lambda: sender.matching_status.matching,
             timeout,
             what=f"the router to route {key} to a {'queryable' if queryable else 'subscriber'}",
+        )
+    finally:
+        sender.undeclare()
+
+
+async def unrouted(
+    session: Any, key: str, timeout: float = 10.0, *, queryable: bool = False
+) -> None:
+    """Wait until the Zenoh router no longer routes puts on ``key`` to any
+    subscriber (queries to any queryable, with ``queryable``), as a raw
+    eclipse-zenoh ``session``'s publisher (querier) sees it: an undeclared
+    subscriber's route lingers a while, and a later :func:`routed` would see
+    it instead of a new one's."""
+    sender = session.declare_querier(key) if queryable else session.declare_publisher(key)
+    try:
+        await wait_until(
+            lambda: not sender.matching_status.matching,
+            timeout,
+            what=f"the router to drop its route of {key}",
         )
     finally:
         sender.undeclare()

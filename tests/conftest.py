@@ -14,13 +14,18 @@ import functools
 import json
 import os
 import random
+import warnings
 import zlib
 from collections.abc import Iterator
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 import pytest
+from hypothesis import settings
+from hypothesis import strategies as st
+from hypothesis.errors import HypothesisSideeffectWarning
 
+from _util import SHORT_SEARCHES, examples
 from peers.zenoh_router import ZenohRouter
 
 if TYPE_CHECKING:
@@ -68,6 +73,28 @@ test_zenoh, test_flow, test_wakeup, test_trio_timers, test_lag, ...). Each
 test of these modules runs on one loop, picked from its name, so each module
 runs about half its tests on each loop. ``RMB_BOTH_LOOPS=1`` runs them on
 both."""
+
+
+# The properties that set no example count of their own take hypothesis's
+# default (100) on the main Python and a short search on the others
+# (tests/_util.py's SHORT_SEARCHES says why); those that set one use
+# ``examples(n)``.
+settings.register_profile("short-searches", max_examples=examples(100))
+if SHORT_SEARCHES:
+    settings.load_profile("short-searches")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """On the pytest-xdist controller, before the workers start: hypothesis's
+    table of the characters ``st.text()`` draws from (every code point UTF-8
+    can encode; seconds of CPU) is computed once and written to
+    ``.hypothesis/`` for the workers to read, instead of computed by each
+    worker at once in a fresh clone. (Hypothesis warns of slow work while
+    plugins load: here it is the point.)"""
+    if config.getoption("numprocesses", None) and not hasattr(config, "workerinput"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", HypothesisSideeffectWarning)
+            st.characters(codec="utf-8").validate()
 
 
 def _one_loop(item: pytest.Item) -> str:

@@ -14,7 +14,7 @@ from collections.abc import Iterator
 import anyio
 import pytest
 
-from _util import ASYNCIO_LOOPS, wait_until
+from _util import ASYNCIO_LOOPS, wait_until, wait_until_sync
 from peers.scripted import Peer, scripted_server
 from ros_mobile_bridge.transport import ConnectionLost, _asyncio_stream, connect_websocket
 from ros_mobile_bridge.transport._asyncio_stream import ProtocolStream
@@ -172,15 +172,13 @@ async def test_a_send_stuck_on_a_peer_that_does_not_read_raises_when_closed(
 
     async with anyio.create_task_group() as tg:
         tg.start_soon(writer)
-        with anyio.fail_after(10):
-            while True:  # until the writer has been waiting a while
-                before = sent
-                await anyio.sleep(0.2)
-                if sent == before:
-                    break
-        assert stream._protocol.write_paused
+        # the buffers are full, and the writer waits in send()
+        await wait_until(lambda: stream._protocol.write_paused, 10, "the transport paused")
+        await anyio.wait_all_tasks_blocked()
+        before = sent
         await stream.aclose()
     assert outcome == ["closed"]
+    assert sent == before  # the waiting send did not return
 
 
 @asyncio_only
@@ -310,7 +308,7 @@ async def test_a_hold_that_meets_the_end_of_the_stream_resumes_reading(peer: Raw
     conn = await anyio.to_thread.run_sync(peer.wait)
 
     def send_late() -> None:
-        time.sleep(0.02)  # after the hold paused reading
+        wait_until_sync(lambda: stream._protocol.held, what="the hold")  # reading paused
         conn.sendall(b"last")
 
     async with anyio.create_task_group() as tg:
@@ -351,7 +349,7 @@ async def test_a_paced_hold_reads_in_its_timer_and_goes_on_while_reads_are_taken
     stream.paced = paced
 
     def send_first() -> None:
-        time.sleep(0.01)  # after the hold paused reading
+        wait_until_sync(lambda: stream._protocol.held, what="the hold")  # reading paused
         conn.sendall(b"keep1")
 
     async with anyio.create_task_group() as tg:

@@ -20,6 +20,12 @@ TOPIC = "/chatter"
 options = partial(rmb.ClientOptions, zero_twist_on_exit=False)
 
 
+async def subscribed(server: SdkServer) -> None:
+    """Until the server has the client's subscription (a message logged
+    before it goes to no one)."""
+    await wait_until(lambda: TOPIC in server.subscribed(), what="the server has the subscription")
+
+
 async def test_waiting_messages_come_in_batches_in_order(server: SdkServer) -> None:
     channel = server.channel(TOPIC, "std_msgs/msg/String")
     count = 300
@@ -27,7 +33,7 @@ async def test_waiting_messages_come_in_batches_in_order(server: SdkServer) -> N
         rmb.connect(server.url, options=options()) as robot,
         robot.subscribe(TOPIC, buffer=count, adaptive=False) as sub,
     ):
-        await anyio.sleep(0.1)  # the server has the subscription
+        await subscribed(server)
         for i in range(count):
             channel.log(string_msg(str(i)))
         await wait_until(lambda: sub.stats.received == count, what="every message received")
@@ -53,7 +59,7 @@ async def test_a_batch_waits_for_the_first_message_then_takes_what_is_there(
         rmb.connect(server.url, options=options()) as robot,
         robot.subscribe(TOPIC, adaptive=False) as sub,
     ):
-        await anyio.sleep(0.1)
+        await subscribed(server)
         batches = sub.batches()
         with anyio.move_on_after(0.2) as scope:
             await batches.__anext__()  # nothing published: it waits
@@ -70,7 +76,7 @@ async def test_a_cancelled_wait_loses_nothing(server: SdkServer) -> None:
         rmb.connect(server.url, options=options()) as robot,
         robot.subscribe(TOPIC, adaptive=False) as sub,
     ):
-        await anyio.sleep(0.1)
+        await subscribed(server)
         for _ in range(3):
             with anyio.move_on_after(0.05):
                 await sub.batches().__anext__()
@@ -92,7 +98,7 @@ async def test_iteration_ends_after_the_queued_messages(server: SdkServer) -> No
         rmb.connect(server.url, options=options()) as robot,
         robot.subscribe(TOPIC, adaptive=False) as sub,
     ):
-        await anyio.sleep(0.1)
+        await subscribed(server)
         channel.log(string_msg("last"))
         await wait_until(lambda: sub.stats.received == 1)
         sub.close()

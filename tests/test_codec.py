@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from _util import examples
 from ros_mobile_bridge._errors import DecodeError, SchemaError
 from ros_mobile_bridge.codec import CodecRegistry, FieldDef, normalize_type_name, same_type_name
 
@@ -598,7 +599,7 @@ def test_truncated_payload_is_decode_error(reg: CodecRegistry) -> None:
         dec(memoryview(b"\x00\x07" + payload[2:]))
 
 
-@settings(max_examples=200, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=examples(200), suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(garbage=st.binary(max_size=200))
 def test_decoder_raises_only_decode_error(reg: CodecRegistry, garbage: bytes) -> None:
     for name in ("nav_msgs/msg/Odometry", "sensor_msgs/msg/Image", "std_msgs/msg/String"):
@@ -742,7 +743,7 @@ int32 = st.integers(-(2**31), 2**31 - 1)
 text = st.text(alphabet=st.characters(codec="utf-8", exclude_characters="\x00"))
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=examples(150), deadline=None)
 @given(
     x=st.floats(allow_nan=True),
     n=int32,

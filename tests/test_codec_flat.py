@@ -13,6 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from _util import examples
 from ros_mobile_bridge._errors import DecodeError, SchemaError
 from ros_mobile_bridge.codec import CodecRegistry, bundled_interface_names
 from ros_mobile_bridge.codec._model import INT_RANGES
@@ -98,7 +99,7 @@ def test_the_common_flat_types_are_covered_and_arrays_are_not() -> None:
     assert len(FLAT) > 50
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(25), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_valid_payloads_decode_as_the_general_decoder_does(data: st.DataObject) -> None:
     for name in FLAT:  # every type in every example
@@ -116,7 +117,7 @@ def test_valid_payloads_decode_as_the_general_decoder_does(data: st.DataObject) 
         assert got[0] == "ok"
 
 
-@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(400), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_damaged_payloads_end_as_with_the_general_decoder(data: st.DataObject) -> None:
     name = data.draw(st.sampled_from(FLAT))

@@ -16,14 +16,21 @@ from types import ModuleType
 
 import pytest
 
-pytestmark = pytest.mark.docs  # built on the main Python only (scripts/test)
+pytestmark = [
+    pytest.mark.docs,  # built on the main Python only (scripts/test)
+    # one pytest-xdist worker runs this module, so the site is built once per
+    # run (the build is seconds of CPU), not once by each worker that got one
+    # of the tests that read it
+    pytest.mark.xdist_group("docs-site"),
+]
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The site, built once for this module from this checkout's sources."""
+    """The site, built once per run (the module's tests share one worker)
+    from this checkout's sources."""
     out = tmp_path_factory.mktemp("site")
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src"), *filter(None, [env.get("PYTHONPATH")])])

@@ -142,7 +142,7 @@ async def test_wait_for_topic_raises_not_connected_when_the_connection_ends() ->
 
             async with anyio.create_task_group() as tg:
                 tg.start_soon(wait)
-                await anyio.sleep(0.1)
+                await anyio.wait_all_tasks_blocked()  # the wait for /never began
                 await anyio.to_thread.run_sync(demo.stop)
     finally:
         demo.stop()

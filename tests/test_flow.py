@@ -21,6 +21,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from _util import examples
 from ros_mobile_bridge import DecodeError, Message, NotConnected, ServiceError
 from ros_mobile_bridge.flow import (
     FrameQueue,
@@ -389,7 +390,7 @@ async def _run_arrivals(
 
 
 @pytest.mark.parametrize("backend", ["asyncio", "trio"])
-@settings(deadline=None, max_examples=60)
+@settings(deadline=None, max_examples=examples(60))
 @given(
     ops=_ARRIVALS,
     max_hz=st.sampled_from([None, 1, 4, 10, 30, 1000, 2.5]),

@@ -9,6 +9,8 @@ from types import ModuleType
 
 import pytest
 
+from _util import SHORT_SEARCHES, examples
+
 # CPU-bound searches: under parallel workers on a busy machine they may take
 # several times their quiet minute, more than the suite's 120 s per test
 pytestmark = pytest.mark.timeout(360)
@@ -29,7 +31,6 @@ def _load_harness() -> ModuleType:
 REACHED = (
     "Publish/json",
     "Publish/cbor",
-    "Publish/cbor-raw",
     "Publish/parsed",
     "ServiceResponse",
     "ActionFeedback",
@@ -41,6 +42,12 @@ REACHED = (
 )
 
 
+RARE = ("Publish/cbor-raw",)
+"""Reached by a full run; a short run (tests/_util.py: 80 sessions a seed)
+reached every other path with its first seed, but a cbor-raw publish only
+with its fourth (in the suite, seeds 0-3): the full run's to reach."""
+
+
 def test_fuzz_harness_short_run() -> None:
     """The run reached the interesting paths, not just the violation branch:
     every publish kind, every event type, and whole fragmented messages.
@@ -49,11 +56,12 @@ def test_fuzz_harness_short_run() -> None:
     five seeds of 400 sessions each, until every path was reached."""
     harness = _load_harness()
     harness.STATS.clear()
+    wanted = REACHED if SHORT_SEARCHES else REACHED + RARE
     for seed in range(5):
-        harness.run(max_examples=400, seed=seed)
-        if all(harness.STATS[name] > 0 for name in REACHED):
+        harness.run(max_examples=examples(400), seed=seed)
+        if all(harness.STATS[name] > 0 for name in wanted):
             break
-    for name in REACHED:
+    for name in wanted:
         assert harness.STATS[name] > 0, (name, dict(harness.STATS))
 
 

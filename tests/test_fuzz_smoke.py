@@ -9,6 +9,8 @@ from types import ModuleType
 
 import pytest
 
+from _util import examples
+
 # CPU-bound searches: under parallel workers on a busy machine they may take
 # several times their quiet minute, more than the suite's 120 s per test
 pytestmark = pytest.mark.timeout(360)
@@ -29,7 +31,9 @@ def _load_harness() -> ModuleType:
 def test_fuzz_harness_short_run() -> None:
     harness = _load_harness()
     harness.STATS.clear()
-    harness.run(max_examples=150, seed=0)
+    # every path named below is reached within the first ten or so sessions
+    # (seeds 0-3, 150 or 30 sessions): a short run's 30 (tests/_util.py) too
+    harness.run(max_examples=examples(150), seed=0)
     # The run reached the interesting paths, not just the violation branch.
     for name in ("ServerInfo", "Advertise", "MessageData", "ProtocolViolation"):
         assert harness.STATS[name] > 0, (name, dict(harness.STATS))

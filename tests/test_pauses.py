@@ -91,7 +91,7 @@ async def test_a_pause_due_sooner_than_the_awaited_one_is_resumed_on_time() -> N
     async with anyio.create_task_group() as tg:
         tg.start_soon(p.run, resume)
         p.pause("/slow", anyio.current_time(), "ks")
-        await anyio.sleep(0.05)  # run now waits for /slow
+        await anyio.wait_all_tasks_blocked()  # run now waits for /slow
         p.pause("/fast", anyio.current_time(), "kf")
         await wait_until(lambda: resumed, 4, what="a resume")
         tg.cancel_scope.cancel()

@@ -31,8 +31,9 @@ def open_fds() -> int:
     return len(os.listdir("/proc/self/fd"))
 
 
-def blocking_service() -> Any:
+def blocking_service(called: list[bool]) -> Any:
     def handler(req: Any) -> bytes:
+        called.append(True)
         time.sleep(30)  # never answers in time: the call is pending at the outage
         return b""
 
@@ -116,7 +117,8 @@ async def test_subscriptions_advertisements_and_parameter_watches_survive_a_serv
 
 
 async def test_a_pending_call_fails_with_disconnected_at_the_outage() -> None:
-    server = SdkServer(services=[blocking_service()])
+    called: list[bool] = []
+    server = SdkServer(services=[blocking_service(called)])
     try:
         async with rmb.connect(server.url, options=options()) as robot:
             outcome: list[BaseException] = []
@@ -129,7 +131,7 @@ async def test_a_pending_call_fails_with_disconnected_at_the_outage() -> None:
 
             async with anyio.create_task_group() as tg:
                 tg.start_soon(call)
-                await anyio.sleep(0.2)  # the request is out and waiting
+                await wait_until(lambda: called, what="the request at the server")
                 server.server.stop()
                 with anyio.fail_after(5):
                     await wait_until(lambda: outcome, what="the call to fail")

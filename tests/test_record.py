@@ -124,6 +124,26 @@ def same_run(
     return data[start : start + len(mine)], mine
 
 
+async def until_seen(
+    path: Path,
+    received: dict[str, list[rmb.Message]],
+    align: Callable[[list[tuple[int, Any]], list[rmb.Message]], tuple[list[Any], list[Any]]],
+) -> None:
+    """Until each parallel subscription has received as many messages of the
+    finished recording's window (``align``: :func:`same_window` or
+    :func:`same_run`) as the recording holds: its consumer task takes them
+    some time after the recorder did. At most 10 s: the comparison after it
+    says what differs."""
+    decoded = decode_all(path)
+
+    def complete() -> bool:
+        return all(len(align(decoded[t], received[t])[0]) >= len(decoded[t]) for t in decoded)
+
+    with anyio.move_on_after(10):
+        while not complete():
+            await anyio.sleep(0.01)
+
+
 def summary_count(path: Path) -> int:
     with path.open("rb") as f:
         summary = make_reader(f).get_summary()
@@ -174,7 +194,7 @@ async def test_demo_topics_round_trip_through_mcap(demo: DemoRobot, tmp_path: Pa
         async with robot.record(path, topics=topics, adaptive=False) as rec:
             await wait_until(lambda: all(rec.stats.messages.get(t, 0) >= 3 for t in topics), 10)
         stats = rec.stats
-        await anyio.sleep(0.2)  # the parallel subscriptions see past the window
+        await until_seen(path, received, same_window)
         tg.cancel_scope.cancel()
     decoded = decode_all(path)
     assert set(decoded) == set(topics)
@@ -444,7 +464,7 @@ async def test_rosbridge_topics_round_trip_through_mcap(
                     lambda: all(rec.stats.messages.get(t, 0) >= 10 for t in topics), 15
                 )
             stats = rec.stats
-            await anyio.sleep(0.3)
+            await until_seen(path, received, same_window if compression is None else same_run)
             tg.cancel_scope.cancel()
         assert stats.skipped == {}
         decoded = decode_all(path)

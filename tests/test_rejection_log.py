@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from _util import examples
 from ros_mobile_bridge._core._rejection_log import LOG_BURST, LOG_EVERY, RejectionLog
 
 LOGGER = logging.getLogger("tests.test_rejection_log")
@@ -99,7 +100,7 @@ def test_details_are_truncated(lines: list[str]) -> None:
     assert "100000" in lines[0]
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(
     steps=st.lists(
         st.tuples(

@@ -76,6 +76,22 @@ async def matched(peer: RosPeer, *topics: str) -> None:
 # -- connecting and discovery ---------------------------------------------------------
 
 
+async def until_quiet(sub: rmb.Subscription, gap: float, timeout: float = 15.0) -> None:
+    """Until ``sub`` received no frame for ``gap`` seconds: the bridge applies
+    a throttle rate some time after the client sends it, and a throttled
+    stream shows it by gaps the 50 Hz one does not have."""
+    last, since = sub.stats.received, time.monotonic()
+
+    def quiet() -> bool:
+        nonlocal last, since
+        now, received = time.monotonic(), sub.stats.received
+        if received != last:
+            last, since = received, now
+        return now - since >= gap
+
+    await wait_until(quiet, timeout, what=f"a {gap} s gap in {sub.topic}")
+
+
 async def test_connects_and_discovers_the_graph(peer: RosPeer) -> None:
     async with rmb.connect(peer.url, protocol="rosbridge", options=options()) as robot:
         assert robot.protocol == "rosbridge"
@@ -236,9 +252,11 @@ async def test_the_adaptive_throttle_is_forwarded_as_throttle_rate(peer: RosPeer
             await take(sub, 1)
             tg.start_soon(keep_lagging)
             await wait_until(lambda: sub.stats.bucket == "1 Hz", timeout=10, what="1 Hz")
-            await anyio.sleep(1.0)  # the next tick forwards it; frames in flight land
+            # the next tick forwards it and the bridge applies it (frames in
+            # flight land meanwhile): the stream's 1 s gaps begin
+            await until_quiet(sub, 0.5)
             start = sub.stats.received
-            await anyio.sleep(2.0)
+            await anyio.sleep(2.0)  # the window counted (an upper bound: load only lowers it)
             throttled = sub.stats.received - start
             lagging = False
             current_monitor().clear()
@@ -383,9 +401,9 @@ async def test_the_loosest_cap_among_local_subscriptions_is_forwarded(peer: RosP
                 await wait_until(
                     lambda: slow.stats.received - start >= 15, timeout=5, what="15 frames"
                 )
-            await anyio.sleep(0.5)
+            await until_quiet(slow, 0.3)  # the bridge throttles to `slow`'s 2 Hz again
             start = slow.stats.received
-            await anyio.sleep(1.0)
+            await anyio.sleep(1.0)  # the window counted (an upper bound: load only lowers it)
             alone = slow.stats.received - start
     assert alone <= 5, alone  # the bridge throttles again once `fast` left (about 2)
 
@@ -655,6 +673,16 @@ async def test_latency_probe_turns_off_after_one_failure(
     opts = options(latency_probe_interval=0.1, on_latency=seen.append)
     try:
         async with rmb.connect(bridge.url, protocol="rosbridge", options=opts) as robot:
+            await wait_until(
+                lambda: (
+                    "latency probe off" in caplog.text
+                    and "discovery through /rosapi failed" in caplog.text
+                ),
+                10,
+                "the probe's and discovery's failures logged",
+            )
+            # several probe intervals (0.1 s) and discovery polls (0.25 s)
+            # more: neither says so again (no event to wait for: a window)
             await anyio.sleep(0.8)
             assert robot.topics == []  # no rosapi: discovery stays empty, and says so once
     finally:

@@ -118,6 +118,11 @@ class FakeBridge:
     def sent(self, op: str) -> list[dict[str, Any]]:
         return [f for f in self.received if f.get("op") == op]
 
+    def polls(self) -> int:
+        """The client's discovery polls so far: its ``/rosapi/topics`` calls
+        (a client polls again only once its last poll ended)."""
+        return sum(f["service"] == "/rosapi/topics" for f in self.sent("call_service"))
+
 
 async def first_messages(sub: rmb.Subscription, n: int) -> list[rmb.Message]:
     got: list[rmb.Message] = []
@@ -319,7 +324,8 @@ async def test_a_bridge_without_rosapi_still_subscribes_and_publishes(
             assert robot.topics == []
             async with robot.subscribe("/chatter", schema="std_msgs/msg/String") as sub:
                 got = await first_messages(sub, 1)
-            await anyio.sleep(0.3)  # several failed polls: warned once
+            # several failed polls (each ended when the next begins): warned once
+            await wait_until(lambda: bridge.polls() >= 4, what="four discovery polls")
     assert got[0].data == {"data": "typed"}
     assert bridge.sent("subscribe")[0]["type"] == "std_msgs/msg/String"
     assert caplog.text.count("discovery through /rosapi failed") == 1
@@ -450,14 +456,16 @@ async def test_fragment_bounds_breaches_are_counted() -> None:
 
 
 async def test_discovered_topics_beyond_max_channels_are_refused_and_counted_once() -> None:
-    async with scripted_server(FakeBridge(), subprotocols=()) as url:
+    bridge = FakeBridge()
+    async with scripted_server(bridge, subprotocols=()) as url:
         with anyio.fail_after(10):
             opts = options(max_channels=1, discovery_interval=0.05)
             async with rmb.connect(url, protocol="rosbridge", options=opts) as robot:
                 assert [t.name for t in robot.topics] == ["/chatter"]
-                await anyio.sleep(0.3)  # several polls, still over the bound
                 await wait_until(lambda: robot.rejections.get("channel_limit") == 1)
-                await anyio.sleep(0.2)
+                # three more polls ended (a fourth began), all still over the bound
+                polls = bridge.polls()
+                await wait_until(lambda: bridge.polls() >= polls + 4, what="four more polls")
                 assert robot.rejections == {"channel_limit": 1}
 
 

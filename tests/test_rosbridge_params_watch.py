@@ -67,6 +67,68 @@ async def first_update(setter: rmb.Client, updates: AsyncIterator[dict[str, Any]
     return got[0]
 
 
+async def until_watched(setter: rmb.Client, updates: AsyncIterator[dict[str, Any]]) -> float:
+    """Set fresh speeds until the watch delivers one of them (the bridge takes
+    a ``subscribe`` that changes the topic's encoding some time after it is
+    sent: an event before that may come in the old encoding, or not at all);
+    the speed delivered. Updates of earlier values are skipped."""
+    sent: list[float] = []
+    got: list[float] = []
+    async with anyio.create_task_group() as tg:
+
+        async def read() -> None:  # (cancelling a wait would end the iterator)
+            while True:
+                update = await updates.__anext__()
+                if update.get(SPEED) in sent:
+                    got.append(update[SPEED])
+                    return
+
+        tg.start_soon(read)
+        with anyio.fail_after(20):
+            while not got:
+                sent.append(fresh())
+                await setter.set_parameters({SPEED: sent[-1]})
+                with anyio.move_on_after(0.5):
+                    while not got:
+                        await anyio.sleep(0.02)
+    return got[0]
+
+
+def speed_of(message: rmb.Message) -> float | None:
+    """The new speed of a ``/parameter_events`` message of ``/rmb_params``, if any."""
+    data = message.data
+    changed = data["changed_parameters"]
+    if data["node"] == "/rmb_params" and changed:
+        return float(changed[0]["value"]["double_value"])
+    return None
+
+
+async def until_heard(setter: rmb.Client, sub: rmb.Subscription) -> float:
+    """Set fresh speeds until the user's ``/parameter_events`` subscription
+    ``sub`` delivers one of them (the bridge takes its ``subscribe`` some time
+    after it is sent); the speed delivered."""
+    sent: list[float] = []
+    got: list[float] = []
+    async with anyio.create_task_group() as tg:
+
+        async def read() -> None:
+            async for message in sub:
+                speed = speed_of(message)
+                if speed is not None and speed in sent:
+                    got.append(speed)
+                    return
+
+        tg.start_soon(read)
+        with anyio.fail_after(20):
+            while not got:
+                sent.append(fresh())
+                await setter.set_parameters({SPEED: sent[-1]})
+                with anyio.move_on_after(0.5):
+                    while not got:
+                        await anyio.sleep(0.02)
+    return got[0]
+
+
 async def restore(setter: rmb.Client) -> None:
     await setter.set_parameters({SPEED: 0.5, LABEL: "demo"})
 
@@ -177,7 +239,12 @@ async def test_a_user_subscription_to_parameter_events_lives_beside_the_watch(
                 async with client.subscribe(
                     "/parameter_events", schema=EVENT, compression=compression
                 ) as sub:
-                    await anyio.sleep(0.3)
+                    # the user's subscription reaches the bridge: both hear it
+                    # then, the watch each value set meanwhile, in order
+                    heard = await until_heard(setter, sub)
+                    with anyio.fail_after(10):
+                        while await next_update(updates) != {SPEED: heard}:
+                            pass
                     speed = fresh()
                     await setter.set_parameters({SPEED: speed})
                     assert await next_update(updates) == {SPEED: speed}
@@ -211,13 +278,9 @@ async def test_undecodable_cbor_raw_events_are_counted_and_json_comes_back(
                             await setter.set_parameters({SPEED: fresh()})
                             await anyio.sleep(0.3)
                 assert set(client.rejections) == {"decode"}
-                await anyio.sleep(0.3)  # the watch's own subscribe reaches the bridge
-                speed = fresh()
-                await setter.set_parameters({SPEED: speed})
-                with anyio.fail_after(10):
-                    async for update in updates:  # (an update may still be on its way)
-                        if update == {SPEED: speed}:
-                            break
+                # the watch's own subscribe (JSON) reaches the bridge: a value
+                # set after it is decoded and delivered
+                await until_watched(setter, updates)
         finally:
             await restore(setter)
 

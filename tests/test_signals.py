@@ -78,7 +78,7 @@ async def test_only_the_chosen_signals_are_taken() -> None:
     try:
         async with rmb.cancel_on_signals(signal.SIGUSR1) as stop:
             os.kill(os.getpid(), signal.SIGUSR2)
-            await anyio.sleep(0.1)
+            await wait_until(lambda: received, what="SIGUSR2 at its own handler")
             os.kill(os.getpid(), signal.SIGUSR1)
             await anyio.sleep(10)
     finally:

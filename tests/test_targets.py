@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from _util import examples
 from ros_mobile_bridge import DEFAULT_PORTS, Endpoint, parse_target
 
 
@@ -289,7 +290,7 @@ _PIECES = st.sampled_from(
 )
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400), deadline=None)
 @given(
     target=st.one_of(st.text(), st.lists(_PIECES, max_size=8).map("".join)),
     protocol=st.sampled_from(["auto", "foxglove-ws", "rosbridge", "zenoh", "bogus"]),

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from _util import examples
 from ros_mobile_bridge.flow._lag import LagMonitor
 from ros_mobile_bridge.flow._throttle import (
     DEFAULT_PRESETS,
@@ -542,7 +543,7 @@ lags = st.floats(min_value=0.0, max_value=2000.0, allow_nan=False)
 steps = st.lists(st.tuples(lags, lags, st.sampled_from(THROTTLE_MODES)), min_size=1, max_size=60)
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300), deadline=None)
 @given(steps=steps, deadband=st.sampled_from([0.0, 5.0, 10.0, 40.0]))
 def test_the_bucket_is_always_between_what_the_lag_and_the_deadband_justify(
     steps: list[tuple[float, float, ThrottleMode]], deadband: float
@@ -572,7 +573,7 @@ def test_the_bucket_is_always_between_what_the_lag_and_the_deadband_justify(
         previous_mode = mode
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200), deadline=None)
 @given(
     history=st.lists(st.tuples(lags, lags), min_size=1, max_size=30),
     calm=st.floats(min_value=0.0, max_value=2000.0, allow_nan=False),

@@ -115,8 +115,12 @@ async def test_one_stall_of_a_second_loses_no_camera_frame(server: SdkServer) ->
                     seen.append(int(msg.data["header"]["stamp"]["sec"]))
                     if len(seen) == 30:
                         time.sleep(1.0)  # user code blocks the loop once
-                        await anyio.sleep(0.2)  # the sampler records the stall
-                        stalled_lag = current_monitor().max_lag_ms()
+                        # the sampler records the stall (its next sample; it
+                        # shows for a second)
+                        stalled_lag = await wait_until(
+                            lambda: (lag := current_monitor().max_lag_ms()) >= 900.0 and lag,
+                            what="the stall in the lag monitor",
+                        )
                     if len(seen) == count:
                         break
             stats = sub.stats

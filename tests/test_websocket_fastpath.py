@@ -20,6 +20,7 @@ from websockets.client import ClientProtocol
 from websockets.protocol import State
 from websockets.uri import parse_uri
 
+from _util import examples
 from ros_mobile_bridge.transport import _ws_frames
 from ros_mobile_bridge.transport._ws_frames import FrameParser
 
@@ -149,7 +150,7 @@ def test_a_frame_websockets_refuses_on_two_bytes_fails_at_once(tail: bytes) -> N
     assert fast[1] is not None  # the connection failed
 
 
-@settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow], deadline=None)
+@settings(max_examples=examples(400), suppress_health_check=[HealthCheck.too_slow], deadline=None)
 @given(
     frames=frame_lists,
     cuts=st.lists(st.integers(0, 1 << 16), max_size=12),
@@ -191,7 +192,7 @@ def test_a_huge_declared_length_is_not_buffered_by_the_fast_path() -> None:
     assert "1009" in str(parser.closed_reason)
 
 
-@settings(max_examples=300, suppress_health_check=[HealthCheck.too_slow], deadline=None)
+@settings(max_examples=examples(300), suppress_health_check=[HealthCheck.too_slow], deadline=None)
 @given(
     frames=frame_lists,
     cuts=st.lists(st.integers(0, 1 << 16), max_size=12),

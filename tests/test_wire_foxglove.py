@@ -16,6 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from _util import examples
 from ros_mobile_bridge.wire import foxglove as fg
 from ros_mobile_bridge.wire.foxglove import (
     SUBPROTOCOLS,
@@ -1395,21 +1396,21 @@ payloads = st.binary(max_size=256)
 
 
 @given(st.text())
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 def test_any_text_never_raises(text: str) -> None:
     events = connected().receive_text(text)
     assert all(isinstance(ev, Event) for ev in events)
 
 
 @given(st.binary())
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 def test_any_text_bytes_never_raises(data: bytes) -> None:
     events = connected().receive_text(data)
     assert all(isinstance(ev, Event) for ev in events)
 
 
 @given(st.binary(max_size=64), st.sampled_from([bytes, bytearray, memoryview]))
-@settings(max_examples=500)
+@settings(max_examples=examples(500))
 def test_any_binary_never_raises(data: bytes, kind: type) -> None:
     e = connected()
     e.subscribe_many([1, 2, 3])
@@ -1422,7 +1423,7 @@ def test_any_binary_never_raises(data: bytes, kind: type) -> None:
 
 
 @given(st.integers(0, 7), st.binary(max_size=40))
-@settings(max_examples=500)
+@settings(max_examples=examples(500))
 def test_any_opcode_with_any_body_never_raises(opcode: int, body: bytes) -> None:
     events = connected().receive_binary(bytes([opcode]) + body)
     assert all(isinstance(ev, Event) for ev in events)
@@ -1468,7 +1469,7 @@ field_names = st.sampled_from(
 
 
 @given(known_ops, st.dictionaries(field_names | st.text(max_size=6), json_values, max_size=4))
-@settings(max_examples=500)
+@settings(max_examples=examples(500))
 def test_known_op_with_random_fields_never_raises(op: str, fields: dict[str, Any]) -> None:
     events = connected().receive_text(json.dumps({**fields, "op": op}))
     assert all(isinstance(ev, Event) for ev in events)

@@ -19,6 +19,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from _util import examples
 from ros_mobile_bridge.wire import rosbridge as rb
 from ros_mobile_bridge.wire.rosbridge import (
     ActionFeedback,
@@ -1452,7 +1453,7 @@ separators = st.sampled_from([None, (",", ":"), (", ", ": "), (" , ", " : ")])
     st.booleans(),
     st.sampled_from([bytes, bytearray, str]),
 )
-@settings(max_examples=400)
+@settings(max_examples=examples(400))
 def test_json_publish_property(
     topic: str,
     msg: dict[str, Any],
@@ -1482,7 +1483,7 @@ def test_json_publish_property(
     st.booleans(),
     st.sampled_from([bytes, bytearray]),
 )
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 def test_cbor_publish_property(
     topic: str, msg: dict[str, Any], order: list[str], with_id: bool, kind: type
 ) -> None:
@@ -1497,7 +1498,7 @@ def test_cbor_publish_property(
 
 
 @given(topics, st.binary(max_size=64), st.none() | st.integers(0, 2**40), st.integers(0, 10**9))
-@settings(max_examples=200)
+@settings(max_examples=examples(200))
 def test_cbor_raw_publish_property(
     topic: str, payload: bytes, secs: int | None, nsecs: int
 ) -> None:
@@ -1536,7 +1537,7 @@ wholes = (
 
 
 @given(wholes, st.integers(1, 8), st.randoms(use_true_random=False))
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 def test_fragment_reassembly_property(whole: str, parts: int, rnd: Any) -> None:
     """Any text, cut into parts sent in any order, is handled as the text itself
     (JSON), or dropped as not JSON."""
@@ -1578,25 +1579,25 @@ def _never_raises(events: object) -> None:
 
 
 @given(st.text())
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 def test_any_text_never_raises(text: str) -> None:
     _never_raises(RosbridgeEngine().receive_text(text))
 
 
 @given(st.binary())
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 def test_any_text_bytes_never_raises(data: bytes) -> None:
     _never_raises(RosbridgeEngine().receive_text(data))
 
 
 @given(st.binary(max_size=80), st.sampled_from([bytes, bytearray]))
-@settings(max_examples=500)
+@settings(max_examples=examples(500))
 def test_any_binary_never_raises(data: bytes, kind: type) -> None:
     _never_raises(RosbridgeEngine().receive_binary(kind(data)))
 
 
 @given(st.binary(max_size=40))
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 def test_any_bytes_after_a_publish_prefix_never_raise(tail: bytes) -> None:
     """The CBOR walker and the JSON peek on frames that start well."""
     e = RosbridgeEngine()
@@ -1620,7 +1621,7 @@ def test_any_bytes_after_a_publish_prefix_never_raise(tail: bytes) -> None:
         max_size=5,
     ),
 )
-@settings(max_examples=500)
+@settings(max_examples=examples(500))
 def test_known_op_with_random_fields_never_raises(op: str, fields: dict[str, Any]) -> None:
     e = RosbridgeEngine()
     _never_raises(e.receive_text(json.dumps({**fields, "op": op})))

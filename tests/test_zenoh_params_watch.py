@@ -10,6 +10,8 @@ of the others, and nothing after it stops watching; garbage on
 
 from __future__ import annotations
 
+import contextlib
+import json
 import time
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
@@ -19,7 +21,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import routed, wait_until
+from _util import routed, unrouted, wait_until
 from _util import zenoh_options as options
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
@@ -43,6 +45,20 @@ def params_node(zenoh_router: Any, zenoh_domain: int, ros_share: Path) -> Iterat
         yield node
     finally:
         node.stop()
+
+
+@contextlib.contextmanager
+def raw_session(locator: str) -> Iterator[Any]:
+    """A bare eclipse-zenoh client session to the router at ``locator``."""
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([locator]))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(config)
+    try:
+        yield session
+    finally:
+        session.close()
 
 
 def data_key(domain: int, topic: str, type_name: str) -> str:
@@ -107,9 +123,8 @@ async def test_a_watcher_sees_the_changes_another_client_makes(
         # nothing is watched: the internal subscription is gone
         assert not subscribed(watcher)
         await setter.set_parameters({SPEED: 4.0})
+        await unrouted(raw, events)  # (its route lingers a while: routed would see it)
         async with watcher.watch_parameters([NAME]) as names:
-            # (the old declaration's route may linger: a pause first)
-            await anyio.sleep(0.3)
             await routed(raw, events)
             await setter.set_parameters({NAME: "r3"})
             assert await next_update(names) == {NAME: "r3"}
@@ -196,7 +211,8 @@ async def test_the_watch_is_restored_after_a_router_restart(
             tg.start_soon(consume)
             async with rmb.connect(router.locator, options=options(zenoh_domain)) as setter:
                 await services_seen(setter)
-                await anyio.sleep(0.3)
+                with raw_session(router.locator) as raw:  # the watch's subscriber is declared
+                    await routed(raw, data_key(zenoh_domain, "/parameter_events", EVENT))
                 await setter.set_parameters({SPEED: 1.0})
                 await wait_until(lambda: seen == [{SPEED: 1.0}], timeout=15.0)
             first = watcher._conn.adapter

@@ -13,7 +13,7 @@ from typing import Any
 import anyio
 import pytest
 
-from _util import routed, wait_until
+from _util import routed, unrouted, wait_until
 from ros_mobile_bridge.transport._zenoh import DEFAULT_MAX_OPEN_QUERIES, ZenohSession
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 
@@ -160,8 +160,8 @@ async def test_undeclare_and_close_answer_the_open_queries(zenoh_router: Any, ra
         }
         assert session.open_queries == 0
         assert not session.reply(got[0].query_id, KEY, b"late", b"")
+        await unrouted(raw, KEY, queryable=True)  # (lingers a while: routed would see it)
         session.declare_queryable(KEY, tag=2)
-        await anyio.sleep(0.3)  # (the old declaration's route may linger: a pause too)
         await routed(raw, KEY, queryable=True)
         caller.get(2, b"c")
         (open_,) = await requests(session, 1)

@@ -30,7 +30,9 @@ pytest.importorskip("mcap_ros2")
 from mcap.reader import make_reader  # noqa: E402
 from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
-from _util import wait_until  # noqa: E402
+from _util import routed, wait_until  # noqa: E402
+from ros_mobile_bridge.codec import CodecRegistry, type_hash  # noqa: E402
+from ros_mobile_bridge.wire import rmw_zenoh as rz  # noqa: E402
 
 STRING = "std_msgs/msg/String"
 IMU_QOS = "1:1:1,5:,:,:,,"  # rmw_zenoh's token form
@@ -92,14 +94,17 @@ async def test_sdk_talkers_are_recorded_and_read_back_with_mcap_ros2(
     zenoh_domain: int,
     ros_share: Path,
     tmp_path: Path,
+    raw: Any,
 ) -> None:
     path = tmp_path / "zenoh.mcap"
     topics = {"/chatter": STRING, "/imu": IMU}
     opts = rmb.ClientOptions(domain_id=zenoh_domain)
     async with rmb.connect(zenoh_router.locator, options=opts) as client:
         async with client.record(path, topics=list(topics), adaptive=False) as rec:
-            # the recorder's subscriptions are declared before the talkers start
-            await anyio.sleep(0.5)
+            # the recorder's subscriptions reach the router before the talkers start
+            for topic, type_name in topics.items():
+                hash_ = type_hash(CodecRegistry(), type_name)
+                await routed(raw, rz.format_key(rz.TopicKey(zenoh_domain, topic, type_name, hash_)))
             for topic, type_name in topics.items():
                 args = ["--topic", topic, "--type", type_name, "--count", str(COUNT)]
                 if topic == "/imu":  # reliable, transient local, keep last 5

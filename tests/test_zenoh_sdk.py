@@ -27,6 +27,7 @@ pytest.importorskip("zenoh_ros2_sdk")
 
 STRING = "std_msgs/msg/String"
 TWIST = "geometry_msgs/msg/Twist"
+SCHEMAS = {"/chatter": STRING, "/cmd_vel": TWIST}
 # the official hashes (share/<pkg>/<kind>/<Name>.json of the Jazzy wheels)
 OFFICIAL = {
     STRING: "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
@@ -68,19 +69,35 @@ async def test_sdk_talker_reaches_our_subscription(
         assert client.rejections == {}
 
 
+async def until_heard(client: rmb.Client, listener: SdkNode, topic: str, probe: Any) -> None:
+    """Publish ``probe`` until the SDK listener has one: a sample put before
+    the router routes our key to its subscriber is lost (what it received
+    after a probe, it received in order)."""
+    with anyio.fail_after(15):
+        while not listener.messages():
+            await client.publish(topic, SCHEMAS[topic], probe)
+            with anyio.move_on_after(0.2):
+                while not listener.messages():
+                    await anyio.sleep(0.02)
+
+
 async def test_our_publisher_reaches_the_sdk_listener(
     sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int
 ) -> None:
     listener = sdk("listener", "--topic", "/chatter", "--type", STRING)
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
         await client.advertise("/chatter", STRING)
-        await anyio.sleep(0.5)  # the listener's subscriber sees our publisher
+        await until_heard(client, listener, "/chatter", {"data": "probe"})
         for i in range(50):
             await client.publish("/chatter", STRING, {"data": f"from rmb {i}"})
+
+        def ours() -> list[str]:
+            return [m["data"] for m in listener.messages() if m["data"] != "probe"]
+
         await wait_until(
-            lambda: len(listener.messages()) >= 50, timeout=15.0, what="50 messages at the listener"
+            lambda: len(ours()) >= 50, timeout=15.0, what="50 messages at the listener"
         )
-    assert [m["data"] for m in listener.messages()] == [f"from rmb {i}" for i in range(50)]
+    assert ours() == [f"from rmb {i}" for i in range(50)]
 
 
 async def test_we_call_the_sdk_service(
@@ -132,21 +149,23 @@ async def test_a_zero_twist_reaches_the_sdk_listener_last(
     with anyio.CancelScope() as scope:
         async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
             await client.advertise("/cmd_vel", TWIST)
-            await anyio.sleep(0.5)
+            await until_heard(client, listener, "/cmd_vel", {"linear": {"x": 0.1}})
+
+            def commands() -> list[dict[str, Any]]:  # after the probes
+                return [m for m in listener.messages() if m["linear"]["x"] != 0.1]
+
             for _ in range(10):
                 await client.publish(
                     "/cmd_vel", TWIST, {"linear": {"x": 0.4}, "angular": {"z": 0.2}}
                 )
-            await wait_until(
-                lambda: len(listener.messages()) >= 10, timeout=15.0, what="the commands"
-            )
+            await wait_until(lambda: len(commands()) >= 10, timeout=15.0, what="the commands")
             if cancel:
                 scope.cancel()
-                await anyio.sleep(5)
+                await anyio.sleep(5)  # (the cancel: returns at once)
     assert scope.cancelled_caught == cancel
-    await wait_until(lambda: len(listener.messages()) >= 11, timeout=15.0, what="the zero Twist")
-    await anyio.sleep(0.3)  # nothing may follow it
-    got = listener.messages()
+    await wait_until(lambda: len(commands()) >= 11, timeout=15.0, what="the zero Twist")
+    await anyio.sleep(0.3)  # nothing may follow it (a window: no event to wait for)
+    got = commands()
     assert [m["linear"]["x"] for m in got] == [0.4] * 10 + [0.0]
     assert got[-1]["angular"] == {"x": 0.0, "y": 0.0, "z": 0.0}
 
