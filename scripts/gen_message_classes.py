@@ -127,14 +127,17 @@ def _comment_text(comment: str) -> str:
     return text[1:] if text.startswith(" ") else text
 
 
-def doc_lines(text: str) -> list[str]:
+def doc_lines(text: str, leading: bool = False) -> list[str]:
     """The docstring body of one ``.msg`` text (or one section of a ``.srv``
     or ``.action``): its comments in order, each field's or constant's own
     comment (the lines right above it, and the one after it) led by its
-    name (````name``: ...``), blank lines kept as paragraph breaks."""
+    name (````name``: ...``), blank lines kept as paragraph breaks. With
+    ``leading``, the comment lines the text starts with are a header even
+    without a blank line after them (the one-line header of the files
+    ``scripts/interfaces/`` supplies)."""
     out: list[str] = []
     block: list[str] = []
-    for raw in text.expandtabs(4).split("\n"):
+    for number, raw in enumerate(text.expandtabs(4).split("\n")):
         code, comment = _split_comment(raw)
         if not code.strip():
             if comment is None:
@@ -146,6 +149,10 @@ def doc_lines(text: str) -> list[str]:
             continue
         tokens = code.split()
         name = tokens[1].split("=")[0] if len(tokens) > 1 else tokens[0]
+        if leading and len(block) == number:  # the file's header
+            out.extend(block)
+            out.append("")
+            block = []
         lines = [*block]
         if comment is not None and _comment_text(comment).strip():
             lines.append(_comment_text(comment))
@@ -222,7 +229,12 @@ def _sections(text: str, count: int) -> list[str]:
 
 
 def _service(
-    name: str, qualname: str, texts: tuple[str, str], defs: dict[str, Any], what: str
+    name: str,
+    qualname: str,
+    texts: tuple[str, str],
+    defs: dict[str, Any],
+    what: str,
+    leading: bool = False,
 ) -> Namespace:
     ns = Namespace(
         name,
@@ -238,16 +250,19 @@ def _service(
                 derived,
                 f"{qualname}.{part}",
                 f"The {part.lower()} of the service ``{name}`` (``{derived}``).",
-                doc_lines(text),
+                doc_lines(text, leading and part == "Request"),
                 defs[derived],
             )
         )
     return ns
 
 
-def build_modules(interfaces: Mapping[str, str]) -> list[Module]:
+def build_modules(
+    interfaces: Mapping[str, str], supplement: frozenset[str] = frozenset()
+) -> list[Module]:
     """Every module to write for ``interfaces`` (``"pkg/kind/Name"`` -> the
-    ``.msg``, ``.srv`` or ``.action`` text), parsed by the library's parser."""
+    ``.msg``, ``.srv`` or ``.action`` text), parsed by the library's parser;
+    the files of the packages in ``supplement`` start with a header line."""
     from ros_mobile_bridge.codec._interface import interface_definitions
 
     modules: dict[tuple[str, str], Module] = {}
@@ -255,13 +270,15 @@ def build_modules(interfaces: Mapping[str, str]) -> list[Module]:
         pkg, kind, short = name.split("/")
         module = modules.setdefault((pkg, kind), Module(pkg, kind))
         defs = interface_definitions(name, text)
+        header = pkg in supplement
         if kind == "msg":
+            doc = doc_lines(text, header)
             module.classes.append(
-                Message(name, short, f"The ROS message ``{name}``.", doc_lines(text), defs[name])
+                Message(name, short, f"The ROS message ``{name}``.", doc, defs[name])
             )
         elif kind == "srv":
             request, response = _sections(text, 2)
-            module.classes.append(_service(name, short, (request, response), defs, ""))
+            module.classes.append(_service(name, short, (request, response), defs, "", header))
         else:
             goal, result, feedback = _sections(text, 3)
             ns = Namespace(
@@ -279,7 +296,7 @@ def build_modules(interfaces: Mapping[str, str]) -> list[Module]:
                         derived,
                         f"{short}.{part}",
                         f"The {part.lower()} of the action ``{name}`` (``{derived}``).",
-                        doc_lines(text),
+                        doc_lines(text, header and part == "Goal"),
                         defs[derived],
                     )
                 )
@@ -659,7 +676,8 @@ def generate_from(
     version from ``packages`` and each type's hash from ``hashes``."""
     out: dict[str, str] = {}
     kinds: dict[str, list[str]] = {}
-    for module in build_modules(interfaces):
+    supplement = frozenset(p for p, version in packages.items() if version == "supplement")
+    for module in build_modules(interfaces, supplement):
         out[f"{module.package}/{module.kind}.py"] = _Writer(module, packages, hashes).text()
         kinds.setdefault(module.package, []).append(module.kind)
     for package, found in kinds.items():

@@ -34,7 +34,7 @@ class Fibonacci(RosAction):
     class Goal(RosMessage):
         """The goal of the action ``example_interfaces/action/Fibonacci`` (``example_interfaces/action/Fibonacci_Goal``).
 
-        ``order``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+        Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
         """
 
         __slots__ = ("order",)

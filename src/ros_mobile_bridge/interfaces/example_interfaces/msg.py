@@ -50,7 +50,7 @@ __all__ = [
 class Bool(RosMessage):
     """The ROS message ``example_interfaces/msg/Bool``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -71,7 +71,7 @@ class Bool(RosMessage):
 class Byte(RosMessage):
     """The ROS message ``example_interfaces/msg/Byte``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -92,7 +92,7 @@ class Byte(RosMessage):
 class ByteMultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/ByteMultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -122,7 +122,7 @@ class ByteMultiArray(RosMessage):
 class Char(RosMessage):
     """The ROS message ``example_interfaces/msg/Char``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -155,7 +155,7 @@ class Empty(RosMessage):
 class Float32(RosMessage):
     """The ROS message ``example_interfaces/msg/Float32``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -176,7 +176,7 @@ class Float32(RosMessage):
 class Float32MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/Float32MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -206,7 +206,7 @@ class Float32MultiArray(RosMessage):
 class Float64(RosMessage):
     """The ROS message ``example_interfaces/msg/Float64``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -227,7 +227,7 @@ class Float64(RosMessage):
 class Float64MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/Float64MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -257,7 +257,7 @@ class Float64MultiArray(RosMessage):
 class Int16(RosMessage):
     """The ROS message ``example_interfaces/msg/Int16``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -278,7 +278,7 @@ class Int16(RosMessage):
 class Int16MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/Int16MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -308,7 +308,7 @@ class Int16MultiArray(RosMessage):
 class Int32(RosMessage):
     """The ROS message ``example_interfaces/msg/Int32``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -329,7 +329,7 @@ class Int32(RosMessage):
 class Int32MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/Int32MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -359,7 +359,7 @@ class Int32MultiArray(RosMessage):
 class Int64(RosMessage):
     """The ROS message ``example_interfaces/msg/Int64``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -380,7 +380,7 @@ class Int64(RosMessage):
 class Int64MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/Int64MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -410,7 +410,7 @@ class Int64MultiArray(RosMessage):
 class Int8(RosMessage):
     """The ROS message ``example_interfaces/msg/Int8``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -431,7 +431,7 @@ class Int8(RosMessage):
 class Int8MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/Int8MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -461,7 +461,7 @@ class Int8MultiArray(RosMessage):
 class MultiArrayDimension(RosMessage):
     """The ROS message ``example_interfaces/msg/MultiArrayDimension``.
 
-    ``label``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -496,7 +496,7 @@ class MultiArrayDimension(RosMessage):
 class MultiArrayLayout(RosMessage):
     """The ROS message ``example_interfaces/msg/MultiArrayLayout``.
 
-    ``dim``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -526,7 +526,7 @@ class MultiArrayLayout(RosMessage):
 class String(RosMessage):
     """The ROS message ``example_interfaces/msg/String``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -547,7 +547,7 @@ class String(RosMessage):
 class UInt16(RosMessage):
     """The ROS message ``example_interfaces/msg/UInt16``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -568,7 +568,7 @@ class UInt16(RosMessage):
 class UInt16MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/UInt16MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -598,7 +598,7 @@ class UInt16MultiArray(RosMessage):
 class UInt32(RosMessage):
     """The ROS message ``example_interfaces/msg/UInt32``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -619,7 +619,7 @@ class UInt32(RosMessage):
 class UInt32MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/UInt32MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -649,7 +649,7 @@ class UInt32MultiArray(RosMessage):
 class UInt64(RosMessage):
     """The ROS message ``example_interfaces/msg/UInt64``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -670,7 +670,7 @@ class UInt64(RosMessage):
 class UInt64MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/UInt64MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -700,7 +700,7 @@ class UInt64MultiArray(RosMessage):
 class UInt8(RosMessage):
     """The ROS message ``example_interfaces/msg/UInt8``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)
@@ -721,7 +721,7 @@ class UInt8(RosMessage):
 class UInt8MultiArray(RosMessage):
     """The ROS message ``example_interfaces/msg/UInt8MultiArray``.
 
-    ``layout``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -751,7 +751,7 @@ class UInt8MultiArray(RosMessage):
 class WString(RosMessage):
     """The ROS message ``example_interfaces/msg/WString``.
 
-    ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("data",)

@@ -23,7 +23,7 @@ class AddTwoInts(RosService):
     class Request(RosMessage):
         """The request of the service ``example_interfaces/srv/AddTwoInts`` (``example_interfaces/srv/AddTwoInts_Request``).
 
-        ``a``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+        Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
         """
 
         __slots__ = (
@@ -77,7 +77,7 @@ class SetBool(RosService):
     class Request(RosMessage):
         """The request of the service ``example_interfaces/srv/SetBool`` (``example_interfaces/srv/SetBool_Request``).
 
-        ``data``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+        Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
         """
 
         __slots__ = ("data",)

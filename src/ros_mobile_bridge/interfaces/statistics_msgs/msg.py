@@ -24,7 +24,7 @@ __all__ = [
 class MetricsMessage(RosMessage):
     """The ROS message ``statistics_msgs/msg/MetricsMessage``.
 
-    ``measurement_source_name``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -76,7 +76,7 @@ class MetricsMessage(RosMessage):
 class StatisticDataPoint(RosMessage):
     """The ROS message ``statistics_msgs/msg/StatisticDataPoint``.
 
-    ``data_type``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -106,7 +106,7 @@ class StatisticDataPoint(RosMessage):
 class StatisticDataType(RosMessage):
     """The ROS message ``statistics_msgs/msg/StatisticDataType``.
 
-    ``STATISTICS_DATA_TYPE_UNINITIALIZED``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ()

@@ -33,7 +33,7 @@ class LookupTransform(RosAction):
     class Goal(RosMessage):
         """The goal of the action ``tf2_msgs/action/LookupTransform`` (``tf2_msgs/action/LookupTransform_Goal``).
 
-        ``target_frame``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+        Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
         """
 
         __slots__ = (

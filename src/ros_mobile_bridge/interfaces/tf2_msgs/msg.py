@@ -23,7 +23,7 @@ __all__ = [
 class TF2Error(RosMessage):
     """The ROS message ``tf2_msgs/msg/TF2Error``.
 
-    ``NO_ERROR``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = (
@@ -61,7 +61,7 @@ class TF2Error(RosMessage):
 class TFMessage(RosMessage):
     """The ROS message ``tf2_msgs/msg/TFMessage``.
 
-    ``transforms``: Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
+    Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
     """
 
     __slots__ = ("transforms",)
