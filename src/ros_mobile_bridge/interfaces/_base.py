@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Iterable, Mapping
-from typing import TYPE_CHECKING, Any, ClassVar, Final, NamedTuple, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Final, TypeVar
 
 from .._errors import MessageError, SchemaError
 
@@ -71,23 +71,37 @@ _STRING_TYPES: Final = frozenset({"string", "wstring"})
 _PACKAGE: Final = __name__.rpartition(".")[0]
 
 
-class FieldInfo(NamedTuple):
+class FieldInfo:
     """One field of a class, read from its ``.msg`` type (``"float64[36]"``,
-    ``"string<=256"``, ``"geometry_msgs/msg/Point[]"``, ``"int32[<=5]"``)."""
+    ``"string<=256"``, ``"geometry_msgs/msg/Point[]"``, ``"int32[<=5]"``).
+    (A plain class: a ``NamedTuple`` would compile its annotations at import.)"""
 
-    name: str
-    msg_type: str
-    """The type as ``__ros_fields__`` spells it."""
-    kind: int
-    element: str
-    """The element type without its string bound (``"float64"``,
-    ``"string"``, ``"geometry_msgs/msg/Point"``)."""
-    fixed: bool
-    """A fixed-size array (``T[N]``): ``size`` is its length."""
-    size: int
-    """The length of a fixed-size array, the bound of a bounded sequence, else 0."""
-    string_bound: int
-    """The bound of a bounded string (the field's, or its elements'), else 0."""
+    __slots__ = ("element", "fixed", "kind", "msg_type", "name", "size", "string_bound")
+
+    def __init__(
+        self,
+        name: str,
+        msg_type: str,
+        kind: int,
+        element: str,
+        fixed: bool,
+        size: int,
+        string_bound: int,
+    ) -> None:
+        self.name = name
+        self.msg_type = msg_type
+        """The type as ``__ros_fields__`` spells it."""
+        self.kind = kind
+        """:data:`SCALAR`, :data:`ARRAY`, :data:`STRINGS`, :data:`MESSAGE` or :data:`MESSAGES`."""
+        self.element = element
+        """The element type without its string bound (``"float64"``,
+        ``"string"``, ``"geometry_msgs/msg/Point"``)."""
+        self.fixed = fixed
+        """A fixed-size array (``T[N]``): ``size`` is its length."""
+        self.size = size
+        """The length of a fixed-size array, the bound of a bounded sequence, else 0."""
+        self.string_bound = string_bound
+        """The bound of a bounded string (the field's, or its elements'), else 0."""
 
 
 def parse_field(name: str, type_: str) -> FieldInfo:
@@ -111,14 +125,17 @@ def parse_field(name: str, type_: str) -> FieldInfo:
     return FieldInfo(name, type_, kind, element, fixed, size, string_bound)
 
 
-class _Plan(NamedTuple):
+class _Plan:
     """What the generic methods need of one class, computed on first use."""
 
-    names: tuple[str, ...]
-    kinds: tuple[int, ...]
-    fields: dict[str, FieldInfo]
-    path: str
-    """The class as ``repr`` names it: ``geometry_msgs.msg.Twist``."""
+    __slots__ = ("fields", "kinds", "names", "path")
+
+    def __init__(self, infos: list[FieldInfo], path: str) -> None:
+        self.names = tuple(i.name for i in infos)
+        self.kinds = tuple(i.kind for i in infos)
+        self.fields = {i.name: i for i in infos}
+        self.path = path
+        """The class as ``repr`` names it: ``geometry_msgs.msg.Twist``."""
 
 
 _PLANS: dict[type, _Plan] = {}
@@ -131,12 +148,7 @@ def _plan(cls: type[RosMessage]) -> _Plan:
         module = cls.__module__
         if module.startswith(_PACKAGE + "."):
             module = module[len(_PACKAGE) + 1 :]
-        plan = _Plan(
-            tuple(i.name for i in infos),
-            tuple(i.kind for i in infos),
-            {i.name: i for i in infos},
-            f"{module}.{cls.__qualname__}",
-        )
+        plan = _Plan(infos, f"{module}.{cls.__qualname__}")
         _PLANS[cls] = plan
     return plan
 
