@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from _message_classes import generator
-from ros_mobile_bridge import MessageError
+from ros_mobile_bridge import MessageError, SchemaError
 from ros_mobile_bridge.codec import CodecRegistry, bundled_hash, bundled_interface_names, type_hash
 from ros_mobile_bridge.codec._bundled import bundled_interface
 from ros_mobile_bridge.codec._interface import interface_definitions
@@ -822,3 +822,19 @@ def test_importing_the_library_does_not_import_the_classes_nor_them_numpy() -> N
     # the library alone: no classes; geometry_msgs: no numpy, no codec, not even std_msgs
     # (Header loads when a message needs it); numpy loads with the first array
     assert out[:4] == ["False", "[]", "False True", "True"]
+
+
+def test_message_class_finds_derived_types_and_refuses_the_rest() -> None:
+    assert message_class("example_interfaces/srv/AddTwoInts_Request") is AddTwoInts.Request
+    assert message_class("example_interfaces/action/Fibonacci_SendGoal_Response") is (
+        Fibonacci.SendGoal.Response
+    )
+    for name in (
+        "nosuch_msgs/msg/Thing",
+        "geometry_msgs/msg/Nope",
+        "geometry_msgs/Twist",
+        "example_interfaces/srv/AddTwoInts",  # a service, not a message
+        "geometry_msgs/_base/Twist",
+    ):
+        with pytest.raises(SchemaError, match="no message class"):
+            message_class(name)

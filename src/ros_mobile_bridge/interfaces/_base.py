@@ -128,7 +128,7 @@ def parse_field(name: str, type_: str) -> FieldInfo:
 class _Plan:
     """What the generic methods need of one class, computed on first use."""
 
-    __slots__ = ("fields", "kinds", "names", "path")
+    __slots__ = ("classes", "fields", "kinds", "names", "path")
 
     def __init__(self, infos: list[FieldInfo], path: str) -> None:
         self.names = tuple(i.name for i in infos)
@@ -136,6 +136,14 @@ class _Plan:
         self.fields = {i.name: i for i in infos}
         self.path = path
         """The class as ``repr`` names it: ``geometry_msgs.msg.Twist``."""
+        self.classes: dict[str, type[RosMessage]] = {}
+        """The nested message fields' classes, by field name, found on first use."""
+
+    def nested_class(self, name: str) -> type[RosMessage]:
+        cls = self.classes.get(name)
+        if cls is None:
+            cls = self.classes[name] = message_class(self.fields[name].element)
+        return cls
 
 
 _PLANS: dict[type, _Plan] = {}
@@ -161,7 +169,7 @@ def message_class(type_name: str) -> type[RosMessage]:
     :class:`~ros_mobile_bridge.SchemaError` when there is none."""
     parts = type_name.split("/")
     found: object = None
-    if len(parts) == 3 and all(p.isidentifier() for p in parts):
+    if len(parts) == 3 and parts[1] in ("msg", "srv", "action") and parts[0].isidentifier():
         pkg, kind, name = parts
         try:
             found = importlib.import_module(f"{_PACKAGE}.{pkg}.{kind}")
@@ -172,16 +180,6 @@ def message_class(type_name: str) -> type[RosMessage]:
     if not (isinstance(found, type) and issubclass(found, RosMessage)):
         raise SchemaError(f"no message class for {type_name!r}")
     return found
-
-
-def _resolve(info: FieldInfo, cache: dict[str, type[RosMessage]]) -> type[RosMessage]:
-    cls = cache.get(info.element)
-    if cls is None:
-        cls = cache[info.element] = message_class(info.element)
-    return cls
-
-
-_CLASSES: dict[str, type[RosMessage]] = {}
 
 
 class RosMessage:
@@ -317,9 +315,9 @@ class RosMessage:
                 names = ", ".join(plan.names) or "none"
                 raise MessageError(type_name, f"unknown field ({type_name} has: {names})", str(key))
             if info.kind == MESSAGE:
-                value = _nested_from(type_name, key, value, _resolve(info, _CLASSES))
+                value = _nested_from(type_name, key, value, plan.nested_class(key))
             elif info.kind == MESSAGES and value is not None:
-                sub = _resolve(info, _CLASSES)
+                sub = plan.nested_class(key)
                 if isinstance(value, str | bytes) or not isinstance(value, Iterable):
                     raise MessageError(
                         type_name,
