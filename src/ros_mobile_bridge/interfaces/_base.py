@@ -249,7 +249,9 @@ class RosMessage:
                 return False
         return True
 
-    # defining __eq__ sets __hash__ to None: messages are mutable, not hashable
+    # defining __eq__ sets __hash__ to None (messages are mutable, not hashable);
+    # the annotation tells type checkers, as typeshed does for list
+    __hash__: ClassVar[None]  # type: ignore[assignment]
 
     def __repr__(self) -> str:
         plan = _plan(type(self))
