@@ -5,12 +5,15 @@
 
 Reads the bundled interfaces (``codec/_interfaces.json.gz``, written by
 ``scripts/gen-interfaces``) through the library's own parser, and writes, for
-each bundled package, ``<package>/__init__.py`` and one module per kind it
-has (``msg.py``, ``srv.py``, ``action.py``): a class per message, a class per
-service with its ``Request`` and ``Response`` nested, a class per action with
-its ``Goal``, ``Result``, ``Feedback``, ``SendGoal``, ``GetResult`` and
-``FeedbackMessage`` nested. Each class carries its type name and RIHS01 hash
-from the bundle, and the ``.msg`` text's comments as its docstring.
+each bundled package, ``<package>/__init__.py`` and a package per kind it has
+(``msg/``, ``srv/``, ``action/``), laid out as rclpy's: one module per
+interface, named as rosidl names it (``msg/_twist_with_covariance.py``),
+holding its one class (a message; a service with its ``Request`` and
+``Response`` nested; an action with its ``Goal``, ``Result``, ``Feedback``,
+``SendGoal``, ``GetResult`` and ``FeedbackMessage`` nested), and the kind's
+``__init__.py``, its public face, importing each class's module on first
+use. Each class carries its type name and RIHS01 hash from the bundle, and
+the ``.msg`` text's comments as its docstring.
 
 The output is deterministic and already in the shape ``ruff format`` gives;
 ``--check`` compares instead of writing (exit 1 on a difference), as
@@ -67,6 +70,18 @@ _ANNOTATION_NAMES = frozenset(
     {"int", "float", "bool", "str", "list", "tuple", "None", "numpy", "NDArray", "Sequence"}
 )
 _KIND_WORDS = {"msg": "messages", "srv": "services", "action": "actions"}
+_KIND_WORD = {"msg": "message", "srv": "service", "action": "action"}
+
+
+def module_stem(name: str) -> str:
+    """The module of the interface ``name`` as rosidl names it
+    (``convert_camel_case_to_lower_case_underscore``, with the leading
+    underscore rclpy adds): ``TwistWithCovariance`` -> ``_twist_with_covariance``,
+    ``PointCloud2`` -> ``_point_cloud2``, ``MultiDOFJointTrajectory`` ->
+    ``_multi_dof_joint_trajectory``."""
+    value = re.sub("(.)([A-Z][a-z]+)", r"\1_\2", name)
+    value = re.sub("([a-z0-9])([A-Z])", r"\1_\2", value)
+    return "_" + value.lower()
 
 
 def _natural(text: str) -> list[tuple[int, int | str]]:
@@ -214,11 +229,15 @@ class Namespace:
 
 @dataclass
 class Module:
-    """One generated module: ``<package>/<kind>.py``."""
+    """One generated module: ``<package>/<kind>/<stem>.py``, holding one class."""
 
     package: str
     kind: str
-    classes: list[Message | Namespace] = field(default_factory=list)
+    cls: Message | Namespace
+
+    @property
+    def stem(self) -> str:
+        return module_stem(self.cls.qualname)
 
 
 def _sections(text: str, count: int) -> list[str]:
@@ -265,20 +284,25 @@ def build_modules(
     the files of the packages in ``supplement`` start with a header line."""
     from ros_mobile_bridge.codec._interface import interface_definitions
 
-    modules: dict[tuple[str, str], Module] = {}
+    modules: list[Module] = []
     for name, text in sorted(interfaces.items()):
         pkg, kind, short = name.split("/")
-        module = modules.setdefault((pkg, kind), Module(pkg, kind))
         defs = interface_definitions(name, text)
         header = pkg in supplement
         if kind == "msg":
             doc = doc_lines(text, header)
-            module.classes.append(
-                Message(name, short, f"The ROS message ``{name}``.", doc, defs[name])
+            modules.append(
+                Module(
+                    pkg,
+                    kind,
+                    Message(name, short, f"The ROS message ``{name}``.", doc, defs[name]),
+                )
             )
         elif kind == "srv":
             request, response = _sections(text, 2)
-            module.classes.append(_service(name, short, (request, response), defs, "", header))
+            modules.append(
+                Module(pkg, kind, _service(name, short, (request, response), defs, "", header))
+            )
         else:
             goal, result, feedback = _sections(text, 3)
             ns = Namespace(
@@ -325,8 +349,14 @@ def build_modules(
                     defs[derived],
                 )
             )
-            module.classes.append(ns)
-    return [modules[key] for key in sorted(modules)]
+            modules.append(Module(pkg, kind, ns))
+    seen: dict[tuple[str, str, str], str] = {}
+    for module in modules:
+        key = (module.package, module.kind, module.stem)
+        if key in seen:
+            raise SystemExit(f"{seen[key]} and {module.cls.type_name} share a module name")
+        seen[key] = module.cls.type_name
+    return modules
 
 
 # -- writing ---------------------------------------------------------------------------------
@@ -372,7 +402,7 @@ class _Writer:
         self.packages = packages
         self.hashes = hashes
         self.here = (module.package, module.kind)
-        self.local_tops = {c.qualname for c in module.classes}
+        self.top = module.cls.qualname
         self.faces: set[str] = set()  # packages referred to at run time
         self.imports: dict[tuple[str, str, str], str] = {}  # (pkg, kind, top) -> local name
         self.helpers: set[str] = set()
@@ -383,17 +413,19 @@ class _Writer:
     def _ref(self, type_name: str) -> tuple[str, str]:
         """``(annotation, run-time expression)`` of the class of ``type_name``."""
         pkg, kind, qual = _location(type_name)
-        if (pkg, kind) == self.here:
-            return qual, qual
-        self.faces.add(pkg)
         top, _, rest = qual.partition(".")
+        if (pkg, kind) == self.here and top == self.top:
+            return qual, qual
         key = (pkg, kind, top)
         local = self.imports.get(key)
         if local is None:
-            taken = self.local_tops | set(self.imports.values())
+            taken = {self.top, *self.imports.values()}
             local = top if top not in taken else f"{pkg}_{top}"
             self.imports[key] = local
         annotation = f"{local}.{rest}" if rest else local
+        if (pkg, kind) == self.here:  # a sibling module, imported with this one
+            return annotation, annotation
+        self.faces.add(pkg)  # another package or kind: imported on first use
         return annotation, f"_{pkg}.{kind}.{qual}"
 
     def message(self, cls: Message, indent: str) -> list[str]:
@@ -553,75 +585,113 @@ class _Writer:
 
     def text(self) -> str:
         module = self.module
-        body: list[str] = []
-        bases: set[str] = set()
-        for cls in module.classes:
-            body += ["", "", *self.one(cls, "")]
-            bases.add(cls.base if isinstance(cls, Namespace) else "RosMessage")
-            if isinstance(cls, Namespace):
-                bases.add("RosMessage")
-                if any(isinstance(m, Namespace) for m in cls.members):
-                    bases.add("RosService")
+        cls = module.cls
+        body = self.one(cls, "")
+        bases = {cls.base if isinstance(cls, Namespace) else "RosMessage"}
+        if isinstance(cls, Namespace):
+            bases.add("RosMessage")
+            if any(isinstance(m, Namespace) for m in cls.members):
+                bases.add("RosService")
         version = self.packages[module.package]
         origin = "" if version == "supplement" else f", version {version}"
-        what = _KIND_WORDS[module.kind]
+        what = _KIND_WORD[module.kind]
+        siblings: list[tuple[str, str]] = []  # (module, name as imported)
+        checking: list[tuple[str, str]] = []
+        for (pkg, kind, top), name in self.imports.items():
+            imported = f"{top} as {name}" if top != name else top
+            if (pkg, kind) == self.here:
+                siblings.append((f".{module_stem(top)}", imported))
+            else:
+                checking.append((f"...{pkg}.{kind}.{module_stem(top)}", imported))
         lines = [
             HEADER.rstrip("\n"),
-            f'"""The ``{module.package}`` {what} (ROS 2 Jazzy{origin}) as Python classes."""',
+            f'"""The ROS {what} ``{cls.type_name}`` (ROS 2 Jazzy{origin}) as a Python class."""',
             "",
             "from __future__ import annotations",
             "",
         ]
-        if self.typing or self.checking or self.imports:
-            names = sorted({"TYPE_CHECKING"} if self.checking or self.imports else set())
+        if self.typing or self.checking or checking:
+            names = sorted({"TYPE_CHECKING"} if self.checking or checking else set())
             names += sorted(self.typing)
             lines.append(f"from typing import {', '.join(names)}")
             lines.append("")
         for pkg in sorted(self.faces):
-            lines.append(f"from .. import {pkg} as _{pkg}")
-        lines.append(f"from .._base import {', '.join(sorted(bases | self.helpers))}")
-        if self.checking or self.imports:
+            lines.append(f"from ... import {pkg} as _{pkg}")
+        lines.append(f"from ..._base import {', '.join(sorted(bases | self.helpers))}")
+        for path, imported in sorted(siblings, key=lambda x: _natural(x[0])):
+            lines += _import("", path, imported)
+        if self.checking or checking:
             lines += ["", "if TYPE_CHECKING:"]
             groups: list[list[str]] = []
             if "Sequence" in self.checking:
                 groups.append(["    from collections.abc import Sequence"])
             if "numpy" in self.checking:
                 groups.append(["    import numpy", "    from numpy.typing import NDArray"])
-            local: list[str] = []
-            by_module: dict[tuple[str, str], list[tuple[str, str]]] = {}
-            for (pkg, kind, top), name in self.imports.items():
-                by_module.setdefault((pkg, kind), []).append((top, name))
-            for (pkg, kind), entries in sorted(by_module.items()):
-                parts = sorted(
-                    (f"{top} as {name}" if top != name else top for top, name in entries),
-                    key=lambda x: x.split(" ")[0],
-                )
-                plain = [p for p in parts if " as " not in p]
-                aliased = [p for p in parts if " as " in p]
-                if plain:
-                    local += _wrap_import(f"    from ..{pkg}.{kind} import ", plain)
-                for alias in aliased:
-                    local.append(f"    from ..{pkg}.{kind} import {alias}")
-            if local:
-                groups.append(local)
+            if checking:
+                group: list[str] = []
+                for path, imported in sorted(checking, key=lambda x: _natural(x[0])):
+                    group += _import("    ", path, imported)
+                groups.append(group)
             for i, group in enumerate(groups):
                 if i:
                     lines.append("")
                 lines += group
-        names = sorted((c.qualname for c in module.classes), key=_natural)
-        lines += ["", "__all__ = ["]
-        lines += [f'    "{n}",' for n in names]
-        lines.append("]")
-        lines += body
+        lines += ["", f'__all__ = ["{cls.qualname}"]', "", "", *body]
         return "\n".join(lines) + "\n"
 
 
-def _wrap_import(head: str, names: list[str]) -> list[str]:
-    one = head + ", ".join(names)
+def _import(indent: str, module: str, name: str) -> list[str]:
+    """``from module import name``, wrapped as ruff format wraps it."""
+    one = f"{indent}from {module} import {name}"
     if len(one) <= LINE:
         return [one]
-    indent = head[: len(head) - len(head.lstrip())]
-    return [head + "(", *(f"{indent}    {n}," for n in names), f"{indent})"]
+    return [f"{indent}from {module} import (", f"{indent}    {name},", f"{indent})"]
+
+
+def _kind_init(package: str, kind: str, modules: list[Module], version: str) -> str:
+    """The face of ``<package>.<kind>``: every class of the kind, its module
+    imported on first use (explicit re-exports for type checkers)."""
+    origin = "" if version == "supplement" else f", version {version}"
+    entries = sorted((m.cls.qualname, m.stem) for m in modules)
+    lines = [
+        HEADER.rstrip("\n"),
+        f'"""The ``{package}`` {_KIND_WORDS[kind]} (ROS 2 Jazzy{origin}) as Python classes,',
+        'one module each (as rclpy lays them out), each imported on first use."""',
+        "",
+        "from typing import TYPE_CHECKING",
+        "",
+        "from ..._base import lazy_types",
+        "",
+        "if TYPE_CHECKING:",
+    ]
+    for stem, name in sorted(
+        ((stem, name) for name, stem in entries), key=lambda x: _natural(x[0])
+    ):
+        lines += _import("    ", f".{stem}", f"{name} as {name}")
+    lines.append("else:")
+    pairs = [f'"{name}": "{stem}"' for name, stem in entries]
+    mapping = "{" + ", ".join(pairs) + "}"
+    # laid out as ruff format lays out the call
+    if len(f"    __getattr__ = lazy_types(__name__, {mapping})") <= LINE:
+        lines.append(f"    __getattr__ = lazy_types(__name__, {mapping})")
+    elif len(f"        __name__, {mapping}") <= LINE:
+        lines += ["    __getattr__ = lazy_types(", f"        __name__, {mapping}", "    )"]
+    elif len(f"        {mapping},") <= LINE:
+        lines += [
+            "    __getattr__ = lazy_types(",
+            "        __name__,",
+            f"        {mapping},",
+            "    )",
+        ]
+    else:
+        lines += ["    __getattr__ = lazy_types(", "        __name__,", "        {"]
+        lines += [f"            {pair}," for pair in pairs]
+        lines += ["        },", "    )"]
+    names = sorted((name for name, _ in entries), key=_natural)
+    lines += ["", "__all__ = ["]
+    lines += [f'    "{n}",' for n in names]
+    lines.append("]")
+    return "\n".join(lines) + "\n"
 
 
 def _package_init(package: str, kinds: list[str], version: str) -> str:
@@ -651,7 +721,7 @@ def _package_init(package: str, kinds: list[str], version: str) -> str:
 
 def generate() -> dict[str, str]:
     """Every generated file's text by its path relative to the interfaces
-    package (``"geometry_msgs/msg.py"``), from the bundle."""
+    package (``"geometry_msgs/msg/_twist.py"``), from the bundle."""
     from ros_mobile_bridge.codec._bundled import (
         bundled_hash,
         bundled_interface,
@@ -675,26 +745,36 @@ def generate_from(
     """The files for ``interfaces`` (name -> text), with each package's
     version from ``packages`` and each type's hash from ``hashes``."""
     out: dict[str, str] = {}
-    kinds: dict[str, list[str]] = {}
+    kinds: dict[str, dict[str, list[Module]]] = {}
     supplement = frozenset(p for p, version in packages.items() if version == "supplement")
     for module in build_modules(interfaces, supplement):
-        out[f"{module.package}/{module.kind}.py"] = _Writer(module, packages, hashes).text()
-        kinds.setdefault(module.package, []).append(module.kind)
+        path = f"{module.package}/{module.kind}/{module.stem}.py"
+        out[path] = _Writer(module, packages, hashes).text()
+        kinds.setdefault(module.package, {}).setdefault(module.kind, []).append(module)
     for package, found in kinds.items():
-        found.sort()
-        out[f"{package}/__init__.py"] = _package_init(package, found, packages[package])
+        version = packages[package]
+        out[f"{package}/__init__.py"] = _package_init(package, sorted(found), version)
+        for kind, modules in found.items():
+            out[f"{package}/{kind}/__init__.py"] = _kind_init(package, kind, modules, version)
     _check_acyclic(out)
     return dict(sorted(out.items()))
 
 
 def _check_acyclic(files: dict[str, str]) -> None:
     """The modules' imports (TYPE_CHECKING ones included) form no circle."""
-    graph = {
-        path: set(re.findall(r"^    from \.\.(\w+)\.(\w+) import", text, re.MULTILINE))
-        for path, text in files.items()
-        if not path.endswith("__init__.py")
-    }
-    edges = {p: {f"{a}/{b}.py" for a, b in deps} for p, deps in graph.items()}
+    edges: dict[str, set[str]] = {}
+    for path, text in files.items():
+        if path.endswith("__init__.py"):
+            continue
+        here = path.rpartition("/")[0]
+        found = {f"{here}/{stem}.py" for stem in re.findall(r"^from \.(_\w+) import", text, re.M)}
+        found |= {
+            f"{pkg}/{kind}/{stem}.py"
+            for pkg, kind, stem in re.findall(
+                r"^    from \.\.\.(\w+)\.(\w+)\.(_\w+) import", text, re.M
+            )
+        }
+        edges[path] = found
     state: dict[str, int] = {}
 
     def visit(node: str, trail: list[str]) -> None:

@@ -6,13 +6,17 @@ classes and the CLI's output stays the same); values go through the codec
 and back; and the behaviour a ROS user expects (keyword construction, zero
 messages for nested fields, constants, ``repr``, equality, copies,
 ``replace``, pickling, ``MessageError`` naming the field) holds. Importing
-``ros_mobile_bridge`` does not import the classes, and importing a package's
-messages does not import numpy."""
+``ros_mobile_bridge`` does not import the classes; each class is in its own
+module (as rclpy's), and taking one imports its module and those of the types
+it holds, not numpy."""
 
 from __future__ import annotations
 
 import copy
 import importlib
+import importlib.abc
+import importlib.machinery
+import importlib.util
 import pickle
 import subprocess
 import sys
@@ -176,7 +180,9 @@ def test_every_type_has_a_class_at_its_ros_path_with_its_name_and_hash(type_name
     pkg, kind, name = type_name.split("/")
     cls = message_class(type_name)
     module = importlib.import_module(f"{PACKAGE}.{pkg}.{kind}")
-    assert cls.__module__ == module.__name__
+    # its own module, named as rclpy names it (geometry_msgs.msg._twist)
+    stem = generator().module_stem(name.split("_")[0])
+    assert cls.__module__ == f"{module.__name__}.{stem}"
     assert cls.__qualname__ == name.replace("_", ".")
     assert _namespace(type_name) is cls
     assert cls.__qualname__.split(".")[0] in module.__all__
@@ -190,8 +196,9 @@ def test_every_type_has_a_class_at_its_ros_path_with_its_name_and_hash(type_name
 @pytest.mark.parametrize("type_name", NAMESPACES)
 def test_services_and_actions_nest_their_messages(type_name: str) -> None:
     cls = _namespace(type_name)
-    kind = type_name.split("/")[1]
-    assert cls.__module__ == f"{PACKAGE}.{type_name.split('/')[0]}.{kind}"
+    pkg, kind, name = type_name.split("/")
+    stem = generator().module_stem(name.split("_")[0])
+    assert cls.__module__ == f"{PACKAGE}.{pkg}.{kind}.{stem}"
     assert cls.__ros_type__ == type_name  # type: ignore[attr-defined]
     assert cls.__ros_hash__ == bundled_hash(type_name)  # type: ignore[attr-defined]
     is_service = kind == "srv" or type_name.endswith(("_SendGoal", "_GetResult"))
@@ -343,7 +350,7 @@ def test_services_and_actions() -> None:
     assert request.to_dict() == {"a": 1, "b": 2}
     assert AddTwoInts.Response(sum=3).sum == 3
     assert AddTwoInts.__ros_type__ == "example_interfaces/srv/AddTwoInts"
-    assert AddTwoInts.Request.__module__ == f"{PACKAGE}.example_interfaces.srv"
+    assert AddTwoInts.Request.__module__ == f"{PACKAGE}.example_interfaces.srv._add_two_ints"
     assert AddTwoInts.Request.__qualname__ == "AddTwoInts.Request"
     assert repr(request) == "example_interfaces.srv.AddTwoInts.Request(a=1, b=2)"
     assert SetBool.Request(data=True).data is True
@@ -429,6 +436,48 @@ def test_pickles_keep_the_class_and_nested_service_classes() -> None:
         assert back.goal.order == 7
         assert back == request
     assert pickle.loads(pickle.dumps(AddTwoInts.Request)) is AddTwoInts.Request
+
+
+def test_each_class_is_in_its_own_module_and_pickles_from_there() -> None:
+    interfaces = PACKAGE
+    assert Twist.__module__ == f"{interfaces}.geometry_msgs.msg._twist"
+    assert AddTwoInts.Request.__module__ == f"{interfaces}.example_interfaces.srv._add_two_ints"
+    assert Fibonacci.Goal.__module__ == f"{interfaces}.example_interfaces.action._fibonacci"
+    for message in (
+        Twist(linear=Vector3(x=0.5)),
+        AddTwoInts.Request(a=1, b=2),
+        AddTwoInts.Response(sum=3),
+        Fibonacci.Goal(order=4),
+        Fibonacci.GetResult.Response(status=4, result=Fibonacci.Result(sequence=[0, 1])),
+    ):
+        for protocol in range(2, pickle.HIGHEST_PROTOCOL + 1):
+            data = pickle.dumps(message, protocol)
+            assert type(message).__module__.encode() in data
+            back = pickle.loads(data)
+            assert type(back) is type(message)
+            assert back == message
+    # a fresh interpreter finds the class from the pickle alone
+    data = pickle.dumps([Fibonacci.Goal(order=9), AddTwoInts.Response(sum=5)])
+    code = (
+        "import pickle, sys\n"
+        "goal, response = pickle.loads(sys.stdin.buffer.read())\n"
+        "print(type(goal).__qualname__, goal.order, type(response).__qualname__, response.sum)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], input=data, capture_output=True, check=True
+    ).stdout.decode()
+    assert out.split() == ["Fibonacci.Goal", "9", "AddTwoInts.Response", "5"]
+
+
+def test_module_names_follow_rosidl() -> None:
+    stem = generator().module_stem
+    assert stem("Twist") == "_twist"
+    assert stem("TwistWithCovariance") == "_twist_with_covariance"
+    assert stem("PointCloud2") == "_point_cloud2"
+    assert stem("MultiDOFJointTrajectory") == "_multi_dof_joint_trajectory"
+    assert stem("UInt8MultiArray") == "_u_int8_multi_array"
+    assert stem("Pose2D") == "_pose2_d"
+    assert stem("NavSatFix") == "_nav_sat_fix"
 
 
 def test_make_builds_an_instance_without_the_constructor() -> None:
@@ -650,33 +699,60 @@ TEST_INTERFACES = {
 }
 
 
+class _Generated(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Imports the generated files of one package from memory."""
+
+    def __init__(self, files: dict[str, str]) -> None:
+        self.files = files
+
+    def find_spec(
+        self, fullname: str, path: object = None, target: object = None
+    ) -> importlib.machinery.ModuleSpec | None:
+        rel = fullname.removeprefix(PACKAGE + ".").replace(".", "/")
+        if fullname.startswith(PACKAGE + ".") and f"{rel}/__init__.py" in self.files:
+            return importlib.util.spec_from_loader(fullname, self, is_package=True)
+        if fullname.startswith(PACKAGE + ".") and f"{rel}.py" in self.files:
+            return importlib.util.spec_from_loader(fullname, self)
+        return None
+
+    def create_module(self, spec: importlib.machinery.ModuleSpec) -> None:
+        return None
+
+    def exec_module(self, module: types.ModuleType) -> None:
+        rel = module.__name__.removeprefix(PACKAGE + ".").replace(".", "/")
+        text = self.files.get(f"{rel}.py") or self.files[f"{rel}/__init__.py"]
+        exec(compile(text, f"<generated {module.__name__}>", "exec"), module.__dict__)
+
+
 @pytest.fixture(scope="module")
 def test_msgs() -> Iterator[types.ModuleType]:
     """``ros_mobile_bridge.interfaces.test_msgs.msg``, generated from
-    :data:`TEST_INTERFACES` and loaded in memory."""
+    :data:`TEST_INTERFACES` and imported from memory."""
     registry = CodecRegistry()
     for name, text in TEST_INTERFACES.items():
         registry.add_schema(name, "ros2msg", text)
     files = generator().generate_from(
         TEST_INTERFACES, {"test_msgs": "test"}, lambda name: type_hash(registry, name)
     )
-    assert sorted(files) == ["test_msgs/__init__.py", "test_msgs/msg.py"]
+    assert sorted(files) == [
+        "test_msgs/__init__.py",
+        "test_msgs/msg/__init__.py",
+        "test_msgs/msg/_kinds.py",
+        "test_msgs/msg/_other.py",
+        "test_msgs/msg/_wide.py",
+    ]
+    assert "from ._other import Other\n" in files["test_msgs/msg/_kinds.py"]
     package = f"{PACKAGE}.test_msgs"
-    loaded: list[str] = []
+    finder = _Generated(files)
+    sys.meta_path.insert(0, finder)
     try:
-        for rel, name in (("__init__.py", package), ("msg.py", f"{package}.msg")):
-            module = types.ModuleType(name)
-            module.__package__ = package
-            if rel == "__init__.py":
-                module.__path__ = []
-            sys.modules[name] = module
-            loaded.append(name)
-            exec(compile(files[f"test_msgs/{rel}"], f"<generated {name}>", "exec"), module.__dict__)
+        module = importlib.import_module(f"{package}.msg")
         module.__dict__["_registry"] = registry
         yield module
     finally:
-        for name in loaded:
-            sys.modules.pop(name, None)
+        sys.meta_path.remove(finder)
+        for name in [n for n in sys.modules if n == package or n.startswith(package + ".")]:
+            del sys.modules[name]
 
 
 def test_every_field_kind_of_a_generated_class(test_msgs: types.ModuleType) -> None:
@@ -791,6 +867,7 @@ def test_a_generated_class_checks_its_bounds(test_msgs: types.ModuleType) -> Non
 def test_a_generated_class_round_trips_through_the_codec(test_msgs: types.ModuleType) -> None:
     registry = test_msgs.__dict__["_registry"]
     kinds = sample(test_msgs.Kinds)
+    assert test_msgs.Kinds.__module__ == f"{test_msgs.__name__}._kinds"
     payload = registry.encoder("test_msgs/msg/Kinds", "cdr")(kinds.to_dict())
     decoded = registry.decoder("test_msgs/msg/Kinds", "cdr")(memoryview(payload))
     assert test_msgs.Kinds.from_dict(decoded) == kinds
@@ -808,6 +885,12 @@ def test_the_generator_refuses_a_field_named_like_a_method() -> None:
 # -- what importing costs ------------------------------------------------------------------------
 
 
+def _run(code: str) -> list[str]:
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split("\n")
+
+
 def test_importing_the_library_does_not_import_the_classes_nor_them_numpy() -> None:
     code = (
         "import sys\n"
@@ -821,12 +904,61 @@ def test_importing_the_library_does_not_import_the_classes_nor_them_numpy() -> N
         "PoseWithCovariance()\n"
         "print('numpy' in sys.modules)\n"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    ).stdout.split("\n")
+    out = _run(code)
     # the library alone: no classes; geometry_msgs: no numpy, no codec, not even std_msgs
     # (Header loads when a message needs it); numpy loads with the first array
     assert out[:4] == ["False", "[]", "False True", "True"]
+
+
+def test_taking_one_class_imports_only_its_module_and_those_it_refers_to() -> None:
+    code = (
+        "import sys\n"
+        "import ros_mobile_bridge\n"
+        "before = set(sys.modules)\n"
+        "from ros_mobile_bridge.interfaces.geometry_msgs.msg import Twist\n"
+        "print(' '.join(sorted(set(sys.modules) - before)))\n"
+        "Twist()\n"
+        "print(' '.join(sorted(set(sys.modules) - before)))\n"
+        "from ros_mobile_bridge.interfaces.nav_msgs.msg import Odometry\n"
+        "before = set(sys.modules)\n"
+        "Odometry()\n"
+        "print(' '.join(sorted(set(sys.modules) - before)))\n"
+    )
+    out = _run(code)
+    base = "ros_mobile_bridge.interfaces"
+    twist = [
+        base,
+        f"{base}._base",
+        f"{base}.geometry_msgs",
+        f"{base}.geometry_msgs.msg",
+        f"{base}.geometry_msgs.msg._twist",
+        f"{base}.geometry_msgs.msg._vector3",
+    ]
+    for line in out[:2]:  # building one needs nothing more
+        loaded = line.split()
+        assert [m for m in loaded if m.startswith(base)] == twist
+        assert [
+            m for m in loaded if m.startswith(("numpy", "rosbags", "ros_mobile_bridge.codec"))
+        ] == []
+    # building an Odometry loads the types it refers to (other packages' on first use),
+    # and no others (Twist and Vector3 are there already)
+    assert [m for m in out[2].split() if m.startswith(base)] == [
+        f"{base}.builtin_interfaces",
+        f"{base}.builtin_interfaces.msg",
+        f"{base}.builtin_interfaces.msg._time",
+        *(
+            f"{base}.geometry_msgs.msg.{stem}"
+            for stem in (
+                "_point",
+                "_pose",
+                "_pose_with_covariance",
+                "_quaternion",
+                "_twist_with_covariance",
+            )
+        ),
+        f"{base}.std_msgs.msg",
+        f"{base}.std_msgs.msg._header",
+    ]
 
 
 def test_message_class_finds_derived_types_and_refuses_the_rest() -> None:

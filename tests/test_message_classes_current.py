@@ -23,3 +23,22 @@ def test_the_generator_is_deterministic_and_covers_every_bundled_package() -> No
     assert {path.split("/")[0] for path in first} == set(bundled_packages())
     for path, text in first.items():
         assert text.startswith(gen.HEADER), path
+
+
+def test_one_module_per_interface_named_as_rosidl_names_it() -> None:
+    gen = generator()
+    files = gen.generate()
+    assert "geometry_msgs/msg.py" not in files
+    for path in (
+        "geometry_msgs/msg/__init__.py",
+        "geometry_msgs/msg/_twist_with_covariance.py",
+        "sensor_msgs/msg/_point_cloud2.py",
+        "trajectory_msgs/msg/_multi_dof_joint_trajectory.py",
+        "example_interfaces/srv/_add_two_ints.py",
+        "example_interfaces/action/_fibonacci.py",
+    ):
+        assert path in files, path
+    for path, text in files.items():
+        if not path.endswith("__init__.py"):
+            assert text.count("\nclass ") == 1, path  # one top-level class
+        assert text.count("\n") <= 900, path  # the house's limit on a file

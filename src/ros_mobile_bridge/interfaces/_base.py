@@ -20,6 +20,7 @@ instances without them: ``cls.__new__(cls)``, then every slot assigned
 from __future__ import annotations
 
 import importlib
+import sys
 from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, Final, TypeVar
 
@@ -34,6 +35,7 @@ __all__ = [
     "RosMessage",
     "RosService",
     "lazy_kinds",
+    "lazy_types",
     "message_class",
 ]
 
@@ -135,7 +137,7 @@ class _Plan:
         self.kinds = tuple(i.kind for i in infos)
         self.fields = {i.name: i for i in infos}
         self.path = path
-        """The class as ``repr`` names it: ``geometry_msgs.msg.Twist``."""
+        """The class as ``repr`` names it (as rclpy's does): ``geometry_msgs.msg.Twist``."""
         self.classes: dict[str, type[RosMessage]] = {}
         """The nested message fields' classes, by field name, found on first use."""
         self.maker: Callable[..., Any] | None = None
@@ -167,9 +169,14 @@ def _plan(cls: type[RosMessage]) -> _Plan:
     plan = _PLANS.get(cls)
     if plan is None:
         infos = [parse_field(name, type_) for name, type_ in cls.__ros_fields__]
+        # the path rclpy's repr gives: the kind's face, not the class's own
+        # module (geometry_msgs.msg._twist)
         module = cls.__module__
         if module.startswith(_PACKAGE + "."):
             module = module[len(_PACKAGE) + 1 :]
+        face, _, own = module.rpartition(".")
+        if face and own.startswith("_"):
+            module = face
         plan = _Plan(infos, f"{module}.{cls.__qualname__}")
         _PLANS[cls] = plan
     return plan
@@ -399,8 +406,27 @@ def lazy_kinds(package: str, kinds: tuple[str, ...]) -> Callable[[str], Any]:
 
     def __getattr__(name: str) -> Any:
         if name in kinds:
-            return importlib.import_module(f"{package}.{name}")
+            __import__(f"{package}.{name}")  # -X importtime shows it, as importlib's does not
+            return sys.modules[f"{package}.{name}"]
         raise AttributeError(f"module {package!r} has no attribute {name!r}")
+
+    return __getattr__
+
+
+def lazy_types(package: str, modules: Mapping[str, str]) -> Callable[[str], Any]:
+    """The module ``__getattr__`` of a generated kind (``pkg.msg``): each
+    class (a key of ``modules``) imports its own module (the value,
+    ``"_twist"``) on first use, and is then an attribute of the kind, so
+    taking one class loads only the modules of the types it refers to."""
+
+    def __getattr__(name: str) -> Any:
+        stem = modules.get(name)
+        if stem is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        __import__(f"{package}.{stem}")
+        value = getattr(sys.modules[f"{package}.{stem}"], name)
+        setattr(sys.modules[package], name, value)
+        return value
 
     return __getattr__
 
