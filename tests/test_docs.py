@@ -84,6 +84,7 @@ def test_site_builds_strict_with_every_page(site: Path) -> None:
         "security",
         "migration-roslibpy",
         "architecture",
+        "message-classes",
     ):
         assert (site / name / "index.html").is_file(), name
     assert (site / "index.html").is_file()

@@ -359,7 +359,7 @@ def test_flow_knows_no_protocol(path: Path) -> None:
 
 LAYERS: tuple[frozenset[str], ...] = (
     frozenset({"_errors", "_types", "_slots", "_version", "_checks", "_loop"}),
-    frozenset({"wire", "codec", "flow", "transport", "_signals"}),
+    frozenset({"wire", "codec", "interfaces", "flow", "transport", "_signals"}),
     frozenset({"_options", "lag"}),
     frozenset({"adapters"}),
     frozenset(
