@@ -47,21 +47,18 @@ _INT_TYPES = frozenset(
 )
 _FLOAT_TYPES = frozenset({"float32", "float64"})
 _STR_TYPES = frozenset({"string", "wstring", "wchar"})
-_DTYPES = {
-    "bool": "bool_",
-    "byte": "uint8",
-    "char": "uint8",
-    "int8": "int8",
-    "uint8": "uint8",
-    "int16": "int16",
-    "uint16": "uint16",
-    "int32": "int32",
-    "uint32": "uint32",
-    "int64": "int64",
-    "uint64": "uint64",
-    "float32": "float32",
-    "float64": "float64",
-}
+
+
+def _dtype_name(base: str) -> str | None:
+    """The numpy scalar type's name for a primitive array of ``base`` (the
+    dtypes the classes build, ``interfaces._base``; ``bool`` is ``bool_``
+    in an annotation), or None for a type with no numpy array."""
+    from ros_mobile_bridge.interfaces._base import _DTYPES
+
+    dtype = _DTYPES.get(base)
+    return "bool_" if dtype == "bool" else dtype
+
+
 _RESERVED = frozenset(
     {"replace", "to_dict", "from_dict", "get_fields_and_field_types", "self", "cls"}
 )
@@ -539,7 +536,7 @@ class _Writer:
             call = ("_strings", args)
             attr, param = "list[str]", "Sequence[str] | None = None"
         else:
-            dtype = _DTYPES.get(spec.base)
+            dtype = _dtype_name(spec.base)
             if dtype is None:
                 raise SystemExit(f"unsupported array element type {spec.base!r}")
             self.helpers.add("_array")
