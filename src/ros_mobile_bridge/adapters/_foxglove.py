@@ -45,6 +45,7 @@ from ._shared import (
     Advertisement,
     Advertisements,
     EventSource,
+    check_pending,
     codec_registry,
     open_websocket,
     socket_frame,
@@ -702,11 +703,7 @@ class FoxgloveAdapter:
     def _check_pending(self, what: str) -> None:
         """``ServiceError`` at once when ``max_pending_requests`` requests
         already wait for an answer on this connection."""
-        limit = self._options.max_pending_requests
-        if len(self._calls) + len(self._params) >= limit:
-            raise ServiceError(
-                what, f"{limit} requests already wait for an answer (max_pending_requests)"
-            )
+        check_pending(self._options, len(self._calls) + len(self._params), what)
 
     # -- lifecycle ----------------------------------------------------------
     async def send(self, message: WireMessage) -> None:

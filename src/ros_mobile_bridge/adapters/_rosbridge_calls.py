@@ -19,6 +19,7 @@ from ..flow import PendingRequests
 from ..transport import WebSocket
 from ..wire import rosbridge as rb
 from ..wire._limits import truncate_for_log
+from ._shared import check_pending
 
 __all__ = ["RosbridgeCalls"]
 
@@ -52,9 +53,8 @@ class RosbridgeCalls:
     def check_pending(self, what: str, error: type[ServiceError] | type[ActionGoalError]) -> None:
         """Raise ``error`` at once when ``max_pending_requests`` calls and
         counted requests already wait for an answer on this connection."""
-        limit = self._options.max_pending_requests
-        if len(self.pending) + sum(map(len, self._also_counted)) >= limit:
-            raise error(what, f"{limit} requests already wait for an answer (max_pending_requests)")
+        waiting = len(self.pending) + sum(map(len, self._also_counted))
+        check_pending(self._options, waiting, what, error)
 
     async def call(self, name: str, args: Any, timeout: float | None) -> Any:
         """One ``call_service`` round trip; the response's ``values``.

@@ -10,6 +10,7 @@ from typing import Any, Final, TypeVar
 
 import anyio
 
+from .._errors import ActionGoalError, ServiceError
 from .._options import HTTPX_MISSING, ClientOptions
 from ..codec import CodecRegistry, same_type_name
 from ..codec._workspace import interface_paths_for
@@ -22,6 +23,7 @@ __all__ = [
     "Advertisements",
     "EventSource",
     "check_fits",
+    "check_pending",
     "open_websocket",
     "socket_frame",
 ]
@@ -220,3 +222,18 @@ def check_fits(codecs: CodecRegistry, type_name: str, data: Mapping[str, Any]) -
     the transports that encode here."""
     if codecs.has_schema(type_name):
         codecs.encoder(type_name, "cdr")(data)
+
+
+def check_pending(
+    options: ClientOptions,
+    waiting: int,
+    what: str,
+    error: type[ServiceError] | type[ActionGoalError] = ServiceError,
+) -> None:
+    """Raise ``error`` naming ``what`` at once when ``waiting`` requests
+    (calls, goals, parameter requests) already wait for an answer on a
+    connection and that reaches ``options.max_pending_requests``: the one
+    bound, and its one message, for every adapter."""
+    limit = options.max_pending_requests
+    if waiting >= limit:
+        raise error(what, f"{limit} requests already wait for an answer (max_pending_requests)")

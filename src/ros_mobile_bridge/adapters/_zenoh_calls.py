@@ -26,6 +26,7 @@ from .._errors import ActionGoalError, DecodeError, RosBridgeError, SchemaError,
 from ..codec import CodecRegistry
 from ..flow import PendingRequests
 from ..wire import rmw_zenoh as rz
+from ._shared import check_pending
 from ._zenoh_node import ZenohNode
 from ._zenoh_values import Query
 
@@ -68,10 +69,8 @@ class ZenohQueries:
     def check_pending(self, what: str, *, goal: bool = False) -> None:
         """``ServiceError`` (``ActionGoalError`` for a ``goal``) naming
         ``what`` when ``max_pending_requests`` requests already wait."""
-        limit = self._node.options.max_pending_requests
-        if len(self._calls) + len(self._goals) >= limit:
-            reason = f"{limit} requests already wait for an answer (max_pending_requests)"
-            raise ActionGoalError(what, reason) if goal else ServiceError(what, reason)
+        waiting = len(self._calls) + len(self._goals)
+        check_pending(self._node.options, waiting, what, ActionGoalError if goal else ServiceError)
 
     def start_query(
         self,
