@@ -27,7 +27,7 @@ a String drain with ``max_hz=10``; String paced at 2 kHz, with and without
 Clients:
 
 * ``library``: ``rmb.connect`` + ``robot.subscribe(topic, buffer=N)``,
-  ``async for msg in sub`` touching ``msg.data["data"]`` (decoded);
+  ``async for msg in sub`` touching ``msg.data.data`` (decoded);
 * ``transport``: the library's own WebSocket (``transport.connect_websocket``)
   in a raw loop counting binary frames (no Foxglove parsing, no decoding);
 * ``websockets``: ``websockets.asyncio.client`` in the same raw loop (asyncio
@@ -217,7 +217,7 @@ def library(
 
             async def run() -> None:
                 async for msg in sub:
-                    got.bytes += len(msg.data["data"])
+                    got.bytes += len(msg.data.data)
                     got.n += 1
                     if got.n == count:
                         got.finish()
@@ -225,7 +225,7 @@ def library(
             async def run_batches() -> None:
                 async for batch in sub.batches():
                     for msg in batch:
-                        got.bytes += len(msg.data["data"])
+                        got.bytes += len(msg.data.data)
                         got.n += 1
                         if got.n == count:
                             got.finish()

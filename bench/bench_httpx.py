@@ -89,7 +89,7 @@ def client(kind: str) -> ClientFactory:
 
                 async def run() -> None:
                     async for msg in sub:
-                        got.bytes += len(msg.data["data"])
+                        got.bytes += len(msg.data.data)
                         got.n += 1
                         if got.n == count:
                             got.finish()

@@ -12,7 +12,7 @@ stamps every ``/cmd_vel`` message with ``time.time_ns()`` on receipt.
 
 1. **Control latency.** One client connects (``advertise_settle=0``),
    ``await robot.advertise("/cmd_vel", ...)``, optionally subscribes to the
-   image and consumes it (every frame decoded, ``msg.data["data"]`` touched),
+   image and consumes it (every frame decoded, ``msg.data.data`` touched),
    then publishes N Twists 15-25 ms apart (seeded jitter, so the publishes do
    not phase-lock with the image stream). Each Twist carries its sequence
    number in ``linear.y``. Latency = the server's receipt stamp minus
@@ -222,7 +222,7 @@ class Consumed:
 async def consume(sub: rmb.Subscription, into: Consumed) -> None:
     """Decode every message and touch its pixels, as an app showing them would."""
     async for msg in sub:
-        into.bytes += len(msg.data["data"])
+        into.bytes += len(msg.data.data)
         into.frames += 1
 
 

@@ -17,7 +17,7 @@ listens. For each size N, in this process on one event loop:
    subscription: the cost of each client's own periodic work.
 3. **subscribed**: every client subscribes to ``/scale/tick`` with
    ``max_hz=MAX_HZ`` (default adaptive throttle) and consumes it with ``async
-   for`` touching ``msg.data["data"]``. Once the server has seen all N
+   for`` touching ``msg.data.data``. Once the server has seen all N
    subscriptions, after 2 s, over ``--seconds``: messages delivered per
    second against the N x min(RATE, MAX_HZ) the caps allow, and CPU.
 4. **memory**: this process's resident set (``/proc/self/statm``) with the N
@@ -230,7 +230,7 @@ async def run_size(
                 ) as sub:
                     subs.append(sub)
                     async for msg in sub:
-                        msg.data["data"]
+                        msg.data.data
                         delivered[i] += 1
         except rmb.RosBridgeError as exc:
             failures.append(f"client {i}: {exc!r}")

@@ -42,7 +42,7 @@ client runs in this process.
   baseline: what eclipse-zenoh alone delivers to Python.
 * ``library``: ``async with rmb.connect("tcp/127.0.0.1:PORT", options=...) as
   client, client.subscribe(topic, schema=..., buffer=N) as sub: async for msg
-  in sub:`` touching ``msg.data["data"]`` (the decoded ``str``, or the
+  in sub:`` touching ``msg.data.data`` (the decoded ``str``, or the
   image's numpy array), on asyncio or trio. The subscription keeps the
   default adaptive throttle: when the event loop lags it drops frames
   (counted as ``dropped_throttle``); ``--no-adaptive`` subscribes with
@@ -387,7 +387,7 @@ async def library(env: Env, kind: Kind, count: int) -> AsyncIterator[Receiver]:
 
         async def run() -> None:
             async for msg in sub:
-                got.bytes += len(msg.data["data"])
+                got.bytes += len(msg.data.data)
                 got.n += 1
                 if got.n == count:
                     got.end = (monotonic(), time.process_time())

@@ -20,7 +20,7 @@ async def main(url: str) -> int:
         print("topics:", [t.name for t in robot.topics])
         async with robot.subscribe("/odom", max_hz=10) as sub:
             async for msg in sub:
-                position = msg.data["pose"]["pose"]["position"]
+                position = msg.data.pose.pose.position
                 print(f"{msg.topic}: x={position['x']:.2f} y={position['y']:.2f}")
                 break
         reply = await robot.call_service("/set_led", {"data": True}, timeout=5)

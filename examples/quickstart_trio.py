@@ -21,7 +21,7 @@ async def main(url: str) -> int:
             async def battery() -> None:
                 async with robot.subscribe("/battery") as sub:
                     async for msg in sub:
-                        print(f"battery {msg.data['percentage'] * 100:.1f}%")
+                        print(f"battery {msg.data.percentage * 100:.1f}%")
                         nursery.cancel_scope.cancel()
 
             nursery.start_soon(battery)

@@ -45,7 +45,7 @@ class Pose:
 async def follow_odometry(robot: rmb.Client, pose: Pose) -> None:
     async with robot.subscribe("/odom", dispatch="latest") as sub:
         async for msg in sub:
-            position = msg.data["pose"]["pose"]["position"]
+            position = msg.data.pose.pose.position
             pose.x, pose.y = position["x"], position["y"]
             pose.messages += 1
 

@@ -46,6 +46,8 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
+from ros_mobile_bridge.interfaces._base import RosMessage
+
 try:
     from ros_mobile_bridge import DecodeError
     from ros_mobile_bridge.codec import CodecRegistry, FieldDef
@@ -195,7 +197,10 @@ _STRATEGIES = {name: st.deferred(lambda name=name: _message(name)) for name in S
 
 
 def _plain(value: Any) -> Any:
-    """A decoded value with numpy arrays as lists (to compare with the input)."""
+    """A decoded value with messages as dicts and numpy arrays as lists (to
+    compare with the input)."""
+    if isinstance(value, RosMessage):
+        return _plain(value.to_dict())
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, dict):

@@ -43,6 +43,8 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
+from ros_mobile_bridge.interfaces._base import RosMessage
+
 try:
     from ros_mobile_bridge import DecodeError, SchemaError
     from ros_mobile_bridge.codec import CodecRegistry
@@ -360,6 +362,8 @@ def _schema(data: st.DataObject) -> tuple[str, str, str | bytes, str]:
 
 
 def _plain(value: Any) -> Any:
+    if isinstance(value, RosMessage):
+        return _plain(value.to_dict())
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, dict):

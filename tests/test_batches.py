@@ -43,7 +43,7 @@ async def test_waiting_messages_come_in_batches_in_order(server: SdkServer) -> N
             async for batch in sub.batches(max_size=50):
                 assert 1 <= len(batch) <= 50
                 sizes.append(len(batch))
-                got += [msg.data["data"] for msg in batch]
+                got += [msg.data.data for msg in batch]
                 if len(got) == count:
                     break
         assert got == [str(i) for i in range(count)]
@@ -67,7 +67,7 @@ async def test_a_batch_waits_for_the_first_message_then_takes_what_is_there(
         channel.log(string_msg("only"))
         with anyio.fail_after(5):
             batch = await batches.__anext__()
-        assert [m.data["data"] for m in batch] == ["only"]
+        assert [m.data.data for m in batch] == ["only"]
 
 
 async def test_a_cancelled_wait_loses_nothing(server: SdkServer) -> None:
@@ -89,7 +89,7 @@ async def test_a_cancelled_wait_loses_nothing(server: SdkServer) -> None:
                 await sub.batches().__anext__()  # cancelled before taking anything
         with anyio.fail_after(5):
             batch = await sub.batches().__anext__()
-        assert [m.data["data"] for m in batch] == ["a", "b"]
+        assert [m.data.data for m in batch] == ["a", "b"]
 
 
 async def test_iteration_ends_after_the_queued_messages(server: SdkServer) -> None:
@@ -103,7 +103,7 @@ async def test_iteration_ends_after_the_queued_messages(server: SdkServer) -> No
         await wait_until(lambda: sub.stats.received == 1)
         sub.close()
         with anyio.fail_after(5):
-            batches = [[m.data["data"] for m in b] async for b in sub.batches()]
+            batches = [[m.data.data for m in b] async for b in sub.batches()]
         assert batches == [["last"]]
 
 

@@ -47,7 +47,7 @@ async def test_rosbridge_counts_bytes_and_accepts_the_mode_as_a_no_op(
             check_bytes(client, sub, got, framed=True)
         # the same throttle_rate as without the mode: the stream keeps
         # coming and nothing is skipped as a replay
-        values = [m.data["data"] for m in got]
+        values = [m.data.data for m in got]
         assert values == sorted(values) and len(set(values)) == 4
 
 
@@ -72,7 +72,7 @@ async def test_zenoh_pauses_the_subscriber_between_deliveries(
             check_bytes(client, saved, got, framed=False)
         async with client.subscribe("/chatter", max_hz=5, adaptive=False) as plain:
             await take(plain, 5, timeout=20)
-    numbers = [int(m.data["data"].split()[1]) for m in got]
+    numbers = [int(m.data.data.split()[1]) for m in got]
     assert numbers == sorted(numbers) and len(set(numbers)) == 5
     mode, every = saved.stats, plain.stats
     # one sample per delivery, and those on their way at each pause (a few

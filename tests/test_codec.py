@@ -83,7 +83,7 @@ def roundtrip(reg: CodecRegistry, name: str, data: dict[str, Any]) -> dict[str, 
     payload = reg.encoder(name, "cdr")(data)
     assert isinstance(payload, bytes)
     assert payload[:4] == b"\x00\x01\x00\x00"
-    result = reg.decoder(name, "cdr")(memoryview(payload))
+    result = reg.dict_decoder(name)(memoryview(payload))
     assert isinstance(result, dict)
     return result
 
@@ -160,7 +160,7 @@ def test_tolerant_lookups(reg: CodecRegistry) -> None:
     assert not reg.has_schema("nope_msgs/msg/Nothing")
     assert not reg.has_schema("")
     payload = reg.encoder("std_msgs/String", "cdr")({"data": "hi"})
-    assert reg.decoder("std_msgs/msg/String", "cdr")(memoryview(payload)) == {"data": "hi"}
+    assert reg.dict_decoder("std_msgs/msg/String")(memoryview(payload)) == {"data": "hi"}
     assert reg.template("geometry_msgs/Vector3") == {"x": 0.0, "y": 0.0, "z": 0.0}
     reg.add_schema("my_robot/WheelState", "ros2msg", "float64 velocity\n")
     assert reg.has_schema("my_robot/msg/WheelState")
@@ -237,7 +237,7 @@ def test_image_roundtrip_zero_copy(reg: CodecRegistry) -> None:
     }
     payload = reg.encoder("sensor_msgs/msg/Image", "cdr")(msg)
     view = memoryview(payload)
-    decoded = reg.decoder("sensor_msgs/msg/Image", "cdr")(view)
+    decoded = reg.dict_decoder("sensor_msgs/msg/Image")(view)
     assert decoded["encoding"] == "rgb8"
     assert decoded["height"] == 48
     assert decoded["data"].dtype == np.uint8
@@ -257,7 +257,7 @@ def test_string_roundtrip(reg: CodecRegistry) -> None:
 
 
 def test_big_endian_payload(reg: CodecRegistry) -> None:
-    dec = reg.decoder("std_msgs/msg/String", "cdr")
+    dec = reg.dict_decoder("std_msgs/msg/String")
     assert dec(memoryview(string_payload("big", big_endian=True))) == {"data": "big"}
     # a bytes object (not a memoryview) is accepted too
     assert dec(string_payload("le")) == {"data": "le"}  # type: ignore[arg-type]
@@ -587,7 +587,7 @@ def test_truncated_payload_is_decode_error(reg: CodecRegistry) -> None:
         "data": b"\x01\x02\x03\x04",
     }
     payload = reg.encoder("sensor_msgs/msg/Image", "cdr")(msg)
-    dec = reg.decoder("sensor_msgs/msg/Image", "cdr")
+    dec = reg.dict_decoder("sensor_msgs/msg/Image")
     for cut in range(len(payload)):
         with pytest.raises(DecodeError):
             dec(memoryview(payload[:cut]))
@@ -603,7 +603,7 @@ def test_truncated_payload_is_decode_error(reg: CodecRegistry) -> None:
 @given(garbage=st.binary(max_size=200))
 def test_decoder_raises_only_decode_error(reg: CodecRegistry, garbage: bytes) -> None:
     for name in ("nav_msgs/msg/Odometry", "sensor_msgs/msg/Image", "std_msgs/msg/String"):
-        dec = reg.decoder(name, "cdr")
+        dec = reg.dict_decoder(name)
         try:
             result = dec(memoryview(b"\x00\x01\x00\x00" + garbage))
         except DecodeError:
@@ -638,7 +638,7 @@ def test_schema_error_is_decode_error() -> None:
 
 def test_unknown_type_and_encoding(reg: CodecRegistry) -> None:
     with pytest.raises(SchemaError):
-        reg.decoder("nope_msgs/msg/Nothing", "cdr")
+        reg.dict_decoder("nope_msgs/msg/Nothing")
     with pytest.raises(SchemaError):
         reg.encoder("nope_msgs/msg/Nothing", "cdr")
     with pytest.raises(SchemaError):
@@ -650,7 +650,7 @@ def test_unknown_type_and_encoding(reg: CodecRegistry) -> None:
     # a dependency nobody defines
     reg.add_schema("my_robot/msg/Orphan", "ros2msg", "missing_pkg/Thing thing\n")
     with pytest.raises(SchemaError, match="missing_pkg/msg/Thing"):
-        reg.decoder("my_robot/msg/Orphan", "cdr")
+        reg.dict_decoder("my_robot/msg/Orphan")
 
 
 def test_no_schema_changes_nothing(reg: CodecRegistry) -> None:
@@ -665,12 +665,12 @@ def test_no_schema_changes_nothing(reg: CodecRegistry) -> None:
 
 
 def test_server_definition_wins_over_builtin(reg: CodecRegistry) -> None:
-    before = reg.decoder("std_msgs/msg/String", "cdr")
+    before = reg.dict_decoder("std_msgs/msg/String")
     reg.add_schema("std_msgs/msg/String", "ros2msg", "string data\nint32 extra 7\n")
     assert reg.template("std_msgs/msg/String") == {"data": "", "extra": 7}
     assert [f.name for f in reg.definition("std_msgs/String")] == ["data", "extra"]
     payload = reg.encoder("std_msgs/String", "cdr")({"data": "hi"})
-    assert reg.decoder("std_msgs/msg/String", "cdr")(memoryview(payload)) == {
+    assert reg.dict_decoder("std_msgs/msg/String")(memoryview(payload)) == {
         "data": "hi",
         "extra": 7,
     }
@@ -680,11 +680,11 @@ def test_server_definition_wins_over_builtin(reg: CodecRegistry) -> None:
 
 def test_earlier_decoder_keeps_captured_definition(reg: CodecRegistry) -> None:
     reg.add_schema("my_robot/msg/Versioned", "ros2msg", "int32 a\n")
-    old_dec = reg.decoder("my_robot/msg/Versioned", "cdr")
+    old_dec = reg.dict_decoder("my_robot/msg/Versioned")
     old_enc = reg.encoder("my_robot/msg/Versioned", "cdr")
     old_payload = old_enc({"a": 5})
     reg.add_schema("my_robot/msg/Versioned", "ros2msg", "int32 a\nfloat64 b\nstring c\n")
-    new_dec = reg.decoder("my_robot/msg/Versioned", "cdr")
+    new_dec = reg.dict_decoder("my_robot/msg/Versioned")
     new_payload = reg.encoder("my_robot/msg/Versioned", "cdr")({"a": 1, "b": 2.5, "c": "x"})
     assert new_dec(memoryview(new_payload)) == {"a": 1, "b": 2.5, "c": "x"}
     assert old_dec(memoryview(old_payload)) == {"a": 5}
@@ -695,18 +695,18 @@ def test_earlier_decoder_keeps_captured_definition(reg: CodecRegistry) -> None:
         new_dec(memoryview(old_payload))
     # re-registering the same definition reuses the codecs
     reg.add_schema("my_robot/msg/Versioned", "ros2msg", "int32 a\nfloat64 b\nstring c\n")
-    assert reg.decoder("my_robot/msg/Versioned", "cdr") is new_dec
+    assert reg.dict_decoder("my_robot/msg/Versioned") is new_dec
 
 
 def test_redefined_dependency(reg: CodecRegistry) -> None:
     reg.add_schema(
         "my_robot/msg/Outer", "ros2msg", f"Inner inner\n{SEP}\nMSG: my_robot/Inner\nint32 v\n"
     )
-    old = reg.decoder("my_robot/msg/Outer", "cdr")
+    old = reg.dict_decoder("my_robot/msg/Outer")
     old_payload = reg.encoder("my_robot/msg/Outer", "cdr")({"inner": {"v": 3}})
     reg.add_schema("my_robot/msg/Inner", "ros2msg", "int32 v\nint32 w\n")
     payload = reg.encoder("my_robot/msg/Outer", "cdr")({"inner": {"v": 3, "w": 4}})
-    assert reg.decoder("my_robot/msg/Outer", "cdr")(memoryview(payload)) == {
+    assert reg.dict_decoder("my_robot/msg/Outer")(memoryview(payload)) == {
         "inner": {"v": 3, "w": 4}
     }
     assert old(memoryview(old_payload)) == {"inner": {"v": 3}}
@@ -795,7 +795,7 @@ def test_large_messages_do_not_leak_old_bytes_into_padding() -> None:
     reg = CodecRegistry()
     reg.add_schema("my_robot/msg/Blob", "ros2msg", schema)
     enc = reg.encoder("my_robot/msg/Blob", "cdr")
-    dec = reg.decoder("my_robot/msg/Blob", "cdr")
+    dec = reg.dict_decoder("my_robot/msg/Blob")
     for msg in messages:
         fresh = CodecRegistry()
         fresh.add_schema("my_robot/msg/Blob", "ros2msg", schema)
@@ -814,7 +814,7 @@ def test_decode_from_a_slice_of_a_larger_frame(reg: CodecRegistry) -> None:
     frame = bytearray(b"\x01" + b"HEADER__" * 3 + payload + b"TRAILER")
     start = 1 + 24
     view = memoryview(frame)[start : start + len(payload)]
-    decoded = reg.decoder("std_msgs/msg/Float64MultiArray", "cdr")(view)
+    decoded = reg.dict_decoder("std_msgs/msg/Float64MultiArray")(view)
     assert decoded["data"].tolist() == [1.0, 2.0, 3.0]
     assert np.shares_memory(decoded["data"], np.frombuffer(frame, dtype=np.uint8))
 
@@ -874,10 +874,10 @@ float64 w 1
 
 
 def test_server_schema_identical_to_builtin_reuses_codecs(reg: CodecRegistry) -> None:
-    dec = reg.decoder("geometry_msgs/msg/PoseStamped", "cdr")
+    dec = reg.dict_decoder("geometry_msgs/msg/PoseStamped")
     enc = reg.encoder("geometry_msgs/msg/PoseStamped", "cdr")
     reg.add_schema("geometry_msgs/msg/PoseStamped", "ros2msg", POSE_STAMPED_FOXGLOVE)
-    assert reg.decoder("geometry_msgs/msg/PoseStamped", "cdr") is dec
+    assert reg.dict_decoder("geometry_msgs/msg/PoseStamped") is dec
     assert reg.encoder("geometry_msgs/msg/PoseStamped", "cdr") is enc
     decoded = dec(memoryview(enc({"pose": {"position": {"x": 1.0}}})))
     assert decoded["pose"]["orientation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
@@ -892,7 +892,7 @@ def test_schema_over_max_schema_fields_is_refused_before_codegen() -> None:
 
     reg = CodecRegistry(max_schema_fields=10)
     reg.add_schema("x/msg/Ok", "ros2msg", "".join(f"float64 f{i}\n" for i in range(10)))
-    assert reg.decoder("x/msg/Ok", "cdr") is not None
+    assert reg.dict_decoder("x/msg/Ok") is not None
     big = "".join(f"float64 f{i}\n" for i in range(6))
     # fields are summed over every definition the schema holds
     with pytest.raises(SchemaTooLarge, match="12 fields in 2 types"):
@@ -926,7 +926,7 @@ def test_cdr_sequence_length_beyond_the_payload_is_refused_before_allocating(
     tracemalloc), no MemoryError."""
     import tracemalloc
 
-    decode = CodecRegistry().decoder(schema, "cdr")
+    decode = CodecRegistry().dict_decoder(schema)
     payload = memoryview(b"\x00\x01\x00\x00" + body)
     tracemalloc.start()
     try:
@@ -945,16 +945,16 @@ def test_registries_with_the_same_definitions_share_built_codecs() -> None:
     a, b = CodecRegistry(), CodecRegistry()
     for reg in (a, b):
         reg.add_schema("demo_pkg/msg/Shared", "ros2msg", "string name\nint32 count")
-    assert a.decoder("demo_pkg/msg/Shared", "cdr") is b.decoder("demo_pkg/msg/Shared", "cdr")
+    assert a.dict_decoder("demo_pkg/msg/Shared") is b.dict_decoder("demo_pkg/msg/Shared")
     assert a.encoder("demo_pkg/msg/Shared", "cdr") is b.encoder("demo_pkg/msg/Shared", "cdr")
     # another definition under the same name is another codec, never the shared one
     c = CodecRegistry()
     c.add_schema("demo_pkg/msg/Shared", "ros2msg", "float64 count")
-    decode_c = c.decoder("demo_pkg/msg/Shared", "cdr")
-    assert decode_c is not a.decoder("demo_pkg/msg/Shared", "cdr")
+    decode_c = c.dict_decoder("demo_pkg/msg/Shared")
+    assert decode_c is not a.dict_decoder("demo_pkg/msg/Shared")
     payload = c.encoder("demo_pkg/msg/Shared", "cdr")({"count": 2.5})
     assert decode_c(memoryview(payload)) == {"count": 2.5}
-    assert a.decoder("demo_pkg/msg/Shared", "cdr")(
+    assert a.dict_decoder("demo_pkg/msg/Shared")(
         memoryview(a.encoder("demo_pkg/msg/Shared", "cdr")({"name": "x", "count": 3}))
     ) == {"name": "x", "count": 3}
     assert len(_registry._SHARED) <= _registry.SHARED_CODECS_MAX

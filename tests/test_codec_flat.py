@@ -27,7 +27,7 @@ def _flat_types() -> list[str]:
         if "/msg/" not in name:
             continue
         try:
-            decode = REG.decoder(name, "cdr")
+            decode = REG.dict_decoder(name)
         except SchemaError:
             continue  # wstring: no codec at all
         if "_general" in decode.__globals__:
@@ -105,7 +105,7 @@ def test_valid_payloads_decode_as_the_general_decoder_does(data: st.DataObject) 
     for name in FLAT:  # every type in every example
         value = data.draw(value_of(name))
         payload = REG.encoder(name, "cdr")(value)
-        decode = REG.decoder(name, "cdr")
+        decode = REG.dict_decoder(name)
         namespace = decode.__globals__  # the generated decoder's own
         slow = namespace["_general"]
         namespace["_general"] = no_fallback  # a valid payload is read directly
@@ -131,7 +131,7 @@ def test_damaged_payloads_end_as_with_the_general_decoder(data: st.DataObject) -
         payload += data.draw(st.binary(min_size=1, max_size=12))
     else:
         payload[1] = 0
-    decode = REG.decoder(name, "cdr")
+    decode = REG.dict_decoder(name)
     assert outcome(decode, bytes(payload)) == outcome(general(decode), bytes(payload))
 
 
@@ -147,7 +147,7 @@ def test_damaged_payloads_end_as_with_the_general_decoder(data: st.DataObject) -
     ],
 )
 def test_a_string_payload_it_cannot_read_raises_the_general_error(payload: bytes) -> None:
-    decode = REG.decoder("std_msgs/msg/String", "cdr")
+    decode = REG.dict_decoder("std_msgs/msg/String")
     with pytest.raises(DecodeError) as flat_error:
         decode(memoryview(payload))
     with pytest.raises(DecodeError) as general_error:
@@ -158,13 +158,13 @@ def test_a_string_payload_it_cannot_read_raises_the_general_error(payload: bytes
 def test_a_string_is_read_straight_from_the_payload() -> None:
     raw = "héllo".encode() + b"\x00"
     payload = b"\x00\x01\x00\x00" + struct.pack("<I", len(raw)) + raw
-    decode = REG.decoder("std_msgs/msg/String", "cdr")
+    decode = REG.dict_decoder("std_msgs/msg/String")
     assert decode(memoryview(payload)) == {"data": "héllo"}
     assert decode(memoryview(payload + b"\x00\x00\x00")) == {"data": "héllo"}  # CDR padding
 
 
 def test_a_fixed_size_type_is_read_in_one_go_with_up_to_3_bytes_of_padding() -> None:
-    decode = REG.decoder("geometry_msgs/msg/Twist", "cdr")
+    decode = REG.dict_decoder("geometry_msgs/msg/Twist")
     payload = b"\x00\x01\x00\x00" + struct.pack("<6d", 1, 2, 3, 4, 5, 6)
     namespace = decode.__globals__
     slow = namespace["_general"]

@@ -72,7 +72,7 @@ async def test_headers_reach_a_token_checking_proxy_and_the_session_works(
                 msg = await first_message(sub)
             await robot.publish("/note", "std_msgs/msg/String", {"data": "back"})
             await wait_until(lambda: server.messages("/note"))
-        assert msg.data == {"data": "through the proxy"}
+        assert msg.data.to_dict() == {"data": "through the proxy"}
         (headers,) = proxy.requests
         assert headers["Authorization"] == TOKEN
         assert headers["X-Robot-Fleet"] == "north"
@@ -215,7 +215,7 @@ async def test_wss_with_the_callers_context_trusting_a_private_ca(
             await wait_until(lambda: "/chatter" in tls_server.subscribed())
             chatter.log(string_msg("over TLS"))
             msg = await first_message(sub)
-    assert msg.data == {"data": "over TLS"}
+    assert msg.data.to_dict() == {"data": "over TLS"}
 
 
 async def test_wss_with_a_context_that_does_not_trust_the_certificate_fails(
@@ -330,7 +330,7 @@ async def test_auth_is_the_first_message_and_rosbridge_server_rs_carries_on(
             assert "/chatter" in [t.name for t in robot.topics]  # discovery went on
             async with robot.subscribe("/chatter") as sub:
                 msg = await first_message(sub)
-        assert isinstance(msg.data["data"], str)
+        assert isinstance(msg.data.data, str)
         first = json.loads(proxy.sent[0])
         later = [json.loads(m)["op"] for m in proxy.sent[1:]]
     assert first == {
@@ -407,7 +407,7 @@ async def test_auth_callable_failing_on_a_reconnection_is_retried(
                 )
                 async with robot.subscribe("/chatter") as sub:
                     msg = await first_message(sub)  # the session works again
-                assert isinstance(msg.data["data"], str)
+                assert isinstance(msg.data.data, str)
                 # the attempt whose callable failed failed with ConnectError
                 assert isinstance(robot.last_error, rmb.ConnectError)
                 assert isinstance(robot.last_error.__cause__, OSError)

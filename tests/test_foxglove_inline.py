@@ -26,7 +26,7 @@ async def test_frames_arriving_one_by_one_are_taken_inline_in_order(server: SdkS
                 for i in range(20):  # one at a time: each arrives alone
                     chatter.log(string_msg(f"m{i}"), log_time=5000 + i)
                     msg = await sub.__anext__()
-                    got.append((msg.data["data"], msg.log_time_ns, msg.topic))
+                    got.append((msg.data.data, msg.log_time_ns, msg.topic))
             assert got == [(f"m{i}", 5000 + i, "/chatter") for i in range(20)]
             assert ws.inline_messages - before == 20
             stats = sub.stats

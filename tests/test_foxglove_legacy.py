@@ -133,7 +133,7 @@ async def test_topics_and_services_with_ids_from_zero(server: LegacyServer) -> N
             server.send_message(first, cdr_string("zero"), timestamp=5)
             with anyio.fail_after(5):
                 msg = await sub.__anext__()
-        assert msg.data == {"data": "zero"}
+        assert msg.data.to_dict() == {"data": "zero"}
         reply = await robot.call_service("/set_flag", {"data": True}, timeout=5)
         assert reply == {"success": True, "message": "on"}
     assert server.recorder.subscribed == [0]
@@ -169,7 +169,7 @@ async def test_subscribe_cdr_string_channel_decodes_messages(server: LegacyServe
                     got.append(msg)
                     if len(got) == 3:
                         break
-    assert [m.data["data"] for m in got] == ["hello 0", "hello 1", "hello 2"]
+    assert [m.data.data for m in got] == ["hello 0", "hello 1", "hello 2"]
     assert [m.log_time_ns for m in got] == [1000, 1001, 1002]
     assert all(m.encoding == "cdr" and m.schema_name == "std_msgs/msg/String" for m in got)
     assert all(m.decode_error is None for m in got)
@@ -212,7 +212,7 @@ async def test_channel_removed_while_subscribed_goes_pending_then_resumes(
             got = []
             with anyio.fail_after(5):
                 async for msg in sub:
-                    got.append(msg.data["data"])
+                    got.append(msg.data.data)
                     if len(got) == 2:
                         break
     assert got == ["before", "after"]

@@ -112,7 +112,7 @@ async def test_subscribe_cdr_topic_decodes_messages(server: SdkServer) -> None:
                     got.append(msg)
                     if len(got) == 3:
                         break
-    assert [m.data["data"] for m in got] == ["hello 0", "hello 1", "hello 2"]
+    assert [m.data.data for m in got] == ["hello 0", "hello 1", "hello 2"]
     assert [m.log_time_ns for m in got] == [1000, 1001, 1002]
     assert all(m.topic == "/chatter" and m.encoding == "cdr" for m in got)
     assert got[0].schema_name == "std_msgs/msg/String"
@@ -144,9 +144,9 @@ async def test_image_data_is_a_numpy_array(server: SdkServer) -> None:
             cam.log(payload)
             with anyio.fail_after(5):
                 msg = await sub.__anext__()
-    assert msg.data["width"] == 640 and msg.data["encoding"] == "rgb8"
-    assert isinstance(msg.data["data"], np.ndarray)
-    assert np.array_equal(msg.data["data"], pixels)
+    assert msg.data.width == 640 and msg.data.encoding == "rgb8"
+    assert isinstance(msg.data.data, np.ndarray)
+    assert np.array_equal(msg.data.data, pixels)
 
 
 async def test_topic_advertised_later_goes_from_pending_to_active(server: SdkServer) -> None:
@@ -160,7 +160,7 @@ async def test_topic_advertised_later_goes_from_pending_to_active(server: SdkSer
             late.log(string_msg("finally"))
             with anyio.fail_after(5):
                 msg = await sub.__anext__()
-    assert msg.data["data"] == "finally"
+    assert msg.data.data == "finally"
 
 
 async def test_unadvertised_topic_goes_pending_and_readvertised_topic_resumes(
@@ -186,8 +186,8 @@ async def test_unadvertised_topic_goes_pending_and_readvertised_topic_resumes(
                     if len(got) == 2:
                         break
     # the frame queued before the unadvertise decodes with its own channel's schema
-    assert got[0].schema_name == "std_msgs/msg/String" and got[0].data == {"data": "before"}
-    assert got[1].schema_name == "std_msgs/msg/Int32" and got[1].data == {"data": 42}
+    assert got[0].schema_name == "std_msgs/msg/String" and got[0].data.to_dict() == {"data": "before"}
+    assert got[1].schema_name == "std_msgs/msg/Int32" and got[1].data.to_dict() == {"data": 42}
 
 
 async def test_undecodable_payload_and_bad_schema_are_delivered_raw(server: SdkServer) -> None:
@@ -209,7 +209,7 @@ async def test_undecodable_payload_and_bad_schema_are_delivered_raw(server: SdkS
                 raw = await sub2.__anext__()
     assert isinstance(broken.data, memoryview) and broken.decode_error
     assert bytes(broken.data) == b"\x00\x01\x00\x00\xff\xff\xff\x7f"
-    assert fine.data == {"data": "still fine"}
+    assert fine.data.to_dict() == {"data": "still fine"}
     assert isinstance(raw.data, memoryview) and bytes(raw.data) == b"\x00\x01\x00\x00abcd"
     assert sub.stats.decode_failures == 1
 
@@ -227,8 +227,8 @@ async def test_max_hz_cap_drops_before_decoding_and_delivers_the_trailing_messag
             got = []
             with anyio.fail_after(5):
                 async for msg in sub:
-                    got.append(msg.data["data"])
-                    if msg.data["data"] == "m49":
+                    got.append(msg.data.data)
+                    if msg.data.data == "m49":
                         break
     # a burst inside one window: the first frame passes, the newest is the trailing one
     assert got == ["m0", "m49"]
@@ -246,7 +246,7 @@ async def test_dispatch_latest_conflates_for_a_slow_consumer(server: SdkServer) 
             await wait_until(lambda: sub.stats.received == 20)
             with anyio.fail_after(5):
                 msg = await sub.__anext__()
-    assert msg.data["data"] == "m19"
+    assert msg.data.data == "m19"
     assert sub.stats.dropped_conflated == 19 and sub.stats.delivered == 1
 
 
@@ -261,7 +261,7 @@ async def test_overflow_drops_the_oldest_undecoded(server: SdkServer) -> None:
             got = []
             with anyio.fail_after(5):
                 async for msg in sub:
-                    got.append(msg.data["data"])
+                    got.append(msg.data.data)
                     if len(got) == 4:
                         break
     assert got == ["m6", "m7", "m8", "m9"]

@@ -87,10 +87,10 @@ async def _fragmented(max_frame_size: int) -> tuple[rmb.Client, list[rmb.Message
 async def test_message_in_one_byte_continuation_frames_is_delivered_in_bounded_memory() -> None:
     robot, got, peak = await _fragmented(64 * 1024 * 1024)
     assert len(got) == 2
-    data = bytes(got[0].data["data"])
+    data = bytes(got[0].data.data)
     assert len(data) == SIZE - 21
     assert data == bytes(i % 251 for i in range(SIZE - 21))
-    assert bytes(got[1].data["data"]) == b"end"
+    assert bytes(got[1].data.data) == b"end"
     assert robot.last_error is None
     assert peak < 4 * SIZE + PARSER_STEP, f"{peak} bytes allocated to reassemble {SIZE}"
 

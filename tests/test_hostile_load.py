@@ -154,7 +154,7 @@ async def test_kill_and_restart_on_the_same_port_restores_the_subscription(
 
                     async def consume() -> None:
                         async for msg in sub:
-                            arrivals.append((time.monotonic(), msg.data["data"]))
+                            arrivals.append((time.monotonic(), msg.data.data))
 
                     async with anyio.create_task_group() as tg:
                         tg.start_soon(consume)

@@ -24,7 +24,7 @@ async def test_library_connects_and_receives(protocol: str) -> None:
                 assert robot.protocol == wanted
                 async with robot.subscribe("/chatter") as sub:
                     msg = await sub.__anext__()
-        assert isinstance(msg.data["data"], str) and msg.data["data"].isdigit()
+        assert isinstance(msg.data.data, str) and msg.data.data.isdigit()
         assert [e["subprotocol"] for e in server.events("connect")] == (
             ["foxglove.sdk.v1"] if protocol == "foxglove" else [None]
         )

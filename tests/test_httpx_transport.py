@@ -63,7 +63,7 @@ async def test_foxglove_negotiates_its_subprotocol_subscribes_and_publishes(
             got = []
             with anyio.fail_after(5):
                 async for msg in sub:
-                    got.append(msg.data["data"])
+                    got.append(msg.data.data)
                     if len(got) == 50:
                         break
         await robot.publish("/cmd_vel", "geometry_msgs/msg/Twist", {"linear": {"x": 0.5}})
@@ -176,7 +176,7 @@ async def test_wss_with_the_clients_tls_settings() -> None:
                     await wait_until(lambda: "/chatter" in srv.subscribed())
                     chatter.log(string_msg("tls via httpx"))
                     msg = await first_message(sub)
-        assert msg.data == {"data": "tls via httpx"}
+        assert msg.data.to_dict() == {"data": "tls via httpx"}
         async with httpx.AsyncClient() as untrusting:  # the system CAs only
             with pytest.raises(rmb.ConnectError, match=r"(?i)certificate"):
                 async with rmb.connect(
@@ -245,7 +245,7 @@ async def test_rosbridge_server_rs_through_httpx_with_auth_first(
             async with robot.subscribe("/chatter") as sub:
                 msg = await first_message(sub)
             ok = await robot.call_service("/set_flag", {"data": True}, timeout=5)
-        assert isinstance(msg.data["data"], str)
+        assert isinstance(msg.data.data, str)
         assert "success" in ok
         assert '"op":"auth"' in str(proxy.sent[0])
 

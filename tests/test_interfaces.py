@@ -416,7 +416,7 @@ async def test_a_local_type_crosses_zenoh(
                 got.append(message)
                 if len(got) == 3:
                     break
-    assert [m.data["inner"] for m in got] == [{"x": float(i), "label": ""} for i in range(3)]
+    assert [m.data.inner for m in got] == [{"x": float(i), "label": ""} for i in range(3)]
     assert {m.schema_name for m in got} == {outer}
 
 

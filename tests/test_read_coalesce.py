@@ -79,7 +79,7 @@ async def receive(
         got: list[str] = []
         with anyio.fail_after(30):
             async for msg in sub:
-                got.append(msg.data["data"])
+                got.append(msg.data.data)
                 if len(got) == count:
                     break
         talker.join()

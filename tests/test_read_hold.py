@@ -201,7 +201,7 @@ async def test_a_capped_subscription_reads_in_holds_and_gets_fresh_messages(
                     break
                 reads, received = ws.reads, sub.stats.received
                 async for msg in sub:
-                    lags.append(ticker.sent - 1 - int(msg.data["data"]))
+                    lags.append(ticker.sent - 1 - int(msg.data.data))
                     if len(lags) == 8:
                         break
                 reads, received = ws.reads - reads, sub.stats.received - received
@@ -242,7 +242,7 @@ async def test_two_clients_holds_and_capped_waits_share_one_timer_on_trio(
                         msg = await sub.__anext__()
                         # released at most a window (20 ticks) before it is
                         # taken here, while the other subscription is read
-                        assert ticker.sent - 1 - int(msg.data["data"]) < 60
+                        assert ticker.sent - 1 - int(msg.data.data) < 60
                 holds = ws.quiet_holds
                 assert holds >= 1
                 if timers:
@@ -270,7 +270,7 @@ async def test_a_stopping_stream_still_delivers_its_last_message(server: SdkServ
             with anyio.fail_after(20):
                 with ticker.running():
                     async for msg in sub:
-                        got.append(int(msg.data["data"]))
+                        got.append(int(msg.data.data))
                         if len(got) == 3:
                             break
                 last = ticker.sent - 1  # the stream has stopped
@@ -279,7 +279,7 @@ async def test_a_stopping_stream_still_delivers_its_last_message(server: SdkServ
                 # is stopped)
                 if got[-1] != last:
                     async for msg in sub:
-                        got.append(int(msg.data["data"]))
+                        got.append(int(msg.data.data))
                         if got[-1] == last:
                             break
             assert ws.quiet_holds >= 1
@@ -315,7 +315,7 @@ async def test_a_keepalive_pong_is_read_during_holds(server: SdkServer) -> None:
                 first = await sub.__anext__()
                 second = await sub.__anext__()  # 2 s later: about 10 pings meanwhile
                 await wait_until(lambda: ws.quiet_holds >= 1)
-            assert int(second.data["data"]) > int(first.data["data"])
+            assert int(second.data.data) > int(first.data.data)
             assert robot.status == "connected"
 
 
@@ -379,4 +379,4 @@ async def test_a_saturated_socket_is_read_at_once(server: SdkServer) -> None:
             assert ws.quiet_holds - holds <= 5
             with anyio.fail_after(5):
                 last = await sub.__anext__()
-            assert last.data["data"].startswith(f"{n - 1:04d}")
+            assert last.data.data.startswith(f"{n - 1:04d}")

@@ -66,7 +66,7 @@ async def test_subscriptions_advertisements_and_parameter_watches_survive_a_serv
 
                     async def consume() -> None:
                         async for msg in sub:  # must keep running across the outage
-                            got.append(msg.data["data"])
+                            got.append(msg.data.data)
 
                     tg.start_soon(consume)
                     await robot.advertise("/cmd_vel", "geometry_msgs/msg/Twist")

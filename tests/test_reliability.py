@@ -57,7 +57,7 @@ async def test_adaptive_throttle_caps_a_subscription_ahead_of_decoding(server: S
             with anyio.fail_after(5):
                 first = await adaptive.__anext__()
                 last = await adaptive.__anext__()
-            assert (first.data["data"], last.data["data"]) == ("m0", "m39")
+            assert (first.data.data, last.data.data) == ("m0", "m39")
             assert adaptive.stats.delivered == 2  # only two were ever decoded
             assert adaptive.stats.arrival_bytes_per_s >= 0.0
 
@@ -112,7 +112,7 @@ async def test_breaker_trips_removes_the_subscription_at_the_bridge_and_recovers
                 chatter.log(string_msg("after"))
                 with anyio.fail_after(5):
                     msg = await sub.__anext__()
-                assert msg.data["data"] == "after"
+                assert msg.data.data == "after"
                 tg.cancel_scope.cancel()
             assert seen[:4] == ["closed", "tripped_auto", "half_open", "closed"]
             assert sub.breaker.trips == 1

@@ -159,7 +159,7 @@ async def test_subscribe_with_a_known_type(peer: RosPeer) -> None:
         async with robot.subscribe("/chatter") as sub:
             got = await take(sub, 3)
             assert sub.state == "active"
-    numbers = [int(m.data["data"].split()[1]) for m in got]
+    numbers = [int(m.data.data.split()[1]) for m in got]
     assert numbers == sorted(numbers)
     assert numbers[-1] - numbers[0] == 2  # none lost in between
     assert {m.schema_name for m in got} == {"std_msgs/msg/String"}
@@ -211,9 +211,9 @@ async def test_a_wrong_schema_hint_does_not_stick(peer: RosPeer) -> None:
         # and for a topic in the graph, the graph's type wins at once
         async with robot.subscribe("/chatter", schema="std_msgs/msg/Int32") as chatter:
             (hello,) = await take(chatter, 1)
-    assert got[0].data == {"data": "actually a string"}
+    assert got[0].data.to_dict() == {"data": "actually a string"}
     assert got[0].schema_name == "std_msgs/msg/String"
-    assert hello.data["data"].startswith("hello")
+    assert hello.data.data.startswith("hello")
 
 
 async def test_max_hz_is_forwarded_as_throttle_rate(peer: RosPeer) -> None:
@@ -375,8 +375,8 @@ async def test_a_stream_through_the_bridge_keeps_its_order_taken_where_it_is_rea
                 tg.start_soon(talk)
                 with anyio.move_on_after(15):
                     async for msg in sub:
-                        if msg.data["data"] != "probe":
-                            got.append(int(msg.data["data"]))
+                        if msg.data.data != "probe":
+                            got.append(int(msg.data.data))
                             if got[-1] == n - 1:
                                 break
             assert got == sorted(got) and len(set(got)) == len(got)  # in order, no repeat
@@ -420,12 +420,12 @@ async def test_cbor_and_cbor_raw_decode_the_same_message(peer: RosPeer) -> None:
             (j,) = await take(plain, 1)
     assert (c.encoding, r.encoding, j.encoding) == ("cbor", "cdr", "json")
     for m in (c, r, j):
-        assert m.data["header"]["frame_id"] == "odom"
-        assert m.data["child_frame_id"] == "base_link"
-        assert m.data["twist"]["twist"]["linear"]["x"] == pytest.approx(0.2)
-        assert len(m.data["pose"]["covariance"]) == 36
+        assert m.data.header.frame_id == "odom"
+        assert m.data.child_frame_id == "base_link"
+        assert m.data.twist.twist.linear.x == pytest.approx(0.2)
+        assert len(m.data.pose.covariance) == 36
     assert r.log_time_ns is not None  # cbor-raw carries the bridge's stamp
-    assert isinstance(r.data["pose"]["covariance"], np.ndarray)
+    assert isinstance(r.data.pose.covariance, np.ndarray)
 
 
 async def test_images_in_every_encoding(peer: RosPeer) -> None:
@@ -440,16 +440,16 @@ async def test_images_in_every_encoding(peer: RosPeer) -> None:
                     (frames[str(compression)],) = await take(sub, 1)
     finally:
         await command(peer, {"cmd": "stop", "topic": topic})
-    raw = frames["cbor-raw"].data["data"]
+    raw = frames["cbor-raw"].data.data
     assert isinstance(raw, np.ndarray) and raw.dtype == np.uint8 and raw.size == 64 * 48 * 3
-    cbor = frames["cbor"].data["data"]
+    cbor = frames["cbor"].data.data
     assert isinstance(cbor, bytes) and len(cbor) == raw.size
-    text = frames["None"].data["data"]  # JSON carries uint8[] as base64, as the bridge sends it
+    text = frames["None"].data.data  # JSON carries uint8[] as base64, as the bridge sends it
     assert isinstance(text, str) and len(base64.b64decode(text)) == raw.size
     row = bytes((x * 7) % 256 for x in range(64 * 3))
     assert bytes(raw[: len(row)])[:10] == row[: len(row)][:10] or bytes(cbor)[:10] == cbor[:10]
     for m in frames.values():
-        assert (m.data["width"], m.data["height"], m.data["encoding"]) == (64, 48, "rgb8")
+        assert (m.data.width, m.data.height, m.data.encoding) == (64, 48, "rgb8")
 
 
 async def test_bad_compression_is_refused_at_once(peer: RosPeer) -> None:
@@ -517,7 +517,7 @@ async def test_latched_advertisement_reaches_a_late_subscriber(peer: RosPeer) ->
         async with rmb.connect(peer.url, protocol="rosbridge", options=options()) as late:
             async with late.subscribe(topic, schema="std_msgs/msg/String") as sub:
                 (msg,) = await take(sub, 1)
-    assert msg.data == {"data": "kept"}
+    assert msg.data.to_dict() == {"data": "kept"}
 
 
 async def test_advertising_an_unknown_type_is_a_clear_error(peer: RosPeer) -> None:

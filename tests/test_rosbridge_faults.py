@@ -156,7 +156,7 @@ async def test_garbage_is_logged_and_skipped(caplog: pytest.LogCaptureFixture) -
                 assert robot.status == "connected"
     # the truncated frame is delivered raw with its decode error, the next is whole
     assert got[0].decode_error is not None
-    assert got[1].data == {"data": "good"}
+    assert got[1].data.to_dict() == {"data": "good"}
     text = caplog.text
     for needle in (
         "not JSON",
@@ -194,7 +194,7 @@ async def test_fragments_are_reassembled_in_any_order() -> None:
         async with rmb.connect(url, protocol="rosbridge", options=options()) as robot:
             async with robot.subscribe("/chatter") as sub:
                 got = await first_messages(sub, 2)
-    assert [m.data["data"] for m in got] == ["x" * 300, "after"]
+    assert [m.data.data for m in got] == ["x" * 300, "after"]
 
 
 async def test_incomplete_late_and_oversized_fragments_are_dropped(
@@ -326,7 +326,7 @@ async def test_a_bridge_without_rosapi_still_subscribes_and_publishes(
                 got = await first_messages(sub, 1)
             # several failed polls (each ended when the next begins): warned once
             await wait_until(lambda: bridge.polls() >= 4, what="four discovery polls")
-    assert got[0].data == {"data": "typed"}
+    assert got[0].data.to_dict() == {"data": "typed"}
     assert bridge.sent("subscribe")[0]["type"] == "std_msgs/msg/String"
     assert caplog.text.count("discovery through /rosapi failed") == 1
 
@@ -419,7 +419,7 @@ async def test_cbor_bignum_status_is_logged_bounded_and_the_connection_stays(
                 async with robot.subscribe("/chatter") as sub:
                     (msg,) = await first_messages(sub, 1)
                     assert robot.status == "connected" and robot.last_error is None
-    assert msg.data == {"data": "after"}
+    assert msg.data.to_dict() == {"data": "after"}
     status = [r.getMessage() for r in caplog.records if "server status" in r.getMessage()]
     assert len(status) == 2 and all(len(t) < 1000 for t in status)
     assert "20001 bits" in status[0]
@@ -516,4 +516,4 @@ async def test_messages_read_with_a_reply_are_delivered_before_it_resolves_the_c
         assert await robot.call_service("/set_flag", {"data": True}, timeout=2) == {"success": True}
         assert sub.stats.received >= 3
         got = await first_messages(sub, 5)
-        assert [m.data["data"] for m in got] == ["0", "1", "2", "3", "4"]
+        assert [m.data.data for m in got] == ["0", "1", "2", "3", "4"]

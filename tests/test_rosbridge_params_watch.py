@@ -330,7 +330,7 @@ async def test_events_that_are_not_parameter_events_are_counted_not_fatal(
         async with client.subscribe("/chatter") as sub:
             with anyio.fail_after(10):
                 message = await sub.__anext__()
-            assert message.data["data"].startswith("hello ")
+            assert message.data.data.startswith("hello ")
 
 
 @pytest.fixture

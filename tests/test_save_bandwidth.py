@@ -126,7 +126,7 @@ async def test_the_stream_pauses_after_each_message_and_resumes_on_the_max_hz_sc
             for round_ in range(3):
                 chatter.log(string_msg(f"m{round_}"))
                 with anyio.fail_after(5):
-                    got.append((await sub.__anext__()).data["data"])
+                    got.append((await sub.__anext__()).data.data)
                 # taken: the client unsubscribes, then subscribes again when due
                 await wait_until(lambda r=round_: unsubscribes(server, "/p") == r + 1)
                 await wait_until(lambda r=round_: subscribes(server, "/p") == r + 2)
@@ -157,7 +157,7 @@ async def test_a_replay_on_resubscription_is_skipped_and_counted(
             with anyio.fail_after(5):
                 second = await sub.__anext__()
             await wait_until(lambda: sub.stats.dropped_replay == 2, what="the next replay")
-    assert (first.data["data"], second.data["data"]) == ("first", "second")
+    assert (first.data.data, second.data.data) == ("first", "second")
     stats = sub.stats
     assert stats.delivered == 2 and stats.dropped_replay == 2
     assert stats.received == fates(stats) == 4
@@ -187,7 +187,7 @@ async def test_a_stream_of_identical_messages_is_delivered_on_schedule(server: S
             finally:
                 stop.set()
                 thread.join()
-    assert [m.data["data"] for m in got] == ["ok"] * 4
+    assert [m.data.data for m in got] == ["ok"] * 4
     stats = sub.stats
     # one check per resubscription: at most one skipped each time
     assert stats.dropped_replay <= subscribes(server, "/same") - 1
@@ -202,7 +202,7 @@ async def test_the_default_mode_delivers_a_replay_again(replaying: ReplayingServ
         async with robot.subscribe("/l", max_hz=20, save_bandwidth=True) as sub:
             with anyio.fail_after(5):
                 msg = await sub.__anext__()
-    assert msg.data["data"] == "before" and sub.stats.dropped_replay == 0
+    assert msg.data.data == "before" and sub.stats.dropped_replay == 0
 
 
 async def test_a_stopping_stream_last_message_the_default_gets_and_the_mode_may_miss(
@@ -220,7 +220,7 @@ async def test_a_stopping_stream_last_message_the_default_gets_and_the_mode_may_
             async with robot.subscribe(topic, max_hz=4, adaptive=False, save_bandwidth=mode) as sub:
                 await wait_until(lambda t=topic: subscribes(server, t) == 1)
                 chatter.log(string_msg("first"))
-                got = [(await sub.__anext__()).data["data"]]
+                got = [(await sub.__anext__()).data.data]
                 if mode:  # paused: the server has stopped sending
                     await wait_until(lambda t=topic: unsubscribes(server, t) == 1)
                 chatter.log(string_msg("last"))  # the stream stops here
@@ -229,7 +229,7 @@ async def test_a_stopping_stream_last_message_the_default_gets_and_the_mode_may_
                     await wait_until(lambda t=topic: subscribes(server, t) == 2)
                     chatter.log(string_msg("later"))
                 with anyio.fail_after(5):
-                    got.append((await sub.__anext__()).data["data"])
+                    got.append((await sub.__anext__()).data.data)
                 results[mode] = got
                 assert sub.stats.received == fates(sub.stats) == 2
     assert results[False] == ["first", "last"]
@@ -250,7 +250,7 @@ async def test_a_second_subscription_without_the_mode_keeps_the_stream_whole(
             async with robot.subscribe("/both") as whole:
                 for i in range(5):
                     chatter.log(string_msg(f"w{i}"))
-                got = [msg.data["data"] for msg in await take(whole, 5, timeout=5)]
+                got = [msg.data.data for msg in await take(whole, 5, timeout=5)]
             assert got == [f"w{i}" for i in range(5)]
             # no pause while the whole stream is wanted
             assert unsubscribes(server, "/both") == 1
@@ -281,7 +281,7 @@ async def test_closing_the_client_while_paused_ends_the_iteration(server: SdkSer
         await wait_until(lambda: subscribes(server, "/close") == 1)
         chatter.log(string_msg("only"))
         with anyio.fail_after(5):
-            got.append((await sub.__anext__()).data["data"])
+            got.append((await sub.__anext__()).data.data)
         await wait_until(lambda: unsubscribes(server, "/close") == 1, what="paused")
     # the client closed with the subscription paused (resumption due in 1 s)
     with anyio.fail_after(5):
@@ -302,7 +302,7 @@ async def test_a_paused_subscription_resumes_after_a_reconnect() -> None:
                 await wait_until(lambda: subscribes(first, "/r") == 1)
                 chatter.log(string_msg("before"))
                 with anyio.fail_after(5):
-                    assert (await sub.__anext__()).data["data"] == "before"
+                    assert (await sub.__anext__()).data.data == "before"
                 await wait_until(lambda: unsubscribes(first, "/r") == 1, what="paused")
                 first.stop()
                 await wait_until(lambda: robot.status == "reconnecting", 10)
@@ -315,7 +315,7 @@ async def test_a_paused_subscription_resumes_after_a_reconnect() -> None:
                 for i in range(2):  # and it pauses and resumes on the new connection
                     chatter2.log(string_msg(f"after{i}"))
                     with anyio.fail_after(5):
-                        got.append((await sub.__anext__()).data["data"])
+                        got.append((await sub.__anext__()).data.data)
                     await wait_until(lambda i=i: subscribes(second, "/r") == i + 2)
                 assert got == ["after0", "after1"]
                 assert unsubscribes(second, "/r") == 2
@@ -366,6 +366,6 @@ def test_the_sync_client_mirrors_the_mode_and_the_stats(server: SdkServer, backe
             msg = sub.get()
             stats = sub.stats
         conn = robot.stats()
-    assert msg.data["data"] == "s"
+    assert msg.data.data == "s"
     assert stats.bytes_received == len(string_msg("s")) and stats.delivered == 1
     assert conn.bytes_received > stats.bytes_received and conn.messages_received >= 2

@@ -66,9 +66,9 @@ def test_a_ros_topic_arrives_and_a_slow_service_times_out(
     ) as robot:
         with robot.subscribe("/chatter", timeout=10) as sub:
             first, second = sub.get(), sub.get()
-        assert first.topic == "/chatter" and first.data["data"].startswith("hello ")
-        n1 = int(first.data["data"].removeprefix("hello "))
-        assert int(second.data["data"].removeprefix("hello ")) > n1
+        assert first.topic == "/chatter" and first.data.data.startswith("hello ")
+        n1 = int(first.data.data.removeprefix("hello "))
+        assert int(second.data.data.removeprefix("hello ")) > n1
         with pytest.raises(rmb.ServiceTimeout):
             robot.call_service("/slow_trigger", {}, timeout=0.5)
         assert robot.call_service("/set_flag", {"data": True}, timeout=10)["success"] is True

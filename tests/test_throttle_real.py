@@ -112,7 +112,7 @@ async def test_one_stall_of_a_second_loses_no_camera_frame(server: SdkServer) ->
             # later was lost (the counters below say where)
             with anyio.move_on_after(10):
                 async for msg in sub:
-                    seen.append(int(msg.data["header"]["stamp"]["sec"]))
+                    seen.append(int(msg.data.header.stamp.sec))
                     if len(seen) == 30:
                         time.sleep(1.0)  # user code blocks the loop once
                         # the sampler records the stall (its next sample; it
@@ -151,7 +151,7 @@ async def test_a_new_image_subscriber_loses_nothing_to_its_first_decode(
 
                 async def consume(s: rmb.Subscription, into: list[int]) -> None:
                     async for msg in s:
-                        into.append(int(msg.data["header"]["stamp"]["sec"]))
+                        into.append(int(msg.data.header.stamp.sec))
                         if into[-1] == count - 1:
                             return
 
@@ -259,7 +259,7 @@ async def test_adaptive_save_bandwidth_pauses_the_stream_while_the_loop_is_busy(
 
             async def consume() -> None:
                 async for msg in sub:
-                    seqs.append(msg.data["header"]["stamp"]["sec"])
+                    seqs.append(msg.data.header.stamp.sec)
 
             tg.start_soon(consume)
             tg.start_soon(busy_loop, busy, calm)

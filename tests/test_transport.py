@@ -87,7 +87,7 @@ async def test_wss_against_the_sdk_servers_own_tls(certificate: tuple[bytes, byt
                         channel.log(string_msg("over tls"))
                         await anyio.sleep(0.02)
                     msg = await sub.__anext__()
-        assert msg.data == {"data": "over tls"}
+        assert msg.data.to_dict() == {"data": "over tls"}
         # without trusting the certificate the handshake fails with a ConnectError
         with pytest.raises(rmb.ConnectError, match="certificate"):
             async with rmb.connect(

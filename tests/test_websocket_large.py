@@ -161,7 +161,7 @@ async def test_camera_images_arrive_whole_and_read_only(server: SdkServer) -> No
             got = []
             with anyio.fail_after(20):
                 async for msg in sub:
-                    got.append(msg.data["data"])
+                    got.append(msg.data.data)
                     if len(got) == count:
                         break
             ws = robot._conn.adapter._ws  # type: ignore[attr-defined]

@@ -66,7 +66,7 @@ async def test_publish_reaches_subscription_in_order(zenoh_router: Any, zenoh_do
         for i in range(100):
             await a.publish("/chatter", STRING, {"data": f"m{i}"})
         got = await take(sub, 100)
-        assert [m.data["data"] for m in got] == [f"m{i}" for i in range(100)]
+        assert [m.data.data for m in got] == [f"m{i}" for i in range(100)]
         assert {m.schema_name for m in got} == {STRING}
         assert all(m.log_time_ns is not None for m in got)
         assert b.rejections == {}
@@ -159,7 +159,7 @@ async def test_another_domain_is_invisible(zenoh_router: Any, zenoh_domain: int,
             attachment=attachment(2),
         )
         got = await take(sub, 1)
-        assert got[0].data["data"] == "near"
+        assert got[0].data.data == "near"
         assert all(t.name != "/far_only" for t in near.topics)
         assert sub.stats.received == 1
 
@@ -201,7 +201,7 @@ async def test_hostile_samples_are_skipped_and_counted(
         # the garbage payload is delivered with its decode error (as on the
         # other transports); the good one decodes
         assert got[1].decode_error is not None
-        assert got[2].data == {"data": "ok"}
+        assert got[2].data.to_dict() == {"data": "ok"}
         assert client.rejections == {"attachment": 3, "malformed": 2}
         assert "RIHS02: this library reads RIHS01 hashes only" in caplog.text
 
@@ -229,7 +229,7 @@ async def test_a_flood_of_bad_samples_is_counted_each_and_logged_in_a_few_lines(
         for _ in range(sent):
             publisher.put(good)  # no attachment
         publisher.put(good, attachment=attachment(1))
-        assert (await take(sub, 1))[0].data == {"data": "ok"}
+        assert (await take(sub, 1))[0].data.to_dict() == {"data": "ok"}
         publisher.undeclare()
         assert client.rejections == {"attachment": sent}
         seconds = time.monotonic() - started
@@ -258,7 +258,7 @@ async def test_the_keyed_attachments_of_early_rmw_zenoh_releases_are_read(
         raw.put(key, cdr(STRING, {"data": "broken"}), attachment=broken)
         raw.put(key, cdr(STRING, {"data": "fixed"}), attachment=attachment(2))
         got = await take(sub, 2)
-        assert [m.data["data"] for m in got] == ["keyed", "fixed"]
+        assert [m.data.data for m in got] == ["keyed", "fixed"]
         assert got[0].log_time_ns == 1_700_000_000_000_000_001
         assert client.rejections == {"attachment": 1}
 
@@ -386,7 +386,7 @@ async def test_a_burst_arrives_whole_and_in_order_and_its_thread_ends_with_the_c
         publisher.undeclare()
         got = await take(sub, sent)
         assert [m.sequence for m in got] == list(range(1, sent + 1))
-        assert [m.data["data"] for m in got] == [f"m{i}" for i in range(1, sent + 1)]
+        assert [m.data.data for m in got] == [f"m{i}" for i in range(1, sent + 1)]
         assert [m.log_time_ns for m in got] == [stamp + i for i in range(1, sent + 1)]
         received = [m.receive_time_ns for m in got]
         assert received == sorted(received) and received[0] >= stamp
@@ -593,7 +593,7 @@ async def test_a_router_restart_is_a_reconnect_and_the_subscription_resumes(
 
                 async def consume() -> None:
                     async for message in sub:
-                        got.append(message.data["data"])
+                        got.append(message.data.data)
 
                 tg.start_soon(consume)
                 await wait_until(

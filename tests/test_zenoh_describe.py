@@ -188,7 +188,7 @@ async def test_a_fetched_description_is_cached_for_the_next_connection(
         async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
             got = await first_messages(client, 3)
             assert [m.decode_error for m in got] == [None] * 3
-            assert got[0].data["basic_types_value"]["int32_value"] == -42
+            assert got[0].data.basic_types_value.int32_value == -42
     assert node.described() == [NESTED]
     assert DESCRIPTION_CACHE.hits >= 1
 

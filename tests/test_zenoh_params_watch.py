@@ -179,7 +179,7 @@ async def test_hostile_parameter_events_are_counted_not_fatal(
             )
             with anyio.fail_after(10):
                 message = await sub.__anext__()
-            assert message.data == {"data": "still here"}
+            assert message.data.to_dict() == {"data": "still here"}
 
 
 async def test_the_watch_is_restored_after_a_router_restart(

@@ -61,7 +61,7 @@ async def test_sdk_talker_reaches_our_subscription(
                 async for message in sub:
                     assert message.schema_name == STRING
                     assert message.decode_error is None
-                    got.append(int(message.data["data"].split()[1]))
+                    got.append(int(message.data.data.split()[1]))
                     if len(got) == 20:
                         break
         # in order, none skipped (reliable, one publisher)

@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Generic, Literal
 
 from ._slots import new_object, unfrozen_twin
 
@@ -36,18 +37,36 @@ Compression = Literal["cbor", "cbor-raw"]
 SaveBandwidth = bool | Literal["adaptive"]
 GoalState = Literal["pending", "active", "succeeded", "canceled", "aborted", "failed"]
 
+if sys.version_info >= (3, 13):
+    from typing import TypeVar
+else:
+    from typing_extensions import TypeVar
+
+DataT = TypeVar("DataT", default=Any)
+"""What ``Message.data`` holds: the message class a subscription names
+(``subscribe(topic, Odometry)``), else ``Any``."""
+
 DEFAULT_PORTS: Mapping[str, int] = {"foxglove-ws": 8765, "rosbridge": 9090, "zenoh": 7447}
 """The port each protocol's bridge listens on unless told otherwise."""
 
 
 @dataclass(frozen=True, slots=True)
-class Message:
+class Message(Generic[DataT]):
     """One message received on a subscription.
 
-    ``data`` is the decoded message: a ``dict`` for CDR and JSON payloads, with
-    primitive arrays (``uint8[]`` image data, ``float64[]``) as numpy arrays that
-    view the received frame where the codec allows. When the payload could not
-    be decoded, ``data`` is the raw ``memoryview`` and ``decode_error`` says why.
+    ``data`` is the decoded message: an instance of the type's message class
+    (``msg.data.pose.pose.position.x``; see :mod:`ros_mobile_bridge.interfaces`)
+    whenever the library knows the type's ROS definition (bundled, the
+    server's schema, the robot's description, a local workspace, or
+    ``register_type``), with primitive arrays (``uint8[]`` image data,
+    ``float64[]``) as numpy arrays that view the received frame where the
+    codec allows; a ``dict`` for a channel that has only a JSON Schema, or
+    JSON of a type with no ROS definition. ``msg.data.to_dict()`` gives the
+    dict form. A subscription that names a class (``subscribe(topic,
+    Odometry)``) is a ``Subscription[Odometry]``, and type checkers know
+    ``msg.data`` is an ``Odometry``. When the payload could not be decoded
+    (or, for a named class, was of another definition), ``data`` is the raw
+    ``memoryview`` and ``decode_error`` says why.
     ``receive_time_ns`` is ``time.time_ns()`` when the frame arrived;
     ``log_time_ns`` is the timestamp the wire carries: the Foxglove server's
     log time, rmw_zenoh's source timestamp (the publisher's clock when it
@@ -60,7 +79,7 @@ class Message:
     topic: str
     schema_name: str
     encoding: str
-    data: Any
+    data: DataT
     receive_time_ns: int
     log_time_ns: int | None
     byte_size: int

@@ -12,7 +12,7 @@ import contextlib
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, Generic, TypeVar, overload
 
 import anyio
 
@@ -40,6 +40,7 @@ from .._types import (
 from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
 from ..flow import Subscription, Watcher
+from ..interfaces._base import RosMessage, RosRequest
 from ._action import ActionGoal
 from ._connection import Connection, RouteContext, is_velocity_type, zero_twist
 from ._published_types import PublishTypes
@@ -55,6 +56,8 @@ if TYPE_CHECKING:
 __all__ = ["Client"]
 
 T = TypeVar("T")
+M = TypeVar("M", bound=RosMessage)
+R = TypeVar("R", bound=RosMessage)
 _Info = TypeVar("_Info", TopicInfo, ServiceInfo)
 
 
@@ -217,9 +220,11 @@ class Client:
         )
 
     # -- subscriptions ------------------------------------------------------
+    @overload
     def subscribe(
         self,
         topic: str,
+        type: type[M],
         *,
         max_hz: float | None = None,
         adaptive: bool = True,
@@ -229,9 +234,50 @@ class Client:
         compression: Compression | None = None,
         decode: bool = True,
         save_bandwidth: SaveBandwidth = False,
-    ) -> _SubscriptionContext:
+    ) -> _SubscriptionContext[M]: ...
+
+    @overload
+    def subscribe(
+        self,
+        topic: str,
+        type: str | None = None,
+        *,
+        max_hz: float | None = None,
+        adaptive: bool = True,
+        dispatch: Dispatch = "all",
+        schema: str | None = None,
+        buffer: int | None = None,
+        compression: Compression | None = None,
+        decode: bool = True,
+        save_bandwidth: SaveBandwidth = False,
+    ) -> _SubscriptionContext[Any]: ...
+
+    def subscribe(
+        self,
+        topic: str,
+        type: type[RosMessage] | str | None = None,
+        *,
+        max_hz: float | None = None,
+        adaptive: bool = True,
+        dispatch: Dispatch = "all",
+        schema: str | None = None,
+        buffer: int | None = None,
+        compression: Compression | None = None,
+        decode: bool = True,
+        save_bandwidth: SaveBandwidth = False,
+    ) -> _SubscriptionContext[Any]:
         """Subscribe to ``topic``; an async context manager yielding a
         :class:`~ros_mobile_bridge.Subscription` (``async for msg in sub``).
+
+        ``type``: the message class (``subscribe("/odom", Odometry)``) or
+        type name (``"nav_msgs/msg/Odometry"``) of the topic, when the
+        caller knows it (``schema=`` is the same as a name). With a class,
+        the subscription is a ``Subscription[Odometry]``: ``msg.data`` is
+        an ``Odometry`` for type checkers and at run time; a message whose
+        definition on the robot differs from the class's is delivered raw,
+        its ``decode_error`` saying so. Without one, ``msg.data`` is still
+        an instance of the type's class whenever the library knows the
+        type's ROS definition (see :class:`~ros_mobile_bridge.Message`).
 
         The topic need not be advertised yet: the subscription stays
         ``pending`` and becomes ``active`` when the server offers it.
@@ -288,6 +334,7 @@ class Client:
         subscriptions to one topic pause only when every one asks for it.
         Arguments are checked here, at once."""
         check_name("topic", topic)
+        want, schema = _wanted(type, schema)
         if schema is not None:
             check_schema(schema)
         if compression is not None and compression not in ("cbor", "cbor-raw"):
@@ -307,6 +354,7 @@ class Client:
             compression=compression,
             decode=decode,
             save_bandwidth=mode,
+            want=want,
         )
         return _SubscriptionContext(self._conn, route)
 
@@ -330,16 +378,40 @@ class Client:
         self._conn.require_connected()
         await self._conn.adapter.unadvertise(topic)
 
+    @overload
+    async def publish(
+        self,
+        topic: str,
+        schema: RosMessage,
+        *,
+        priority: Priority = "data",
+        check_velocity: bool = True,
+    ) -> None: ...
+
+    @overload
     async def publish(
         self,
         topic: str,
         schema: str,
-        data: Mapping[str, Any],
+        data: Mapping[str, Any] | RosMessage,
+        *,
+        priority: Priority = "data",
+        check_velocity: bool = True,
+    ) -> None: ...
+
+    async def publish(
+        self,
+        topic: str,
+        schema: str | RosMessage,
+        data: Mapping[str, Any] | RosMessage | None = None,
         *,
         priority: Priority = "data",
         check_velocity: bool = True,
     ) -> None:
-        """Publish ``data`` (a dict; missing fields are zero) on ``topic``.
+        """Publish a message on ``topic``: ``publish("/cmd_vel", Twist(...))``
+        takes the type from the instance; ``publish(topic, schema, data)``
+        names the type and gives a dict (missing fields are zero) or an
+        instance of the type's class.
 
         Before anything is advertised or sent, the type is checked and a
         mistake raises :class:`~ros_mobile_bridge.SchemaError` naming it: a
@@ -366,11 +438,10 @@ class Client:
         :class:`~ros_mobile_bridge.MessageError` (a ``ValueError``) naming
         the field when ``data`` does not fit the schema."""
         check_name("topic", topic)
+        schema, data = _published(schema, data)
         check_schema(schema)
         if priority not in ("data", "control"):
             raise ValueError(f"priority must be 'data' or 'control', got {priority!r}")
-        if not isinstance(data, Mapping):
-            raise TypeError(f"data must be a mapping (dict), not {type(data).__name__}")
         if not isinstance(check_velocity, bool):
             raise TypeError("check_velocity must be a bool")
         self._conn.require_connected()
@@ -484,11 +555,34 @@ class Client:
         return open_recording(self._conn, checked, wanted, max_hz, adaptive, compression)
 
     # -- services -----------------------------------------------------------
+    @overload
     async def call_service(
-        self, name: str, request: Mapping[str, Any] | None = None, *, timeout: float | None = None
+        self, name: str, request: RosRequest[R], *, timeout: float | None = None
+    ) -> R: ...
+
+    @overload
+    async def call_service(
+        self,
+        name: str,
+        request: Mapping[str, Any] | RosMessage | None = None,
+        *,
+        timeout: float | None = None,
+    ) -> Any: ...
+
+    async def call_service(
+        self,
+        name: str,
+        request: Mapping[str, Any] | RosMessage | None = None,
+        *,
+        timeout: float | None = None,
     ) -> Any:
-        """Call service ``name`` with ``request`` (a dict; missing fields are
-        zero) and return the decoded response (a dict).
+        """Call service ``name`` with ``request`` and return the response.
+
+        ``request`` is an instance of the service's request class
+        (``AddTwoInts.Request(a=1, b=2)``; then type checkers know the call
+        returns an ``AddTwoInts.Response``) or a dict (missing fields are
+        zero). The response is an instance of the response class whenever
+        the library knows the service type's definition, else a dict.
 
         Raises :class:`~ros_mobile_bridge.MessageError` naming the field,
         before anything is sent, when ``request`` does not fit the request
@@ -498,9 +592,10 @@ class Client:
         ``NotConnected`` when the connection is or goes away. A call never
         waits forever."""
         check_name("service name", name)
-        if request is not None and not isinstance(request, Mapping):
+        if request is not None and not isinstance(request, Mapping | RosMessage):
             raise TypeError(
-                f"request must be a mapping (dict) or None, not {type(request).__name__}"
+                "request must be a message instance, a mapping (dict) or None, "
+                f"not {type(request).__name__}"
             )
         adapter = self._conn.adapter
         try:
@@ -761,14 +856,59 @@ class Client:
                     await handle.cancel()
 
 
-class _SubscriptionContext:
+def _published(
+    schema: str | RosMessage, data: Mapping[str, Any] | RosMessage | None
+) -> tuple[str, Mapping[str, Any] | RosMessage]:
+    """``publish``'s ``schema`` and ``data`` as (the type name, the
+    message): the type of an instance given alone is its class's; an
+    instance given with a name must be of that type. ``TypeError`` /
+    ``ValueError`` naming the mistake."""
+    if isinstance(schema, RosMessage):
+        if data is not None:
+            raise TypeError("publish(topic, message) takes no data: the message is the data")
+        return type(schema).__ros_type__, schema
+    if data is None:
+        raise TypeError("publish(topic, schema, data) needs the data (a dict or a message)")
+    if isinstance(data, RosMessage):
+        own = type(data).__ros_type__
+        if isinstance(schema, str) and not same_type_name(schema, own):
+            raise ValueError(f"the message is a {own}, not a {schema}")
+    elif not isinstance(data, Mapping):
+        raise TypeError(
+            f"data must be a mapping (dict) or a message instance, not {type(data).__name__}"
+        )
+    return schema, data
+
+
+def _wanted(
+    given: type[RosMessage] | str | None, schema: str | None
+) -> tuple[type[RosMessage] | None, str | None]:
+    """``subscribe``'s ``type`` and ``schema`` as (the class wanted, the
+    type name): ``TypeError`` for a ``type`` that is neither a message
+    class nor a name, ``ValueError`` when the two name different types."""
+    if given is None:
+        return None, schema
+    if isinstance(given, str):
+        want, name = None, given
+    elif isinstance(given, type) and issubclass(given, RosMessage) and given is not RosMessage:
+        want, name = given, given.__ros_type__
+    else:
+        raise TypeError(
+            f"type must be a message class (geometry_msgs.msg.Twist) or a type name, not {given!r}"
+        )
+    if schema is not None and not same_type_name(schema, name):
+        raise ValueError(f"type {name!r} and schema {schema!r} name different types")
+    return want, name
+
+
+class _SubscriptionContext(Generic[M]):
     """What :meth:`Client.subscribe` returns: enter to subscribe, exit to
     unsubscribe (the bridge stops sending once no local subscriber is left)."""
 
     def __init__(self, conn: Connection, route: Route) -> None:
         self._routed = RouteContext(conn, route)
 
-    async def __aenter__(self) -> Subscription:
+    async def __aenter__(self) -> Subscription[M]:
         return (await self._routed.__aenter__()).sub
 
     async def __aexit__(self, *exc_info: object) -> None:

@@ -59,7 +59,7 @@ class Route:
     :class:`Subscription`, the queue frames go to, its adaptive throttle and
     what the bridge is told."""
 
-    sub: Subscription
+    sub: Subscription[Any]
     queue: FrameQueue
     throttle: AdaptiveThrottle | None
     hints: SubscribeHints
@@ -223,9 +223,11 @@ class Router:
         compression: Compression | None,
         decode: bool = True,
         save_bandwidth: SaveBandwidth = False,
+        want: type | None = None,
     ) -> Route:
         """Build one subscription's pipeline (throttle, queue, breaker); not
-        routed until :meth:`add`. The queue checks its own arguments."""
+        routed until :meth:`add`. The queue checks its own arguments.
+        ``want``: the message class the subscription delivers, or None."""
         throttle = (
             AdaptiveThrottle(
                 self._presets, self._mode, current_monitor(), logger=self._log, name=topic
@@ -241,8 +243,14 @@ class Router:
         )
         policy = self._options.breaker
         breaker = policy.build() if policy is not None else None
-        sub = Subscription(
-            topic, queue, logger=self._log, throttle=throttle, breaker=breaker, decode=decode
+        sub: Subscription[Any] = Subscription(
+            topic,
+            queue,
+            logger=self._log,
+            throttle=throttle,
+            breaker=breaker,
+            decode=decode,
+            want=want,
         )
         hints = SubscribeHints(max_hz=max_hz, schema=schema, compression=compression)
         return Route(sub, queue, throttle, hints, save_bandwidth)

@@ -24,7 +24,7 @@ import time
 from collections.abc import Awaitable, Callable, Iterator, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager
 from types import TracebackType
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar, overload
 
 from .._checks import check_timeout as _check_timeout
 from .._connect import ProtocolArg, connect
@@ -36,6 +36,7 @@ from .._types import (
     ActionOutcome,
     Compression,
     ConnectionStats,
+    DataT,
     Dispatch,
     GoalState,
     Message,
@@ -50,6 +51,7 @@ from .._types import (
 )
 from ..codec import FieldDef
 from ..flow import Subscription
+from ..interfaces._base import RosMessage, RosRequest
 from ._worker import JOIN_S, Children, Held, Parent, SyncBackend, Worker
 
 if TYPE_CHECKING:
@@ -59,6 +61,8 @@ __all__ = ["SyncActionGoal", "SyncClient", "SyncSubscription", "connect_sync"]
 
 T = TypeVar("T")
 T_ = TypeVar("T_")
+_M = TypeVar("_M", bound=RosMessage)
+_R = TypeVar("_R", bound=RosMessage)
 F = TypeVar("F", bound=Callable[..., Any])
 
 
@@ -364,12 +368,35 @@ class SyncClient:
         )
 
     # -- publishing ---------------------------------------------------------
-    @_mirrors
+    @overload
+    def publish(
+        self,
+        topic: str,
+        schema: RosMessage,
+        *,
+        priority: Priority = "data",
+        check_velocity: bool = True,
+        timeout: float | None = None,
+    ) -> None: ...
+
+    @overload
     def publish(
         self,
         topic: str,
         schema: str,
-        data: Mapping[str, Any],
+        data: Mapping[str, Any] | RosMessage,
+        *,
+        priority: Priority = "data",
+        check_velocity: bool = True,
+        timeout: float | None = None,
+    ) -> None: ...
+
+    @_mirrors
+    def publish(
+        self,
+        topic: str,
+        schema: str | RosMessage,
+        data: Mapping[str, Any] | RosMessage | None = None,
         *,
         priority: Priority = "data",
         check_velocity: bool = True,
@@ -418,9 +445,27 @@ class SyncClient:
         self._call(self._client.unadvertise, topic, timeout=timeout, what="unadvertise")
 
     # -- services and parameters -------------------------------------------
+    @overload
+    def call_service(
+        self, name: str, request: RosRequest[_R], *, timeout: float | None = None
+    ) -> _R: ...
+
+    @overload
+    def call_service(
+        self,
+        name: str,
+        request: Mapping[str, Any] | RosMessage | None = None,
+        *,
+        timeout: float | None = None,
+    ) -> Any: ...
+
     @_mirrors
     def call_service(
-        self, name: str, request: Mapping[str, Any] | None = None, *, timeout: float | None = None
+        self,
+        name: str,
+        request: Mapping[str, Any] | RosMessage | None = None,
+        *,
+        timeout: float | None = None,
     ) -> Any:
         """:meth:`Client.call_service`, blocking; ``timeout`` is the call's
         own (``ServiceTimeout``, default ``options.service_timeout``)."""
@@ -498,10 +543,11 @@ class SyncClient:
         )
 
     # -- subscriptions and actions -------------------------------------------
-    @_mirrors
+    @overload
     def subscribe(
         self,
         topic: str,
+        type: type[_M],
         *,
         max_hz: float | None = None,
         adaptive: bool = True,
@@ -512,7 +558,41 @@ class SyncClient:
         decode: bool = True,
         save_bandwidth: SaveBandwidth = False,
         timeout: float | None = None,
-    ) -> SyncSubscription:
+    ) -> SyncSubscription[_M]: ...
+
+    @overload
+    def subscribe(
+        self,
+        topic: str,
+        type: str | None = None,
+        *,
+        max_hz: float | None = None,
+        adaptive: bool = True,
+        dispatch: Dispatch = "all",
+        schema: str | None = None,
+        buffer: int | None = None,
+        compression: Compression | None = None,
+        decode: bool = True,
+        save_bandwidth: SaveBandwidth = False,
+        timeout: float | None = None,
+    ) -> SyncSubscription[Any]: ...
+
+    @_mirrors
+    def subscribe(
+        self,
+        topic: str,
+        type: type[RosMessage] | str | None = None,
+        *,
+        max_hz: float | None = None,
+        adaptive: bool = True,
+        dispatch: Dispatch = "all",
+        schema: str | None = None,
+        buffer: int | None = None,
+        compression: Compression | None = None,
+        decode: bool = True,
+        save_bandwidth: SaveBandwidth = False,
+        timeout: float | None = None,
+    ) -> SyncSubscription[Any]:
         """:meth:`Client.subscribe`, as a (plain) context manager yielding a
         :class:`SyncSubscription`: ``for msg in sub`` or ``sub.get()``.
         ``timeout`` is the default wait for each message (None: until one
@@ -526,10 +606,11 @@ class SyncClient:
         _check_timeout(timeout)
         client = self._client
 
-        def make() -> AbstractAsyncContextManager[Subscription]:
+        def make() -> AbstractAsyncContextManager[Subscription[Any]]:
             # in the loop: a subscription's throttle belongs to the loop's lag monitor
             return client.subscribe(
                 topic,
+                type,
                 max_hz=max_hz,
                 adaptive=adaptive,
                 dispatch=dispatch,
@@ -602,7 +683,7 @@ class _SyncBlock(Generic[T]):
         return self._parent.worker.run_bounded(fn, (), timeout, what)
 
 
-class SyncSubscription(_SyncBlock[Subscription]):
+class SyncSubscription(_SyncBlock[Subscription[DataT]]):
     """A subscription of a :class:`SyncClient`: ``for msg in sub`` blocks
     for each :class:`~ros_mobile_bridge.Message`; :meth:`get` takes one with
     a timeout. Iteration ends when the subscription or the client closes;
@@ -611,7 +692,7 @@ class SyncSubscription(_SyncBlock[Subscription]):
     _how_to_enter = "enter the subscription first: with robot.subscribe(...) as sub"
 
     def __init__(
-        self, held: Held[Subscription], parent: Parent, topic: str, timeout: float | None
+        self, held: Held[Subscription[DataT]], parent: Parent, topic: str, timeout: float | None
     ) -> None:
         super().__init__(held, parent)
         self.topic = topic
@@ -624,7 +705,7 @@ class SyncSubscription(_SyncBlock[Subscription]):
     def __repr__(self) -> str:
         return f"<SyncSubscription {self.topic}>"
 
-    def get(self, timeout: float | None = None) -> Message:
+    def get(self, timeout: float | None = None) -> Message[DataT]:
         """The next message. ``timeout`` (default: the one given to
         ``subscribe``) bounds the wait: ``TimeoutError`` when no message came
         (nothing is lost; call again); with neither, it waits until a
@@ -635,7 +716,7 @@ class SyncSubscription(_SyncBlock[Subscription]):
         except StopAsyncIteration:
             raise NotConnected(f"the subscription to {self.topic} has ended") from None
 
-    def get_batch(self, max_size: int = 256, timeout: float | None = None) -> list[Message]:
+    def get_batch(self, max_size: int = 256, timeout: float | None = None) -> list[Message[DataT]]:
         """Every message already waiting (at least one, at most ``max_size``),
         in order, for one hand-over between threads instead of one per
         message: :meth:`Subscription.batches`' step. Waits, times out and
@@ -650,16 +731,16 @@ class SyncSubscription(_SyncBlock[Subscription]):
         except StopAsyncIteration:
             raise NotConnected(f"the subscription to {self.topic} has ended") from None
 
-    def __iter__(self) -> Iterator[Message]:
+    def __iter__(self) -> Iterator[Message[DataT]]:
         return self
 
-    def __next__(self) -> Message:
+    def __next__(self) -> Message[DataT]:
         try:
             return self._next(None)
         except StopAsyncIteration:
             raise StopIteration from None
 
-    def _next(self, timeout: float | None) -> Message:
+    def _next(self, timeout: float | None) -> Message[DataT]:
         sub = self._entered()
         limit = self._timeout if timeout is None else _check_timeout(timeout)
         if not self._held.open:
@@ -748,12 +829,13 @@ async def _sync_call(fn: Callable[..., T], args: tuple[Any, ...]) -> T:
 async def _publish(
     client: Client,
     topic: str,
-    schema: str,
-    data: Mapping[str, Any],
+    schema: str | RosMessage,
+    data: Mapping[str, Any] | RosMessage | None,
     priority: Priority,
     check_velocity: bool,
 ) -> None:
-    await client.publish(topic, schema, data, priority=priority, check_velocity=check_velocity)
+    publish: Any = client.publish  # the one implementation behind both forms
+    await publish(topic, schema, data, priority=priority, check_velocity=check_velocity)
 
 
 async def _advertise(client: Client, topic: str, schema: str, latch: bool) -> None:
@@ -769,7 +851,10 @@ async def _wait_for_service(client: Client, name: str, timeout: float | None) ->
 
 
 async def _call_service(
-    client: Client, name: str, request: Mapping[str, Any] | None, timeout: float | None
+    client: Client,
+    name: str,
+    request: Mapping[str, Any] | RosMessage | None,
+    timeout: float | None,
 ) -> Any:
     return await client.call_service(name, request, timeout=timeout)
 

@@ -28,6 +28,7 @@ from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
+from ..interfaces._base import RosMessage
 from ..transport import WebSocket
 from ..wire import foxglove as fx
 from ..wire._limits import truncate_for_log
@@ -671,12 +672,13 @@ class FoxgloveAdapter:
         svc = self._service_for(name)
         if svc is None:
             raise ServiceError(name, "the server does not advertise this service")
+        empty = not request.__ros_fields__ if isinstance(request, RosMessage) else not request
         try:
-            encoding, encode = self._request_codec(svc, not request)
+            encoding, encode = self._request_codec(svc, empty)
         except SchemaError as exc:
             raise ServiceError(name, f"request schema: {exc}") from exc
         if encode is None:
-            if request:
+            if not empty:
                 raise ServiceError(
                     name,
                     f"the server sent no request schema for {svc.type} and none is bundled; "

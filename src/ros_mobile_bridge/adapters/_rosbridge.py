@@ -44,9 +44,11 @@ from ._shared import (
     Advertisement,
     Advertisements,
     EventSource,
+    as_instance,
     check_fits,
     codec_registry,
     open_websocket,
+    plain,
     socket_frame,
 )
 
@@ -410,7 +412,14 @@ class RosbridgeAdapter:
             return  # still in flight from before a change of compression
         schema = wire.type or self._discovery.topic_types.get(topic, "")
         if kind == "parsed":
-            decode: Decoder | None = lambda _payload: message  # noqa: E731
+            try:
+                convert = self._decoders[(topic, kind)]
+            except KeyError:
+                convert = self._make_decoder(topic, kind, schema or None)
+            if convert is None:
+                decode: Decoder | None = lambda _payload: message  # noqa: E731
+            else:
+                decode = lambda _payload: convert(message)  # noqa: E731
         else:
             try:
                 decode = self._decoders[(topic, kind)]
@@ -431,11 +440,21 @@ class RosbridgeAdapter:
         )
 
     def _make_decoder(self, topic: str, kind: str, schema: str | None) -> Decoder | None:
+        """The decoder of ``topic``'s messages of ``kind`` (for ``"parsed"``,
+        the converter of the message the reader parsed; None: kept as it
+        is), kept until the topic's subscription changes. A JSON or CBOR
+        message of a type the registry defines becomes an instance of its
+        class; of any other type, it stays the dict it is."""
         decode: Decoder | None
-        if kind == "json":
-            decode = _decode_json
-        elif kind == "cbor":
-            decode = _decode_cbor
+        if kind in ("parsed", "json", "cbor"):
+            convert = self._converter(topic, schema)
+            if kind == "parsed":
+                decode = convert
+            elif convert is None:
+                decode = _decode_json if kind == "json" else _decode_cbor
+            else:
+                parse = _decode_json if kind == "json" else _decode_cbor
+                decode = lambda payload: convert(parse(payload))  # noqa: E731
         else:
             decode = None
             try:
@@ -452,6 +471,19 @@ class RosbridgeAdapter:
                     self._events.reject("schema_too_large", f"{topic}: {exc}")
         self._decoders[(topic, kind)] = decode
         return decode
+
+    def _converter(self, topic: str, schema: str | None) -> Decoder | None:
+        """The dict -> instance converter of ``schema`` (None when the
+        registry has no ROS definition of it, or it is too large)."""
+        if not schema:
+            return None
+        try:
+            return self.codecs.dict_converter(schema)
+        except SchemaError as exc:
+            self._log.warning("%s: messages stay dicts: %s", topic, truncate_for_log(str(exc)))
+            if isinstance(exc, SchemaTooLarge):
+                self._events.reject("schema_too_large", f"{topic}: {exc}")
+            return None
 
     async def _handle(self, event: rb.Event) -> None:
         if isinstance(event, rb.ServiceResponse):
@@ -569,7 +601,8 @@ class RosbridgeAdapter:
             await self._ws.send(self._engine.unsubscribe(topic, id=current.id))
         self._subs[topic] = want
         self._sub_topics[want.id] = topic
-        self._decoders.pop((topic, "cbor-raw"), None)
+        for kind in ("parsed", "json", "cbor", "cbor-raw"):
+            self._decoders.pop((topic, kind), None)
         if want.compression == "cbor-raw" and want.type:
             await self._prepare_decoder(topic, want.type)
         await self._send_subscribe(topic, want)
@@ -678,13 +711,19 @@ class RosbridgeAdapter:
 
     # -- services ------------------------------------------------------------------
     async def call_service(self, name: str, request: Any, timeout: float) -> Any:
-        args = dict(request) if request is not None else {}
+        args = plain(request) if request is not None else {}
         service_type = self._discovery.service_types.get(name)
-        if service_type:
-            request_type = CodecRegistry.service_type_names(service_type)[0]
-            await self._definitions.fetch_part(request_type)  # once per type and connection
-            check_fits(self.codecs, request_type, args)
-        return await self._calls.call(name, args, timeout)
+        if not service_type:
+            return await self._calls.call(name, args, timeout)
+        request_type, response_type = CodecRegistry.service_type_names(service_type)
+        await self._definitions.fetch_part(request_type)  # once per type and connection
+        check_fits(self.codecs, request_type, args)
+        values = await self._calls.call(name, args, timeout)
+        await self._definitions.fetch_part(response_type)
+        try:
+            return as_instance(self.codecs, response_type, values)
+        except DecodeError as exc:
+            raise ServiceError(name, f"the response does not decode: {exc}") from None
 
     # -- lifecycle -------------------------------------------------------------------
     async def send(self, message: WireMessage) -> None:

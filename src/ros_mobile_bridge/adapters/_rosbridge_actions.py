@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from .._errors import ActionGoalError, ServiceError
+from .._errors import ActionGoalError, DecodeError, ServiceError
 from ..codec import CodecRegistry
 from ..transport import WebSocket
 from ..wire import rosbridge as rb
@@ -16,7 +16,7 @@ from ._rosbridge_calls import RosbridgeCalls
 from ._rosbridge_definitions import RosbridgeDefinitions
 from ._rosbridge_discovery import names_in
 from ._seam import GoalEvents
-from ._shared import check_fits
+from ._shared import as_instance, check_fits, plain
 
 __all__ = ["RosbridgeActions"]
 
@@ -41,7 +41,8 @@ class RosbridgeActions:
         self._definitions = definitions
         self._codecs = codecs
         self._log = log
-        self._goals: dict[str, tuple[str, GoalEvents]] = {}  # goal id -> (action, events)
+        # goal id -> (action, the action's type as pkg/action/Name, events)
+        self._goals: dict[str, tuple[str, str, GoalEvents]] = {}
         calls.count_also(self._goals)
 
     async def send_action_goal(
@@ -57,13 +58,15 @@ class RosbridgeActions:
             if action not in servers:
                 raise ActionGoalError(action, "no action server offers it")
         parts = action_type.split("/")
-        goal_type = f"{parts[0]}/action/{parts[-1]}_Goal"
-        await self._definitions.fetch_part(goal_type)  # once per type and connection
-        check_fits(self._codecs, goal_type, goal)
+        base = f"{parts[0]}/action/{parts[-1]}"
+        goal = plain(goal)
+        for part in ("_Goal", "_Result", "_Feedback"):  # once per type and connection
+            await self._definitions.fetch_part(base + part)
+        check_fits(self._codecs, f"{base}_Goal", goal)
         self._calls.check_pending(action, ActionGoalError)
         goal_id = self._calls.next_id(f"goal:{action}")
         frame = self._engine.send_action_goal(action, action_type, goal, id=goal_id)
-        self._goals[goal_id] = (action, events)
+        self._goals[goal_id] = (action, base, events)
         try:
             await self._ws.send(frame)
         except BaseException:
@@ -78,13 +81,25 @@ class RosbridgeActions:
         """A feedback message from the reader: to its goal, if still ours."""
         entry = self._goals.get(event.id or "")
         if entry is not None:
-            entry[1].on_feedback(event.values)
+            _action, base, events = entry
+            try:
+                feedback = as_instance(self._codecs, f"{base}_Feedback", event.values)
+            except DecodeError as exc:
+                self._log.warning("%s: a feedback message that does not decode: %s", _action, exc)
+                return
+            events.on_feedback(feedback)
 
     def on_result(self, event: rb.ActionResult) -> None:
         """A result from the reader: the goal ends."""
         entry = self._goals.pop(event.id or "", None)
         if entry is not None:
-            entry[1].on_result(event.status, event.values, event.result)
+            _action, base, events = entry
+            try:
+                values = as_instance(self._codecs, f"{base}_Result", event.values)
+            except DecodeError as exc:
+                events.on_failed(f"the result does not decode: {exc}")
+                return
+            events.on_result(event.status, values, event.result)
 
     def on_error_status(self, key: str, message: str) -> bool:
         """An error status with id ``key``: the bridge refused that goal
@@ -92,12 +107,12 @@ class RosbridgeActions:
         entry = self._goals.pop(key, None)
         if entry is None:
             return False
-        entry[1].on_failed(message)
+        entry[2].on_failed(message)
         return True
 
     def fail_all(self) -> None:
         """The connection is lost: every goal fails as ``"disconnected"``."""
         goals = list(self._goals.values())
         self._goals.clear()  # (in place: the calls count this dict)
-        for _action, events in goals:
+        for _action, _base, events in goals:
             events.on_failed("disconnected")

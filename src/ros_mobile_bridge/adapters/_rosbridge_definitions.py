@@ -64,7 +64,8 @@ class RosbridgeDefinitions:
         return self._codecs.resolves(schema)
 
     async def fetch_part(self, schema: str) -> None:
-        """Fetch the definition of a request or goal type ``schema`` once per
+        """Fetch the definition of a message, request, response, goal,
+        result or feedback type ``schema`` once per
         connection, unless it is known (quietly: a bridge without it only
         means the bridge checks what is sent)."""
         if schema not in self._none and not self._codecs.has_schema(schema):
@@ -74,11 +75,20 @@ class RosbridgeDefinitions:
 def _details_request(schema: str) -> tuple[str, dict[str, str]]:
     """Which ``/rosapi`` service describes ``schema``, and its request."""
     parts = schema.split("/")
-    if len(parts) == 3 and parts[1] == "action" and parts[2].endswith("_Goal"):
-        return "/rosapi/action_goal_details", {"type": schema.removesuffix("_Goal")}
-    if len(parts) == 3 and parts[1] == "srv" and parts[2].endswith("_Request"):
-        return "/rosapi/service_request_details", {"type": schema.removesuffix("_Request")}
+    if len(parts) == 3:
+        for kind, suffix, service in _DERIVED:
+            if parts[1] == kind and parts[2].endswith(suffix):
+                return service, {"type": schema.removesuffix(suffix)}
     return "/rosapi/message_details", {"type": schema}
+
+
+_DERIVED = (
+    ("action", "_Goal", "/rosapi/action_goal_details"),
+    ("action", "_Result", "/rosapi/action_result_details"),
+    ("action", "_Feedback", "/rosapi/action_feedback_details"),
+    ("srv", "_Request", "/rosapi/service_request_details"),
+    ("srv", "_Response", "/rosapi/service_response_details"),
+)
 
 
 def typedefs_to_msg(schema: str, answer: Any) -> str:

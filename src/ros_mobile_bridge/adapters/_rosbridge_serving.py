@@ -12,13 +12,14 @@ from typing import Any, Final
 
 import anyio
 
-from .._errors import RosBridgeError, SchemaError, ServiceError
+from .._errors import DecodeError, RosBridgeError, SchemaError, ServiceError
 from ..codec import CodecRegistry, same_type_name
 from ..transport import WebSocket
 from ..wire import rosbridge as rb
 from ..wire._limits import truncate_for_log
 from ._rosbridge_calls import _INTERNAL_TIMEOUT, RosbridgeCalls
 from ._seam import ServiceHandler
+from ._shared import as_instance
 
 
 def _refusal(name: str, service_type: str, text: str) -> RosBridgeError:
@@ -126,7 +127,15 @@ class RosbridgeServing:
                 event.service, event.id, "this client does not serve it", False
             )
         else:
-            await served.handler.on_service_request(self, event.id, event.args)
+            request_type = CodecRegistry.service_type_names(served.type)[0]
+            try:
+                args = as_instance(self._codecs, request_type, event.args)
+            except DecodeError as exc:
+                await self.respond_service(
+                    event.service, event.id, f"the request does not decode: {exc}", False
+                )
+                return
+            await served.handler.on_service_request(self, event.id, args)
 
     async def unadvertise_service(self, name: str) -> None:
         served = self._served.pop(name, None)

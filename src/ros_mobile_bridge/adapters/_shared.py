@@ -15,6 +15,7 @@ from .._options import HTTPX_MISSING, ClientOptions
 from ..codec import CodecRegistry, same_type_name
 from ..codec._workspace import interface_paths_for
 from ..flow import TopicMessage, WireMessage
+from ..interfaces._base import RosMessage
 from ..transport import WebSocket, connect_websocket
 from ._seam import Event, EventSink, Rejected
 
@@ -22,9 +23,11 @@ __all__ = [
     "Advertisement",
     "Advertisements",
     "EventSource",
+    "as_instance",
     "check_fits",
     "check_pending",
     "open_websocket",
+    "plain",
     "socket_frame",
 ]
 
@@ -222,6 +225,34 @@ def check_fits(codecs: CodecRegistry, type_name: str, data: Mapping[str, Any]) -
     the transports that encode here."""
     if codecs.has_schema(type_name):
         codecs.encoder(type_name, "cdr")(data)
+
+
+def plain(value: Any) -> Any:
+    """``value`` as the plain data a JSON bridge takes: a message instance
+    becomes its dict (:meth:`~ros_mobile_bridge.interfaces.RosMessage.to_dict`),
+    numpy arrays (in it, or given) lists, mappings and lists new ones;
+    anything else is returned as it is."""
+    if isinstance(value, RosMessage):
+        value = value.to_dict()
+    if isinstance(value, Mapping):
+        return {k: plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [plain(v) for v in value]
+    tolist = getattr(value, "tolist", None)
+    if tolist is not None and not isinstance(value, str | bytes | int | float | bool):
+        return tolist()
+    return value
+
+
+def as_instance(codecs: CodecRegistry, type_name: str | None, values: Any) -> Any:
+    """A JSON bridge's message ``values`` (nested dicts) as an instance of
+    ``type_name``'s class where the registry has its ROS definition, else
+    ``values`` as they are. Raises :class:`~ros_mobile_bridge.DecodeError`
+    naming the field when they do not fit the definition."""
+    if not type_name or not isinstance(values, Mapping):
+        return values
+    convert = codecs.dict_converter(type_name)
+    return values if convert is None else convert(values)
 
 
 def check_pending(

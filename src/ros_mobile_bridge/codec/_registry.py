@@ -15,8 +15,11 @@ import numpy as np
 from rosbags.typesys.store import Typestore
 
 from .._errors import DecodeError, MessageError, SchemaError
+from ..interfaces._base import RosMessage
 from ._bundled import bundled_definition, bundled_interface
+from ._classes import class_for
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
+from ._dict_classes import build_dict_converter
 from ._flat import build_flat_decoder
 from ._lru import LruCache
 from ._model import DescribedTypes, FieldDef, MsgDef
@@ -36,7 +39,7 @@ from ._workspace import InterfacePaths
 __all__ = ["CodecRegistry", "SchemaTooLarge"]
 
 Decoder = Callable[[memoryview], Any]
-Encoder = Callable[[Mapping[str, Any]], bytes]
+Encoder = Callable[[Mapping[str, Any] | RosMessage], bytes]
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,10 +209,13 @@ def _make_cdr_encoder(typename: str, store: Typestore, build: Builder) -> Encode
     scratch_lock = threading.Lock()
     scratch: list[np.ndarray[Any, np.dtype[np.uint8]]] = [np.zeros(0, np.uint8)]
 
-    def encode(data: Mapping[str, Any]) -> bytes:
-        """Encode a (partial) mapping as little-endian CDR with the 4-byte
-        encapsulation header. Raises :class:`MessageError` naming the field for
-        an unknown field or a value of the wrong type."""
+    def encode(data: Mapping[str, Any] | RosMessage) -> bytes:
+        """Encode a message instance or a (partial) mapping as little-endian
+        CDR with the 4-byte encapsulation header. Raises
+        :class:`MessageError` naming the field for an unknown field or a
+        value of the wrong type."""
+        if isinstance(data, RosMessage):
+            data = data.to_dict()
         try:
             message = build(data)
         except Invalid as exc:
@@ -245,6 +251,18 @@ def _make_cdr_encoder(typename: str, store: Typestore, build: Builder) -> Encode
 
 _MSG_SEPARATOR_LINE: Final = "=" * 80 + "\n"
 _MSG_SEPARATOR: Final = re.compile(r"^={80}\n", re.MULTILINE)
+
+
+def _sub_closure(key: str, closure: Mapping[str, MsgDef]) -> dict[str, MsgDef]:
+    """The part of ``closure`` that ``key`` uses (``key`` included)."""
+    out = {key: closure[key]}
+    stack = [closure[key]]
+    while stack:
+        for ref in stack.pop().refs():
+            if ref not in out:
+                out[ref] = closure[ref]
+                stack.append(closure[ref])
+    return out
 
 
 def _builtin(name: str) -> MsgDef | None:
@@ -502,14 +520,17 @@ class CodecRegistry:
     def decoder(self, schema_name: str, message_encoding: str) -> Callable[[memoryview], Any]:
         """A function decoding one payload of type ``schema_name``.
 
-        ``"cdr"``: the payload (4-byte encapsulation header, little or big
-        endian, then the body) becomes a plain dict: nested messages are
-        dicts, arrays of messages lists, arrays of numeric primitives numpy
-        arrays (read-only views into the payload when it is little endian -
-        copy them to keep them beyond the payload buffer's lifetime),
-        ``string[]`` lists of ``str``, ``time``/``duration`` ``{"sec",
-        "nanosec"}`` dicts, ``byte`` values 0..255. ``"json"``: ``json.loads``
-        of the UTF-8 payload, for any (even unknown) ``schema_name``.
+        When the registry knows the type's ROS definition, a payload becomes
+        an instance of the type's message class (:meth:`message_class`):
+        nested messages are instances, arrays of messages lists of them,
+        arrays of numeric primitives numpy arrays (read-only views into the
+        payload when it is little-endian CDR - copy them to keep them beyond
+        the payload buffer's lifetime), ``string[]`` lists of ``str``,
+        ``byte`` values 0..255; ``.to_dict()`` gives the dict form.
+        ``"cdr"`` needs that definition. ``"json"``: ``json.loads`` of the
+        UTF-8 payload, made an instance of the class when the registry has a
+        ROS definition of ``schema_name`` (every field must be present), a
+        plain dict otherwise (a JSON Schema, an unknown type).
 
         The returned function raises :class:`DecodeError` (and nothing else)
         for a payload that does not decode. ``decoder`` itself raises
@@ -519,24 +540,94 @@ class CodecRegistry:
         """
         encoding = _encoding(message_encoding)
         if encoding == "json":
-            return _json_decode
+            from_dict = self.dict_converter(schema_name)
+            if from_dict is None:
+                return _json_decode
+            return lambda payload: from_dict(_json_decode(payload))
         if encoding != "cdr":
             raise _unsupported(message_encoding, schema_name)
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
-            shared_key = ("decode", key, frozenset(self._closure(key, msgdef).items()))
+            closure = self._closure(key, msgdef)
+            shared_key = ("decode", key, frozenset(closure.items()))
             shared = _SHARED.get(shared_key)
             if shared is not None:
                 return cast(Decoder, shared)
-            gen = self._prepare(key, msgdef)
-            decode = gen.decoders.get(key)
-            if decode is None:
-                conv = build_converter(key, gen.defs, gen.converters)
-                decode = _make_cdr_decoder(key, gen.store, conv)
-                decode = build_flat_decoder(key, gen.defs, decode) or decode
-                gen.decoders[key] = decode
+            to_dict = self._dict_decoder(key, msgdef)
+            convert = build_dict_converter(key, closure, self._classes(closure))
+
+            def decode(payload: memoryview) -> Any:
+                return convert(to_dict(payload))
+
             _SHARED.put(shared_key, decode)
             return decode
+
+    def dict_decoder(self, schema_name: str) -> Callable[[memoryview], dict[str, Any]]:
+        """A function decoding one CDR payload of type ``schema_name`` into
+        a plain dict (what :meth:`RosMessage.to_dict` gives of the instance
+        :meth:`decoder`'s function makes), for code that reads fields by
+        name. Raises as :meth:`decoder` does."""
+        with self._lock:
+            key, msgdef = self._find_ros(schema_name)
+            return self._dict_decoder(key, msgdef)
+
+    def _dict_decoder(self, key: str, msgdef: MsgDef) -> Decoder:
+        shared_key = ("decode-dict", key, frozenset(self._closure(key, msgdef).items()))
+        shared = _SHARED.get(shared_key)
+        if shared is not None:
+            return cast(Decoder, shared)
+        gen = self._prepare(key, msgdef)
+        decode = gen.decoders.get(key)
+        if decode is None:
+            conv = build_converter(key, gen.defs, gen.converters)
+            decode = _make_cdr_decoder(key, gen.store, conv)
+            decode = build_flat_decoder(key, gen.defs, decode) or decode
+            gen.decoders[key] = decode
+        _SHARED.put(shared_key, decode)
+        return decode
+
+    def dict_converter(self, schema_name: str) -> Callable[[Any], Any] | None:
+        """A function turning a decoded mapping of type ``schema_name`` (a
+        JSON bridge's message: nested dicts and lists, ``uint8[]`` as a list
+        or base64 text) into an instance of its class; None when the registry
+        has no ROS definition of it (a JSON Schema, an unknown type), whose
+        messages stay dicts. The function raises :class:`DecodeError`
+        naming the field that does not fit."""
+        with self._lock:
+            try:
+                found = self._find(schema_name, ros_only=False)
+            except (TypeError, ValueError):
+                return None
+            if found is None or isinstance(found[1], _JsonSchema):
+                return None
+            key, msgdef = found[0], found[1]
+            closure = self._closure(key, msgdef)
+            shared_key = ("from-dict", key, frozenset(closure.items()))
+            shared = _SHARED.get(shared_key)
+            if shared is None:
+                shared = build_dict_converter(key, closure, self._classes(closure))
+                _SHARED.put(shared_key, shared)
+            return cast(Callable[[Any], Any], shared)
+
+    def message_class(self, schema_name: str) -> type[RosMessage]:
+        """The message class of ``schema_name`` as this registry defines it:
+        the bundled class (``ros_mobile_bridge.interfaces...``) when the
+        definitions are the bundled ones, else a class made from the
+        definitions this registry holds (the server's, the robot's, a
+        workspace's, a registered one), one per distinct definition in the
+        process. :class:`SchemaError` when it has no ROS definition."""
+        with self._lock:
+            key, msgdef = self._find_ros(schema_name)
+            closure = self._closure(key, msgdef)
+        return class_for(key, closure)
+
+    def _classes(self, closure: Mapping[str, MsgDef]) -> Callable[[str], type[RosMessage]]:
+        """The class of each type of ``closure`` (a closure itself)."""
+
+        def classes(name: str) -> type[RosMessage]:
+            return class_for(name, _sub_closure(name, closure))
+
+        return classes
 
     def ros2msg_text(self, schema_name: str) -> str:
         """The ``.msg`` text of ``schema_name`` with the definition of every
@@ -606,8 +697,10 @@ class CodecRegistry:
 
     def encoder(
         self, schema_name: str, message_encoding: str
-    ) -> Callable[[Mapping[str, Any]], bytes]:
-        """A function encoding one message of type ``schema_name``.
+    ) -> Callable[[Mapping[str, Any] | RosMessage], bytes]:
+        """A function encoding one message of type ``schema_name``: an
+        instance of a message class (the type's, or any with the same
+        fields), or a mapping.
 
         ``"cdr"``: a (partial) mapping -> little-endian CDR bytes with the
         4-byte header. Missing fields are filled from the template (so
@@ -656,8 +749,11 @@ class CodecRegistry:
                     strict = True
         typename = schema_name
 
-        def encode(data: Mapping[str, Any]) -> bytes:
-            """Encode a (partial) mapping as compact JSON (UTF-8 bytes)."""
+        def encode(data: Mapping[str, Any] | RosMessage) -> bytes:
+            """Encode a message instance or a (partial) mapping as compact
+            JSON (UTF-8 bytes)."""
+            if isinstance(data, RosMessage):
+                data = data.to_dict()
             try:
                 merged = _merge(template, data, strict, "") if template is not None else data
             except Invalid as exc:

@@ -27,14 +27,14 @@ import logging
 import time
 from collections import deque
 from collections.abc import Awaitable, Callable
-from typing import Final
+from typing import Any, Final, Generic
 
 import anyio
 import anyio.lowlevel
 
 from .._errors import DecodeError, NotConnected
 from .._loop._wakeup import Wakeup, new_wakeup
-from .._types import Dispatch, Message, SubscriptionState, SubscriptionStats
+from .._types import DataT, Dispatch, Message, SubscriptionState, SubscriptionStats
 from ._breaker import CircuitBreaker
 from ._frame import RawFrame, frame_message
 from ._rate_window import Clock, RateWindow
@@ -346,13 +346,18 @@ class FrameQueue:
                     self._untimed = False
 
 
-class Subscription:
+class Subscription(Generic[DataT]):
     """A live subscription: ``async for msg in sub`` yields :class:`Message`.
 
     Obtained from ``Client.subscribe(...)``, an async context manager;
     leaving its block unsubscribes. Iteration ends (after the frames already
     queued) when the subscription or the client closes, and raises
-    ``NotConnected`` when the connection was lost."""
+    ``NotConnected`` when the connection was lost.
+
+    ``Subscription[Odometry]`` (what ``subscribe(topic, Odometry)`` gives)
+    yields ``Message[Odometry]``: a message that decodes to anything but an
+    ``Odometry`` (the robot's definition of the type differs from the
+    class's) is delivered raw with a ``decode_error`` saying so."""
 
     def __init__(
         self,
@@ -363,10 +368,12 @@ class Subscription:
         throttle: AdaptiveThrottle | None = None,
         breaker: CircuitBreaker | None = None,
         decode: bool = True,
+        want: type | None = None,
     ) -> None:
         self.topic = topic
         self._queue = queue
         self._decoding = decode
+        self._want = want
         self._throttle = throttle
         self.breaker: CircuitBreaker = breaker if breaker is not None else CircuitBreaker()
         """This subscription's circuit breaker: ``state``, ``next_retry_at``
@@ -412,10 +419,10 @@ class Subscription:
             dropped_replay=q.dropped_replay,
         )
 
-    def __aiter__(self) -> Subscription:
+    def __aiter__(self) -> Subscription[DataT]:
         return self
 
-    def batches(self, max_size: int = 256) -> Batches:
+    def batches(self, max_size: int = 256) -> Batches[DataT]:
         """Iterate over lists of messages instead of one message at a time:
         ``async for batch in sub.batches(): for msg in batch: ...``.
 
@@ -437,7 +444,7 @@ class Subscription:
             raise ValueError(f"max_size must be at least 1, got {max_size}")
         return Batches(self._next_batch, max_size)
 
-    async def _next_batch(self, max_size: int) -> list[Message]:
+    async def _next_batch(self, max_size: int) -> list[Message[DataT]]:
         queue = self._queue
         # a pending cancellation is taken before any frame leaves the queue;
         # when frames are waiting, the loop also gets one turn per batch (the
@@ -449,10 +456,11 @@ class Subscription:
         frame = queue.take() or await self._wait()
         if not self._decoding:
             return self._raw_batch(frame, max_size)
-        batch: list[Message] = []
+        batch: list[Message[DataT]] = []
         append = batch.append
         take = queue.take
         undecoded = self._undecoded
+        want = self._want
         delivered = 0
         try:
             # each frame decoded here, as ``__anext__`` does: one call less
@@ -469,7 +477,10 @@ class Subscription:
                     except Exception as exc:  # a codec bug must not end the subscription
                         append(undecoded(frame, exc))
                     else:
-                        append(frame_message(frame, data, size, None))
+                        if want is not None and data.__class__ is not want:
+                            append(self._unwanted(frame, data))
+                        else:
+                            append(frame_message(frame, data, size, None))
                 if delivered >= max_size or size >= _LARGE_PAYLOAD:
                     break
                 more = take()
@@ -480,7 +491,7 @@ class Subscription:
             queue.delivered += delivered
         return batch
 
-    def _raw_batch(self, frame: RawFrame, max_size: int) -> list[Message]:
+    def _raw_batch(self, frame: RawFrame, max_size: int) -> list[Message[DataT]]:
         """:meth:`_next_batch`'s batch from ``frame`` on, ``decode=False``."""
         raw = self._raw
         batch = [raw(frame)]
@@ -494,7 +505,7 @@ class Subscription:
             size = more.payload.nbytes
         return batch
 
-    async def __anext__(self) -> Message:
+    async def __anext__(self) -> Message[DataT]:
         # A pending cancellation is taken before a frame leaves the queue, so
         # a cancelled ``__anext__`` raises and loses nothing. While frames are
         # waiting, the consumer yields to the loop (the reader and other tasks
@@ -534,9 +545,27 @@ class Subscription:
             data = decode(payload)
         except Exception as exc:  # a codec bug must not end the subscription
             return self._undecoded(frame, exc)
+        if self._want is not None and data.__class__ is not self._want:
+            return self._unwanted(frame, data)
         return frame_message(frame, data, size, None)
 
-    def _undecoded(self, frame: RawFrame, exc: Exception | None) -> Message:
+    def _unwanted(self, frame: RawFrame, data: Any) -> Message[DataT]:
+        """A frame that decoded to something other than the class this
+        subscription names: delivered raw, with the reason."""
+        want: Any = self._want
+        got = getattr(data, "__ros_hash__", None)
+        if got is None:
+            reason = f"not a {want.__ros_type__} but a {type(data).__name__}"
+        else:
+            reason = (
+                f"the robot's {frame.schema_name} has another definition than "
+                f"{want.__qualname__} ({got} != {want.__ros_hash__})"
+            )
+        return self._undecoded(
+            frame, DecodeError(f"cannot decode as {want.__qualname__}: {reason}")
+        )
+
+    def _undecoded(self, frame: RawFrame, exc: Exception | None) -> Message[DataT]:
         """A delivered frame whose payload did not decode (``exc``; None: no
         decoder): logged, counted, delivered raw."""
         payload = frame.payload
@@ -556,7 +585,7 @@ class Subscription:
         )
         return frame_message(frame, payload, payload.nbytes, error)
 
-    def _raw(self, frame: RawFrame) -> Message:
+    def _raw(self, frame: RawFrame) -> Message[DataT]:
         """A subscription opened with ``decode=False``: the payload as it
         came (``memoryview``), the codec never called."""
         self._queue.delivered += 1
@@ -568,20 +597,20 @@ class Subscription:
         self._queue.close()
 
 
-class Batches:
+class Batches(Generic[DataT]):
     """The async iterator :meth:`Subscription.batches` returns: each step is a
     non-empty ``list`` of :class:`Message`."""
 
     __slots__ = ("_max_size", "_next")
 
     def __init__(
-        self, next_batch: Callable[[int], Awaitable[list[Message]]], max_size: int
+        self, next_batch: Callable[[int], Awaitable[list[Message[DataT]]]], max_size: int
     ) -> None:
         self._next = next_batch
         self._max_size = max_size
 
-    def __aiter__(self) -> Batches:
+    def __aiter__(self) -> Batches[DataT]:
         return self
 
-    async def __anext__(self) -> list[Message]:
+    async def __anext__(self) -> list[Message[DataT]]:
         return await self._next(self._max_size)

@@ -22,7 +22,7 @@ from __future__ import annotations
 import importlib
 import sys
 from collections.abc import Callable, Iterable, Mapping
-from typing import TYPE_CHECKING, Any, ClassVar, Final, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Final, Generic, TypeVar
 
 from .._errors import MessageError, SchemaError
 
@@ -32,7 +32,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "RosAction",
+    "RosGoal",
     "RosMessage",
+    "RosRequest",
     "RosService",
     "lazy_kinds",
     "lazy_types",
@@ -40,6 +42,9 @@ __all__ = [
 ]
 
 _M = TypeVar("_M", bound="RosMessage")
+_Response = TypeVar("_Response", bound="RosMessage")
+_Result = TypeVar("_Result", bound="RosMessage")
+_Feedback = TypeVar("_Feedback", bound="RosMessage")
 
 # What a field holds (FieldInfo.kind).
 SCALAR: Final = 0
@@ -364,6 +369,24 @@ def _nested_from(type_name: str, path: str, value: Any, sub: type[RosMessage]) -
     except MessageError as exc:
         field = f"{path}.{exc.field}" if exc.field else path
         raise MessageError(type_name, exc.reason, field) from None
+
+
+class RosRequest(RosMessage, Generic[_Response]):
+    """The base of a service's ``Request`` class: ``RosRequest[Response]``
+    tells type checkers which class answers it, so
+    ``call_service(name, AddTwoInts.Request(a=1, b=2))`` is known to return
+    an ``AddTwoInts.Response``. Otherwise a :class:`RosMessage`."""
+
+    __slots__ = ()
+
+
+class RosGoal(RosMessage, Generic[_Result, _Feedback]):
+    """The base of an action's ``Goal`` class: ``RosGoal[Result, Feedback]``
+    tells type checkers what a goal's result and feedback are, so a goal
+    sent as ``Fibonacci.Goal(order=5)`` has a ``Fibonacci.Result`` and
+    ``Fibonacci.Feedback``. Otherwise a :class:`RosMessage`."""
+
+    __slots__ = ()
 
 
 class RosService:

@@ -1,0 +1,149 @@
+"""Decoded mappings -> message class instances, generated per type.
+
+A JSON bridge (rosbridge, a Foxglove ``json`` channel of a ROS type) hands
+over a message as nested dicts and lists; :func:`build_dict_converter` makes,
+for one type and the definitions it uses, a function that turns such a
+mapping into an instance of the type's class, built as a decoder builds one
+(``cls.__new__`` and a store per slot; no constructor, no defaults): every
+field must be present. Values are taken as the bridge wrote them, converted
+only where the class's form differs from JSON's: a ``float`` field given an
+``int`` (``0`` for ``0.0``) is made a float, a numeric or bool array becomes a
+numpy array of the field's dtype (from a list, or from the base64 text
+rosbridge sends for ``uint8[]``/``byte[]``/``char[]``, or kept when it is
+one already), an array of strings a new list. A mapping that does not fit
+(a field missing, a value of the wrong shape) raises
+:class:`~ros_mobile_bridge.DecodeError` naming the type and the field."""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import keyword
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from .._errors import DecodeError
+from ..interfaces._base import _DTYPES, RosMessage
+from ._model import DUMMY_FIELD, SCALAR, FieldSpec, MsgDef
+
+__all__ = ["build_dict_converter"]
+
+_FLOATS = frozenset({"float32", "float64"})
+_INTS = frozenset(
+    {"byte", "char", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64"}
+)
+_STRINGS = frozenset({"string", "wstring"})
+
+
+def _array(value: Any, dtype: np.dtype[Any]) -> np.ndarray[Any, Any]:
+    """A numeric or bool array field's value as a numpy array of ``dtype``."""
+    if type(value) is np.ndarray:
+        return value if value.dtype == dtype else value.astype(dtype)
+    if isinstance(value, str):  # rosbridge: uint8[] / byte[] / char[] as base64
+        try:
+            raw = base64.b64decode(value, validate=True)
+        except (binascii.Error, ValueError) as exc:
+            raise ValueError(f"not base64: {exc}") from None
+        return np.frombuffer(raw, np.uint8).view(dtype)
+    if isinstance(value, bytes | bytearray | memoryview):
+        return np.frombuffer(value, np.uint8).view(dtype)
+    return np.array(value, dtype)
+
+
+def _strings(value: Any) -> list[str]:
+    if isinstance(value, str) or not isinstance(value, list | tuple):
+        raise TypeError(f"expected a list of strings, got {type(value).__name__}")
+    return list(value)
+
+
+class _Source:
+    """The generated module: one function per type of the closure."""
+
+    def __init__(self, defs: Mapping[str, MsgDef], classes: Callable[[str], type[RosMessage]]):
+        self.defs = defs
+        self.classes = classes
+        self.names: dict[str, str] = {}
+        self.lines: list[str] = []
+        self.env: dict[str, Any] = {
+            "new": object.__new__,
+            "float": float,
+            "int": int,
+            "bool": bool,
+            "str": str,
+            "setattr": setattr,
+            "_array": _array,
+            "_strings": _strings,
+        }
+
+    def function(self, key: str) -> str:
+        name = self.names.get(key)
+        if name is not None:
+            return name
+        index = len(self.names)
+        name = self.names[key] = f"conv_{index}"
+        self.env[f"C_{index}"] = self.classes(key)
+        body: list[str] = [f"def {name}(d):", f"    o = new(C_{index})"]
+        for spec in self.defs[key].fields:
+            if spec.name == DUMMY_FIELD:
+                continue
+            body.append("    " + self._store(spec, self._value(spec, f"d[{spec.name!r}]")))
+        body.append("    return o")
+        self.lines.extend(body)
+        self.lines.append("")
+        return name
+
+    def _store(self, spec: FieldSpec, value: str) -> str:
+        if keyword.iskeyword(spec.name):  # not an attribute name in source
+            return f"setattr(o, {spec.name!r}, {value})"
+        return f"o.{spec.name} = {value}"
+
+    def _value(self, spec: FieldSpec, item: str) -> str:
+        if spec.ref is not None:
+            sub = self.function(spec.ref)
+            if spec.cardinality == SCALAR:
+                return f"{sub}({item})"
+            return f"[{sub}(v) for v in {item}]"
+        base = spec.base
+        assert base is not None
+        if spec.cardinality != SCALAR:
+            if base in _STRINGS:
+                return f"_strings({item})"
+            dtype = _DTYPES.get(base)
+            if dtype is None:
+                raise DecodeError(f"no array form for {base}[]")
+            self.env[f"D_{dtype}"] = np.dtype(dtype)
+            return f"_array({item}, D_{dtype})"
+        if base in _FLOATS:
+            return f"float({item})"
+        if base in _INTS:
+            return f"int({item})"
+        if base == "bool":
+            return f"bool({item})"
+        return f"str({item})"
+
+
+def build_dict_converter(
+    key: str, defs: Mapping[str, MsgDef], classes: Callable[[str], type[RosMessage]]
+) -> Callable[[Any], RosMessage]:
+    """A function turning a decoded mapping of type ``key`` into an instance
+    of ``classes(key)``; ``defs`` holds ``key`` and every type it uses,
+    ``classes`` gives each one's class. The function raises
+    :class:`~ros_mobile_bridge.DecodeError` and nothing else."""
+    source = _Source(defs, classes)
+    top = source.function(key)
+    text = "\n".join(source.lines)
+    exec(compile(text, f"<dict converter of {key}>", "exec"), source.env)
+    convert: Callable[[Any], RosMessage] = source.env[top]
+
+    def to_instance(data: Any) -> RosMessage:
+        """``data`` (nested mappings and lists) as an instance of its class."""
+        try:
+            return convert(data)
+        except KeyError as exc:
+            raise DecodeError(f"cannot decode {key}: field {exc.args[0]!r} missing") from None
+        except Exception as exc:
+            raise DecodeError(f"cannot decode {key}: {type(exc).__name__}: {exc}") from None
+
+    return to_instance
