@@ -357,7 +357,9 @@ class ModuleWriter(ClassWriter):
             names += sorted(self.typing)
             lines.append(f"from typing import {', '.join(names)}")
             lines.append("")
-        lines += sorted(layout.face(pkg) for pkg in self.faces)
+        # ``import x`` before ``from x import y``, as isort orders them
+        faces = [layout.face(pkg) for pkg in self.faces]
+        lines += sorted(faces, key=lambda line: (not line.startswith("import "), line))
         lines.append(f"from {layout.base(3)} import {', '.join(sorted(bases | self.helpers))}")
         for path, imported in sorted(siblings, key=lambda x: natural(x[0])):
             lines += _import("", path, imported)
