@@ -67,8 +67,7 @@ def generated(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, 
     root = tmp_path_factory.mktemp("generate")
     src = write_workspace(root / "ws")
     out = root / "out"
-    paths = [f"--interface-path={src / p}" for p in PACKAGES]
-    result = rmb(*paths, "--out", str(out), "--json")
+    result = rmb("--interface-path", str(src), "--out", str(out), "--json")  # ws/src
     assert result.returncode == 0, result.stderr
     lines = [json.loads(line) for line in result.stdout.splitlines()]
     assert lines == [

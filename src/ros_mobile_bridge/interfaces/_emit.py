@@ -193,7 +193,9 @@ class ClassWriter:
     ``check_shadowing``, a field named like a name its class's annotations
     use is refused (for source that a type checker reads)."""
 
-    def __init__(self, hashes: Callable[[str], str | None], *, check_shadowing: bool = True):
+    def __init__(
+        self, hashes: Callable[[str], str | None], *, check_shadowing: bool = True
+    ) -> None:
         self.hashes = hashes
         self.check_shadowing = check_shadowing
         self.helpers: set[str] = set()
