@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from .._errors import SchemaError
-from ._emit import ClassWriter, Message, Namespace, docstring, location, module_stem, natural
+from ._emit import ClassWriter, Message, Namespace, location, module_stem, natural
 
 if TYPE_CHECKING:
     from ..codec._model import MsgDef
@@ -31,10 +31,10 @@ __all__ = [
     "BUNDLED_HEADER",
     "Layout",
     "Module",
+    "ModuleWriter",
     "build_modules",
     "check_acyclic",
     "doc_lines",
-    "docstring",
     "generate_from",
 ]
 
