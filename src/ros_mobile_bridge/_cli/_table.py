@@ -83,6 +83,11 @@ ENTRIES: tuple[Entry, ...] = (
         "print a YAML prototype of a message, or of a service's request / action's goal",
     ),
     Entry(
+        ("interface", "generate"),
+        "_generate",
+        "write typed Python classes for your own interface packages (--out DIR)",
+    ),
+    Entry(
         ("record",),
         "_record",
         "record topics to an MCAP file (every topic when none is named; Ctrl-C stops, "

@@ -45,7 +45,7 @@ import hashlib
 import json
 import threading
 import weakref
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeAlias
 
@@ -64,6 +64,8 @@ __all__ = [
     "PRIMITIVE_IDS",
     "UNBOUNDED_SEQUENCE_OFFSET",
     "TypeDesc",
+    "definitions_closure",
+    "definitions_hash",
     "desc_from_msgdef",
     "digest",
     "is_derived_composite",
@@ -337,6 +339,43 @@ def digest(top: TypeDesc, referenced: Iterable[TypeDesc]) -> str:
     }
     text = json.dumps(document, separators=(", ", ": "), sort_keys=False)
     return "RIHS01_" + hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def definitions_closure(type_name: str, defs: Mapping[str, MsgDef]) -> dict[str, MsgDef]:
+    """The definitions of the message type ``type_name`` and of every type
+    it uses, directly or not, from ``defs`` (by canonical name; other
+    entries are left out), ``type_name`` first, then in the order they are
+    first used. Raises :class:`SchemaError` naming a type that is missing."""
+    top = defs.get(type_name)
+    if top is None:
+        raise SchemaError(f"no definition of {type_name!r}")
+    closure = {type_name: top}
+    stack = [top]
+    while stack:
+        current = stack.pop(0)
+        for ref in current.refs():
+            if ref in closure:
+                continue
+            sub = defs.get(ref)
+            if sub is None:
+                raise SchemaError(
+                    f"{type_name!r} needs {ref!r} (used by {current.name!r}), which has no "
+                    "definition here"
+                )
+            closure[ref] = sub
+            stack.append(sub)
+    return closure
+
+
+def definitions_hash(type_name: str, defs: Mapping[str, MsgDef]) -> str:
+    """The RIHS01 hash of the message type ``type_name`` from ``defs``
+    alone (its definition and those of every type it uses, by canonical
+    name): what :func:`type_hash` gives from a registry holding these
+    definitions. Raises :class:`SchemaError` as :func:`definitions_closure`
+    does, and for a field type with no REP-2011 id."""
+    closure = definitions_closure(type_name, defs)
+    descs = [desc_from_msgdef(name, msgdef) for name, msgdef in closure.items()]
+    return digest(descs[0], descs)
 
 
 def _digest(name: str, closure: dict[str, TypeDesc]) -> str:

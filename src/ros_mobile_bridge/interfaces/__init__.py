@@ -19,7 +19,10 @@ holds only the base classes:
 :class:`RosMessage` (every message, and a service's ``Request`` and
 ``Response``, an action's ``Goal``, ``Result`` and ``Feedback``),
 :class:`RosService` and :class:`RosAction`. docs/message-classes.md
-describes them.
+describes them. The private ``_emit`` and ``_generate`` write the classes'
+source (for the script, and for ``rmb interface generate``, which writes
+them for a user's own packages); ``_runtime`` makes a class at run time
+from a definition learnt while running, from the same source.
 """
 
 from ._base import RosAction as RosAction

@@ -173,6 +173,9 @@ _PLANS: dict[type, _Plan] = {}
 def _plan(cls: type[RosMessage]) -> _Plan:
     plan = _PLANS.get(cls)
     if plan is None:
+        own = cls.__dict__.get(_OWN_PLAN)
+        if own is not None:  # a class made at run time keeps its own (see own_plan)
+            return own  # type: ignore[no-any-return]
         infos = [parse_field(name, type_) for name, type_ in cls.__ros_fields__]
         # the path rclpy's repr gives: the kind's face, not the class's own
         # module (geometry_msgs.msg._twist)
@@ -185,6 +188,20 @@ def _plan(cls: type[RosMessage]) -> _Plan:
         plan = _Plan(infos, f"{module}.{cls.__qualname__}")
         _PLANS[cls] = plan
     return plan
+
+
+_OWN_PLAN: Final = "_ros_plan_"
+
+
+def own_plan(cls: type[RosMessage], path: str, nested: Mapping[str, type[RosMessage]]) -> None:
+    """Give ``cls``, a class made at run time, its plan: ``path`` is what its
+    ``repr`` names it (``"my_msgs.msg.Status"``), ``nested`` its nested
+    message fields' classes by field name (they are not found by
+    :func:`message_class`). The plan is kept on the class, not in this
+    module's table, so that the class can be freed when nothing uses it."""
+    plan = _Plan([parse_field(name, type_) for name, type_ in cls.__ros_fields__], path)
+    plan.classes.update(nested)
+    setattr(cls, _OWN_PLAN, plan)
 
 
 def message_class(type_name: str) -> type[RosMessage]:
