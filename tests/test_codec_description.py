@@ -140,9 +140,13 @@ def test_described_definitions_round_trip_to_the_same_hash_and_codec(
     payload = fresh.encoder("rmbtest/msg/Outer", "cdr")(message)
     assert payload == nested_registry.encoder("rmbtest/msg/Outer", "cdr")(message)
     decoded = fresh.decoder("rmbtest/msg/Outer", "cdr")(memoryview(payload))
-    assert decoded["many"][0]["big"] == 5
-    assert list(decoded["many"][0]["small"]) == [1, -2]
-    assert decoded["short_name"] == "robot"
+    # a type learnt from a description decodes to a class made from it
+    assert type(decoded).__ros_type__ == "rmbtest/msg/Outer"
+    assert type(decoded).__ros_hash__ == description_hash(description)
+    assert decoded.many[0].big == 5
+    assert list(decoded.many[0].small) == [1, -2]
+    assert decoded.short_name == "robot"
+    assert fresh.message_class("rmbtest/msg/Outer") is type(decoded)
 
 
 def test_msg_sources_give_constants_and_the_schema_text(nested_registry: CodecRegistry) -> None:

@@ -46,6 +46,12 @@ DataT = TypeVar("DataT", default=Any)
 """What ``Message.data`` holds: the message class a subscription names
 (``subscribe(topic, Odometry)``), else ``Any``."""
 
+ResultT = TypeVar("ResultT", default=Any)
+"""An action goal's result: the action's ``Result`` class for a goal sent as
+an instance of its ``Goal`` class, else ``Any``."""
+FeedbackT = TypeVar("FeedbackT", default=Any)
+"""An action goal's feedback: the action's ``Feedback`` class, else ``Any``."""
+
 DEFAULT_PORTS: Mapping[str, int] = {"foxglove-ws": 8765, "rosbridge": 9090, "zenoh": 7447}
 """The port each protocol's bridge listens on unless told otherwise."""
 
@@ -203,9 +209,11 @@ class ConnectionStats:
 
 
 @dataclass(frozen=True, slots=True)
-class ActionOutcome:
+class ActionOutcome(Generic[ResultT]):
     """How an action goal ended: ``status`` is ``"succeeded"`` or
-    ``"canceled"``, ``result`` the action's result message (a dict)."""
+    ``"canceled"``, ``result`` the action's result message (an instance of
+    the action's ``Result`` class whenever the library knows the action's
+    definition, else a dict)."""
 
     status: Literal["succeeded", "canceled"]
-    result: Any
+    result: ResultT

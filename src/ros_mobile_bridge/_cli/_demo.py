@@ -18,6 +18,8 @@ import anyio
 
 from .. import _connect
 from .._options import ClientOptions
+from ..interfaces.nav_msgs.msg import Odometry
+from ..interfaces.sensor_msgs.msg import BatteryState
 from ._verb import Verb, run_signalled
 
 __all__ = ["VERBS"]
@@ -92,15 +94,13 @@ async def _drive_demo(url: str, seconds: float, out: Callable[[str], None]) -> N
 def _readout(state: Mapping[str, Any], rates: _Rates) -> str:
     odom = state.get("/odom")
     pose = "pose: waiting for /odom"
-    if isinstance(odom, Mapping):
-        p = odom["pose"]["pose"]
-        q = p["orientation"]
-        yaw = math.atan2(
-            2 * (q["w"] * q["z"] + q["x"] * q["y"]), 1 - 2 * (q["y"] ** 2 + q["z"] ** 2)
-        )
-        pose = f"pose x={p['position']['x']:+.2f} y={p['position']['y']:+.2f} yaw={math.degrees(yaw):+6.1f}deg"
+    if isinstance(odom, Odometry):
+        p = odom.pose.pose
+        q = p.orientation
+        yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y**2 + q.z**2))
+        pose = f"pose x={p.position.x:+.2f} y={p.position.y:+.2f} yaw={math.degrees(yaw):+6.1f}deg"
     battery = state.get("/battery")
-    batt = f"battery {battery['percentage'] * 100:.1f}%" if isinstance(battery, Mapping) else ""
+    batt = f"battery {battery.percentage * 100:.1f}%" if isinstance(battery, BatteryState) else ""
     return f"  {pose}  {batt}  | {rates.line()}"
 
 

@@ -11,6 +11,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from ..interfaces._base import RosMessage
+
 __all__ = [
     "UsageError",
     "check_fields",
@@ -44,7 +46,10 @@ def plain(
     ``truncate``: arrays and strings longer than that keep their first
     ``truncate`` items and end with ``'...'`` (as ``ros2 topic echo``'s
     ``--truncate-length``). ``no_arr`` / ``no_str``: array / string fields
-    become a ``'<array: N items>'`` / ``'<string: N chars>'`` placeholder."""
+    become a ``'<array: N items>'`` / ``'<string: N chars>'`` placeholder.
+    A message instance is taken as its dict (``to_dict()``)."""
+    if isinstance(value, RosMessage):
+        value = value.to_dict()
     if isinstance(value, Mapping):
         return {
             str(k): plain(v, truncate=truncate, no_arr=no_arr, no_str=no_str)
@@ -165,7 +170,7 @@ def parse_yaml_mapping(text: str, what: str) -> dict[str, Any]:
 def select_field(value: Any, path: str) -> Any:
     """The part of a message ``path`` names (``pose.pose.position.x``;
     a number indexes an array). :class:`UsageError` when it names nothing."""
-    current = value
+    current = value.to_dict() if isinstance(value, RosMessage) else value
     for part in path.split("."):
         if not isinstance(current, Mapping | list | tuple) and callable(
             getattr(current, "tolist", None)

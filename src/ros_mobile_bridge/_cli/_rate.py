@@ -25,6 +25,7 @@ from typing import Any, Final
 import anyio
 
 from .._types import Message, SubscriptionStats
+from ..interfaces._base import RosMessage
 from ._common import notice_if_missing, open_robot, out, warn
 from ._format import UsageError, json_line
 from ._verb import Verb
@@ -224,6 +225,12 @@ async def _bw(ns: argparse.Namespace) -> int:
 def header_stamp_ns(data: Any) -> int | None:
     """``header.stamp`` of a decoded message in nanoseconds, or None when it
     has none."""
+    if isinstance(data, RosMessage):
+        stamp = getattr(getattr(data, "header", None), "stamp", None)
+        sec, nanosec = getattr(stamp, "sec", None), getattr(stamp, "nanosec", None)
+        if not isinstance(sec, int) or not isinstance(nanosec, int):
+            return None
+        return sec * 1_000_000_000 + nanosec
     header = data.get("header") if isinstance(data, dict) else None
     stamp = header.get("stamp") if isinstance(header, dict) else None
     if not isinstance(stamp, dict):

@@ -7,12 +7,12 @@ implements."""
 from __future__ import annotations
 
 from collections.abc import AsyncIterator, Awaitable, Callable
-from typing import Any, Final, Literal
+from typing import Any, Final, Generic, Literal
 
 import anyio
 
 from .._errors import ActionGoalError
-from .._types import ActionOutcome, GoalState
+from .._types import ActionOutcome, FeedbackT, GoalState, ResultT
 from ..flow import Watchable, Watcher
 
 __all__ = ["ActionGoal"]
@@ -21,7 +21,7 @@ _STATUS: Final = {4: "succeeded", 5: "canceled", 6: "aborted"}
 """``action_msgs/msg/GoalStatus`` codes of the terminal states."""
 
 
-class ActionGoal:
+class ActionGoal(Generic[ResultT, FeedbackT]):
     """A goal sent with :meth:`Client.send_action_goal
     <ros_mobile_bridge.Client.send_action_goal>`.
 
@@ -31,7 +31,10 @@ class ActionGoal:
     goal does. :meth:`result` waits for the end: a succeeded or canceled goal
     gives an :class:`~ros_mobile_bridge.ActionOutcome`; a rejected, aborted
     or lost one raises :class:`~ros_mobile_bridge.ActionGoalError` whose
-    ``reason`` says which (``"disconnected"`` when the connection went)."""
+    ``reason`` says which (``"disconnected"`` when the connection went).
+    A goal sent as an instance of an action's ``Goal`` class
+    (``Fibonacci.Goal(order=5)``) is an ``ActionGoal[Fibonacci.Result,
+    Fibonacci.Feedback]`` for type checkers."""
 
     def __init__(self, action: str, cancel: Callable[[], Awaitable[None]]) -> None:
         self.action = action
@@ -40,7 +43,7 @@ class ActionGoal:
         self._feedback: Watchable[Any] = Watchable(None)
         self._accepted = anyio.Event()
         self._done = anyio.Event()
-        self._outcome: ActionOutcome | None = None
+        self._outcome: ActionOutcome[ResultT] | None = None
         self._error: ActionGoalError | None = None
         self._cancel_sent = False
 
@@ -56,7 +59,7 @@ class ActionGoal:
         return self._done.is_set()
 
     @property
-    def feedback(self) -> AsyncIterator[Any]:
+    def feedback(self) -> AsyncIterator[FeedbackT]:
         """Async iterator over feedback messages, newest wins; it ends when
         the goal does. (A plain iterator, not an async generator: leaving an
         ``async for`` early needs no cleanup.)"""
@@ -69,7 +72,7 @@ class ActionGoal:
         if self._error is not None and self._outcome is None:
             raise self._error
 
-    async def result(self) -> ActionOutcome:
+    async def result(self) -> ActionOutcome[ResultT]:
         """Wait for the goal to end; see the class docstring."""
         await self._done.wait()
         if self._error is not None:

@@ -40,7 +40,7 @@ from .._types import (
 from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
 from ..flow import Subscription, Watcher
-from ..interfaces._base import RosMessage, RosRequest
+from ..interfaces._base import RosGoal, RosMessage, RosRequest
 from ._action import ActionGoal
 from ._connection import Connection, RouteContext, is_velocity_type, zero_twist
 from ._published_types import PublishTypes
@@ -58,6 +58,8 @@ __all__ = ["Client"]
 T = TypeVar("T")
 M = TypeVar("M", bound=RosMessage)
 R = TypeVar("R", bound=RosMessage)
+_Res = TypeVar("_Res", bound=RosMessage)
+_Fb = TypeVar("_Fb", bound=RosMessage)
 _Info = TypeVar("_Info", TopicInfo, ServiceInfo)
 
 
@@ -810,13 +812,33 @@ class Client:
         return self._conn.adapter.codecs.definition(check_schema(name))
 
     # -- actions ------------------------------------------------------------
+    @overload
+    def send_action_goal(
+        self, action: str, action_type: RosGoal[_Res, _Fb]
+    ) -> AbstractAsyncContextManager[ActionGoal[_Res, _Fb]]: ...
+
+    @overload
+    def send_action_goal(
+        self, action: str, action_type: str, goal: Mapping[str, Any] | RosMessage
+    ) -> AbstractAsyncContextManager[ActionGoal[Any, Any]]: ...
+
     @asynccontextmanager
     async def send_action_goal(
-        self, action: str, action_type: str, goal: Mapping[str, Any]
-    ) -> AsyncIterator[ActionGoal]:
-        """Send ``goal`` to action server ``action`` (type ``action_type``,
-        e.g. ``"test_msgs/action/Fibonacci"``); an async context manager
+        self,
+        action: str,
+        action_type: str | RosGoal[Any, Any],
+        goal: Mapping[str, Any] | RosMessage | None = None,
+    ) -> AsyncIterator[ActionGoal[Any, Any]]:
+        """Send a goal to action server ``action``; an async context manager
         yielding the :class:`~ros_mobile_bridge.ActionGoal`.
+        ``send_action_goal("/fibonacci", Fibonacci.Goal(order=5))`` takes the
+        action type from the goal's class (and type checkers know the
+        goal's result is a ``Fibonacci.Result``, its feedback a
+        ``Fibonacci.Feedback``); ``send_action_goal(action, action_type,
+        goal)`` names the type (``"example_interfaces/action/Fibonacci"``)
+        and gives a dict (missing fields are zero) or a goal instance. The
+        feedback and the result are instances of the action's classes
+        whenever the library knows its definition, else dicts.
 
         Leaving the block before the goal ended cancels it (shielded, within
         ``options.teardown_timeout``). A lost connection fails the goal with
@@ -826,9 +848,8 @@ class Client:
         fit the goal type; ``ActionGoalError`` when no server offers the
         action or it refuses the goal."""
         check_name("action", action)
+        action_type, goal = _goal(action_type, goal)
         check_schema(action_type)
-        if not isinstance(goal, Mapping):
-            raise TypeError(f"goal must be a mapping (dict), not {type(goal).__name__}")
         conn = self._conn
         conn.require_connected()
         adapter = conn.adapter
@@ -841,7 +862,7 @@ class Client:
 
         handle = ActionGoal(action, cancel)
         try:
-            goal_id.append(await actions.send_action_goal(action, action_type, dict(goal), handle))
+            goal_id.append(await actions.send_action_goal(action, action_type, goal, handle))
         except MessageError as exc:
             raise exc.in_call(f"send_action_goal {action}") from None
         try:
@@ -854,6 +875,34 @@ class Client:
                     contextlib.suppress(ConnectError, NotConnected),
                 ):
                     await handle.cancel()
+
+
+def _goal(
+    action_type: str | RosGoal[Any, Any], goal: Mapping[str, Any] | RosMessage | None
+) -> tuple[str, dict[str, Any] | RosMessage]:
+    """``send_action_goal``'s ``action_type`` and ``goal`` as (the action
+    type, the goal): a goal instance given alone names its action
+    (``pkg/action/Name_Goal`` -> ``pkg/action/Name``). ``TypeError`` /
+    ``ValueError`` naming the mistake."""
+    if isinstance(action_type, RosMessage):
+        if goal is not None:
+            raise TypeError("send_action_goal(action, goal) takes no third argument")
+        goal, action_type = action_type, ""
+    elif goal is None:
+        raise TypeError("send_action_goal(action, action_type, goal) needs the goal")
+    if isinstance(goal, RosMessage):
+        own = type(goal).__ros_type__
+        if not own.endswith("_Goal") or "/action/" not in own:
+            raise TypeError(f"a {own} is not an action's goal (an action's Goal class is)")
+        named = own.removesuffix("_Goal")
+        if action_type and not same_type_name(action_type, named):
+            raise ValueError(f"the goal is a {own}, not a goal of {action_type}")
+        return action_type or named, goal
+    if not isinstance(goal, Mapping):
+        raise TypeError(
+            f"goal must be a mapping (dict) or a goal instance, not {type(goal).__name__}"
+        )
+    return action_type, dict(goal)
 
 
 def _published(

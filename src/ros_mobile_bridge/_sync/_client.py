@@ -37,10 +37,12 @@ from .._types import (
     Compression,
     ConnectionStats,
     DataT,
+    FeedbackT,
     Dispatch,
     GoalState,
     Message,
     Priority,
+    ResultT,
     SaveBandwidth,
     ServerInfo,
     ServiceInfo,
@@ -51,7 +53,7 @@ from .._types import (
 )
 from ..codec import FieldDef
 from ..flow import Subscription
-from ..interfaces._base import RosMessage, RosRequest
+from ..interfaces._base import RosGoal, RosMessage, RosRequest
 from ._worker import JOIN_S, Children, Held, Parent, SyncBackend, Worker
 
 if TYPE_CHECKING:
@@ -63,6 +65,8 @@ T = TypeVar("T")
 T_ = TypeVar("T_")
 _M = TypeVar("_M", bound=RosMessage)
 _R = TypeVar("_R", bound=RosMessage)
+_Res = TypeVar("_Res", bound=RosMessage)
+_Fb = TypeVar("_Fb", bound=RosMessage)
 F = TypeVar("F", bound=Callable[..., Any])
 
 
@@ -625,16 +629,30 @@ class SyncClient:
         held = Held(self._worker, ctx, f"the subscription to {topic}")
         return SyncSubscription(held, self._parent, topic, timeout)
 
+    @overload
+    def send_action_goal(
+        self, action: str, action_type: RosGoal[_Res, _Fb]
+    ) -> SyncActionGoal[_Res, _Fb]: ...
+
+    @overload
+    def send_action_goal(
+        self, action: str, action_type: str, goal: Mapping[str, Any] | RosMessage
+    ) -> SyncActionGoal[Any, Any]: ...
+
     @_mirrors
     def send_action_goal(
-        self, action: str, action_type: str, goal: Mapping[str, Any]
-    ) -> SyncActionGoal:
+        self,
+        action: str,
+        action_type: str | RosGoal[Any, Any],
+        goal: Mapping[str, Any] | RosMessage | None = None,
+    ) -> SyncActionGoal[Any, Any]:
         """:meth:`Client.send_action_goal`, as a (plain) context manager
         yielding a :class:`SyncActionGoal`; the goal is sent when the block
         is entered, and leaving it before the goal ended cancels it."""
         if self._closed:
             raise NotConnected("send_action_goal: the client is closed")
-        cm = self._client.send_action_goal(action, action_type, goal)
+        send: Any = self._client.send_action_goal  # the one implementation behind both forms
+        cm = send(action, action_type, goal)
         return SyncActionGoal(Held(self._worker, cm, f"the goal to {action}"), self._parent, action)
 
 
@@ -767,12 +785,14 @@ class SyncSubscription(_SyncBlock[Subscription[DataT]]):
         return self._entered().stats
 
 
-class SyncActionGoal(_SyncBlock[ActionGoal]):
+class SyncActionGoal(_SyncBlock[ActionGoal[ResultT, FeedbackT]]):
     """An action goal of a :class:`SyncClient`, with blocking waits."""
 
     _how_to_enter = "enter the goal first: with robot.send_action_goal(...) as goal"
 
-    def __init__(self, held: Held[ActionGoal], parent: Parent, action: str) -> None:
+    def __init__(
+        self, held: Held[ActionGoal[ResultT, FeedbackT]], parent: Parent, action: str
+    ) -> None:
         super().__init__(held, parent)
         self._feedback: Any = None
         self.action = action
@@ -795,7 +815,7 @@ class SyncActionGoal(_SyncBlock[ActionGoal]):
         waits until the goal is accepted or fails."""
         self._run(self._entered().accepted, timeout, "accepted")
 
-    def result(self, timeout: float | None = None) -> ActionOutcome:
+    def result(self, timeout: float | None = None) -> ActionOutcome[ResultT]:
         """:meth:`ActionGoal.result`, blocking; without ``timeout`` it waits
         until the goal ends, however long the action runs."""
         return self._run(self._entered().result, timeout, "result")
@@ -804,17 +824,18 @@ class SyncActionGoal(_SyncBlock[ActionGoal]):
         """:meth:`ActionGoal.cancel`, blocking."""
         self._run(self._entered().cancel, timeout, "cancel")
 
-    def next_feedback(self, timeout: float | None = None) -> Any:
+    def next_feedback(self, timeout: float | None = None) -> FeedbackT:
         """The newest feedback not yet seen (waits for one: without
         ``timeout``, until one comes or the goal ends); ``StopIteration``
         is never raised: ``NotConnected`` once the goal has ended."""
         goal = self._entered()
 
-        async def step() -> Any:
+        async def step() -> FeedbackT:
             if self._feedback is None:  # made in the loop: it holds anyio events
                 self._feedback = goal.feedback
             try:
-                return await self._feedback.__anext__()
+                value: FeedbackT = await self._feedback.__anext__()
+                return value
             except StopAsyncIteration:
                 raise NotConnected(f"the goal to {self.action} has ended") from None
 

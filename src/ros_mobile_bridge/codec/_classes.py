@@ -58,9 +58,10 @@ def class_for(key: str, defs: Mapping[str, MsgDef]) -> type[RosMessage]:
     holds its definition and that of every type it uses, directly or not,
     by canonical name (other entries are ignored).
 
-    When every one of those definitions equals the bundled one
-    (:func:`~ros_mobile_bridge.codec._bundled.bundled_definition`:
-    fields, defaults and constants alike), the bundled generated class
+    When every one of those definitions has the bundled one's fields
+    (:func:`~ros_mobile_bridge.codec._bundled.bundled_definition`: names
+    and types in order; defaults and constants, which do not change the
+    wire format, are not compared), the bundled generated class
     (``ros_mobile_bridge.interfaces.<pkg>.<kind>.<Name>``). Else a class made
     at run time, behaving as a generated one (see
     :mod:`ros_mobile_bridge.interfaces._runtime`), its ``__ros_hash__``
@@ -99,9 +100,15 @@ def _ident(key: str, closure: Mapping[str, MsgDef]) -> Hashable:
 
 
 def _bundled(key: str, closure: Mapping[str, MsgDef]) -> type[RosMessage] | None:
-    """The generated class of ``key`` when ``closure`` is the bundled definitions."""
+    """The generated class of ``key`` when ``closure`` describes the bundled
+    types' wire format: the same fields, of the same types, in the same
+    order, all the way down (so the same RIHS01 hash). Defaults and
+    constants are not compared: a REP-2011 description carries no
+    constants, a server's schema may leave out defaults, and neither
+    changes a message on the wire."""
     for name, msgdef in closure.items():
-        if bundled_definition(name) != msgdef:
+        bundled = bundled_definition(name)
+        if bundled is None or bundled.wire != msgdef.wire:
             return None
     from ..interfaces._base import message_class
 

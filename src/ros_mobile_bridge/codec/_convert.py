@@ -22,6 +22,7 @@ import numpy as np
 from rosbags.typesys.base import normalize_fieldname
 
 from .._errors import SchemaError
+from ..interfaces._base import RosMessage
 from ._model import ARRAY, DUMMY_FIELD, FLOAT_TYPES, INT_RANGES, SCALAR, FieldSpec, MsgDef
 
 __all__ = ["Builder", "Converter", "Invalid", "build_builder", "build_converter", "check_default"]
@@ -371,6 +372,8 @@ def build_builder(
     frozen_known = frozenset(known)
 
     def build_message(data: Any) -> object:
+        if isinstance(data, RosMessage):  # an instance, given alone or nested in a dict
+            data = data.to_dict()
         if not isinstance(data, Mapping):
             raise Invalid(f"expected a mapping for {key}, got {_type_name(data)}")
         for name in data:

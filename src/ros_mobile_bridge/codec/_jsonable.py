@@ -8,6 +8,8 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+from ..interfaces._base import RosMessage
+
 __all__ = ["jsonable"]
 
 
@@ -17,8 +19,11 @@ def jsonable(value: Any) -> Any:
     mappings become dicts with ``str`` keys, lists and tuples lists, numpy
     arrays and scalars lists and Python numbers, ``bytes``/``bytearray``/
     ``memoryview`` (a ``uint8[]`` field) a base64 string, and NaN and the
-    infinities ``None`` (JSON has no spelling for them). Everything else is
-    returned as is. Never modifies ``value``."""
+    infinities ``None`` (JSON has no spelling for them), a message instance
+    its dict (``to_dict()``). Everything else is returned as is. Never
+    modifies ``value``."""
+    if isinstance(value, RosMessage):
+        value = value.to_dict()
     if isinstance(value, Mapping):
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, bytes | bytearray | memoryview):

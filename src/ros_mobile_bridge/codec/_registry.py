@@ -127,6 +127,8 @@ def _merge(template: Any, data: Any, strict: bool, path: str) -> Any:
     non-mappings in place of a message raise :class:`Invalid`."""
     if not isinstance(template, dict):
         return data
+    if isinstance(data, RosMessage):
+        data = data.to_dict()
     if not isinstance(data, Mapping):
         if strict:
             raise Invalid(f"expected a mapping, got {type(data).__name__}", path)

@@ -170,6 +170,11 @@ class Message:
     summary: str
     doc: list[str]
     msgdef: MsgDef
+    base: str = "RosMessage"
+    """The base class expression: ``RosMessage``, or for a service's
+    request ``RosRequest["AddTwoInts.Response"]`` and for an action's goal
+    ``RosGoal["Fibonacci.Result", "Fibonacci.Feedback"]`` (what type
+    checkers learn a call or a goal gives)."""
 
 
 @dataclass
@@ -213,7 +218,9 @@ class ClassWriter:
         msgdef = cls.msgdef
         fields = msgdef.visible_fields
         inner = indent + "    "
-        lines = [f"{indent}class {cls.qualname.rpartition('.')[2]}(RosMessage):"]
+        lines = [f"{indent}class {cls.qualname.rpartition('.')[2]}({cls.base}):"]
+        if cls.base != "RosMessage":
+            self.helpers.add(cls.base.partition("[")[0])
         lines += docstring(cls.summary, cls.doc, inner)
         lines.append("")
         names = [f.name for f in fields]

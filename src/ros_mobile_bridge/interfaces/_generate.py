@@ -210,6 +210,7 @@ def _service(
                 f"The {part.lower()} of the service ``{name}`` (``{derived}``).",
                 doc_lines(text, leading and part == "Request"),
                 defs[derived],
+                f'RosRequest["{qualname}.Response"]' if part == "Request" else "RosMessage",
             )
         )
     return ns
@@ -235,6 +236,9 @@ def _action(name: str, text: str, defs: Mapping[str, MsgDef], header: bool) -> N
                 f"The {part.lower()} of the action ``{name}`` (``{derived}``).",
                 doc_lines(section, header and part == "Goal"),
                 defs[derived],
+                f'RosGoal["{short}.Result", "{short}.Feedback"]'
+                if part == "Goal"
+                else "RosMessage",
             )
         )
     ns.members.append(

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, ClassVar
 
 from ... import action_msgs as _action_msgs
-from ..._base import RosMessage, RosService, _messages, _nested
+from ..._base import RosMessage, RosRequest, RosService, _messages, _nested
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class CancelGoal(RosService):
     __ros_type__ = "action_msgs/srv/CancelGoal"
     __ros_hash__ = "RIHS01_573d8b0a534451d7bc2ac8c5ffde8ac14b8593b7001175d0cd6516dcbeb8689a"
 
-    class Request(RosMessage):
+    class Request(RosRequest["CancelGoal.Response"]):
         """The request of the service ``action_msgs/srv/CancelGoal`` (``action_msgs/srv/CancelGoal_Request``).
 
         Cancel one or more goals with the following policy:

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ..._base import RosMessage, RosService
+from ..._base import RosMessage, RosRequest, RosService
 
 __all__ = ["AddDiagnostics"]
 
@@ -16,7 +16,7 @@ class AddDiagnostics(RosService):
     __ros_type__ = "diagnostic_msgs/srv/AddDiagnostics"
     __ros_hash__ = "RIHS01_6b91084c9f8bffd9b0c1f6883e0e8e491a831f4fc6c6aec77a4efaf3f1ea90b5"
 
-    class Request(RosMessage):
+    class Request(RosRequest["AddDiagnostics.Response"]):
         """The request of the service ``diagnostic_msgs/srv/AddDiagnostics`` (``diagnostic_msgs/srv/AddDiagnostics_Request``).
 
         This service is used as part of the process for loading analyzers at runtime,

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import diagnostic_msgs as _diagnostic_msgs
-from ..._base import RosMessage, RosService, _messages
+from ..._base import RosMessage, RosRequest, RosService, _messages
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class SelfTest(RosService):
     __ros_type__ = "diagnostic_msgs/srv/SelfTest"
     __ros_hash__ = "RIHS01_df1e4e54a814a16ccc77471e9239618d46818e8d0e3b45ad6f8c34c6e2abfef6"
 
-    class Request(RosMessage):
+    class Request(RosRequest["SelfTest.Response"]):
         """The request of the service ``diagnostic_msgs/srv/SelfTest`` (``diagnostic_msgs/srv/SelfTest_Request``)."""
 
         __slots__ = ()

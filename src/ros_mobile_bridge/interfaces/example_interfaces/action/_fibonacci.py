@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 from ... import builtin_interfaces as _builtin_interfaces
 from ... import unique_identifier_msgs as _unique_identifier_msgs
-from ..._base import RosAction, RosMessage, RosService, _array, _nested
+from ..._base import RosAction, RosGoal, RosMessage, RosRequest, RosService, _array, _nested
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -29,7 +29,7 @@ class Fibonacci(RosAction):
     __ros_type__ = "example_interfaces/action/Fibonacci"
     __ros_hash__ = "RIHS01_9508051da1ea4658de144b09bd0690ff3de52104683d847aed764d2915906f51"
 
-    class Goal(RosMessage):
+    class Goal(RosGoal["Fibonacci.Result", "Fibonacci.Feedback"]):
         """The goal of the action ``example_interfaces/action/Fibonacci`` (``example_interfaces/action/Fibonacci_Goal``).
 
         Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
@@ -90,7 +90,7 @@ class Fibonacci(RosAction):
         __ros_type__ = "example_interfaces/action/Fibonacci_SendGoal"
         __ros_hash__ = "RIHS01_d1a57fb2a4afe8c21e34fb10db206f16ce6729b28531141472df92277c55b557"
 
-        class Request(RosMessage):
+        class Request(RosRequest["Fibonacci.SendGoal.Response"]):
             """The request of the service ``example_interfaces/action/Fibonacci_SendGoal`` (``example_interfaces/action/Fibonacci_SendGoal_Request``)."""
 
             __slots__ = (
@@ -149,7 +149,7 @@ class Fibonacci(RosAction):
         __ros_type__ = "example_interfaces/action/Fibonacci_GetResult"
         __ros_hash__ = "RIHS01_1b0de0d5d29dc955d92f546706568428632771db13ec84c15ec1c1a59f424a57"
 
-        class Request(RosMessage):
+        class Request(RosRequest["Fibonacci.GetResult.Response"]):
             """The request of the service ``example_interfaces/action/Fibonacci_GetResult`` (``example_interfaces/action/Fibonacci_GetResult_Request``)."""
 
             __slots__ = ("goal_id",)

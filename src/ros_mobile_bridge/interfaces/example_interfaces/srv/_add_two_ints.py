@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ..._base import RosMessage, RosService
+from ..._base import RosMessage, RosRequest, RosService
 
 __all__ = ["AddTwoInts"]
 
@@ -16,7 +16,7 @@ class AddTwoInts(RosService):
     __ros_type__ = "example_interfaces/srv/AddTwoInts"
     __ros_hash__ = "RIHS01_e118de6bf5eeb66a2491b5bda11202e7b68f198d6f67922cf30364858239c81a"
 
-    class Request(RosMessage):
+    class Request(RosRequest["AddTwoInts.Response"]):
         """The request of the service ``example_interfaces/srv/AddTwoInts`` (``example_interfaces/srv/AddTwoInts_Request``).
 
         Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ..._base import RosMessage, RosService
+from ..._base import RosMessage, RosRequest, RosService
 
 __all__ = ["SetBool"]
 
@@ -16,7 +16,7 @@ class SetBool(RosService):
     __ros_type__ = "example_interfaces/srv/SetBool"
     __ros_hash__ = "RIHS01_a69782e5631b12e15c8e218410de1685bbf13e382718295adad14037a24afbe8"
 
-    class Request(RosMessage):
+    class Request(RosRequest["SetBool.Response"]):
         """The request of the service ``example_interfaces/srv/SetBool`` (``example_interfaces/srv/SetBool_Request``).
 
         Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.

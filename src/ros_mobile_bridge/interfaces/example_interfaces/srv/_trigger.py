@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ..._base import RosMessage, RosService
+from ..._base import RosMessage, RosRequest, RosService
 
 __all__ = ["Trigger"]
 
@@ -16,7 +16,7 @@ class Trigger(RosService):
     __ros_type__ = "example_interfaces/srv/Trigger"
     __ros_hash__ = "RIHS01_cfeeee47f8105dd7685e4c92d46d4074669cb1c477402be1dea37486542a69e0"
 
-    class Request(RosMessage):
+    class Request(RosRequest["Trigger.Response"]):
         """The request of the service ``example_interfaces/srv/Trigger`` (``example_interfaces/srv/Trigger_Request``).
 
         Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import lifecycle_msgs as _lifecycle_msgs
-from ..._base import RosMessage, RosService, _nested
+from ..._base import RosMessage, RosRequest, RosService, _nested
 
 if TYPE_CHECKING:
     from ...lifecycle_msgs.msg._transition import Transition
@@ -22,7 +22,7 @@ class ChangeState(RosService):
     __ros_type__ = "lifecycle_msgs/srv/ChangeState"
     __ros_hash__ = "RIHS01_356fe34f0475a43acf54542013af4167b0e729f77ea22ffb045c6ad8e20668e5"
 
-    class Request(RosMessage):
+    class Request(RosRequest["ChangeState.Response"]):
         """The request of the service ``lifecycle_msgs/srv/ChangeState`` (``lifecycle_msgs/srv/ChangeState_Request``).
 
         ``transition``: The requested transition.

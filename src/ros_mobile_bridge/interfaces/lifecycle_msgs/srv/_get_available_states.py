@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import lifecycle_msgs as _lifecycle_msgs
-from ..._base import RosMessage, RosService, _messages
+from ..._base import RosMessage, RosRequest, RosService, _messages
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class GetAvailableStates(RosService):
     __ros_type__ = "lifecycle_msgs/srv/GetAvailableStates"
     __ros_hash__ = "RIHS01_00a07d79d2207d71e81a8cbc1880e5d924cc16d4688ea8e8e06e443dc8f8aa1d"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetAvailableStates.Response"]):
         """The request of the service ``lifecycle_msgs/srv/GetAvailableStates`` (``lifecycle_msgs/srv/GetAvailableStates_Request``)."""
 
         __slots__ = ()

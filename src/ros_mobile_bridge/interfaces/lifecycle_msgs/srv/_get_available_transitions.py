@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import lifecycle_msgs as _lifecycle_msgs
-from ..._base import RosMessage, RosService, _messages
+from ..._base import RosMessage, RosRequest, RosService, _messages
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class GetAvailableTransitions(RosService):
     __ros_type__ = "lifecycle_msgs/srv/GetAvailableTransitions"
     __ros_hash__ = "RIHS01_59b7ecefce0982a8a844b9f2c4f14764c1c4543cc55e72924e2aa4adad83e9bc"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetAvailableTransitions.Response"]):
         """The request of the service ``lifecycle_msgs/srv/GetAvailableTransitions`` (``lifecycle_msgs/srv/GetAvailableTransitions_Request``)."""
 
         __slots__ = ()

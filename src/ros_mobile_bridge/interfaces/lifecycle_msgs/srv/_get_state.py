@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import lifecycle_msgs as _lifecycle_msgs
-from ..._base import RosMessage, RosService, _nested
+from ..._base import RosMessage, RosRequest, RosService, _nested
 
 if TYPE_CHECKING:
     from ...lifecycle_msgs.msg._state import State
@@ -22,7 +22,7 @@ class GetState(RosService):
     __ros_type__ = "lifecycle_msgs/srv/GetState"
     __ros_hash__ = "RIHS01_800a0a5aae599782b02932de0caf563f6dc4e7e94b794eadde075ba2cbef9795"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetState.Response"]):
         """The request of the service ``lifecycle_msgs/srv/GetState`` (``lifecycle_msgs/srv/GetState_Request``)."""
 
         __slots__ = ()

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import nav_msgs as _nav_msgs
-from ..._base import RosMessage, RosService, _nested
+from ..._base import RosMessage, RosRequest, RosService, _nested
 
 if TYPE_CHECKING:
     from ...nav_msgs.msg._occupancy_grid import OccupancyGrid
@@ -22,7 +22,7 @@ class GetMap(RosService):
     __ros_type__ = "nav_msgs/srv/GetMap"
     __ros_hash__ = "RIHS01_c8ae77c9995b3554b5ba80e4d4d443f970ac65143102a1d893ec24fc07b31147"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetMap.Response"]):
         """The request of the service ``nav_msgs/srv/GetMap`` (``nav_msgs/srv/GetMap_Request``).
 
         Get the map as a nav_msgs/OccupancyGrid

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 from ... import geometry_msgs as _geometry_msgs
 from ... import nav_msgs as _nav_msgs
-from ..._base import RosMessage, RosService, _nested
+from ..._base import RosMessage, RosRequest, RosService, _nested
 
 if TYPE_CHECKING:
     from ...geometry_msgs.msg._pose_stamped import PoseStamped
@@ -24,7 +24,7 @@ class GetPlan(RosService):
     __ros_type__ = "nav_msgs/srv/GetPlan"
     __ros_hash__ = "RIHS01_234f7aff100f5edb8150366601687b027bcdc253db47decb88fff846193fe5e8"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetPlan.Response"]):
         """The request of the service ``nav_msgs/srv/GetPlan`` (``nav_msgs/srv/GetPlan_Request``).
 
         Get a plan from the current position to the goal Pose

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, ClassVar
 
 from ... import nav_msgs as _nav_msgs
-from ..._base import RosMessage, RosService, _nested
+from ..._base import RosMessage, RosRequest, RosService, _nested
 
 if TYPE_CHECKING:
     from ...nav_msgs.msg._occupancy_grid import OccupancyGrid
@@ -22,7 +22,7 @@ class LoadMap(RosService):
     __ros_type__ = "nav_msgs/srv/LoadMap"
     __ros_hash__ = "RIHS01_1a192ac56c40fed2767dac26f0b371785372276bd465c902676d2dca135aae5a"
 
-    class Request(RosMessage):
+    class Request(RosRequest["LoadMap.Response"]):
         """The request of the service ``nav_msgs/srv/LoadMap`` (``nav_msgs/srv/LoadMap_Request``).
 
         ``map_url``: URL of map resource

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 from ... import geometry_msgs as _geometry_msgs
 from ... import nav_msgs as _nav_msgs
-from ..._base import RosMessage, RosService, _nested
+from ..._base import RosMessage, RosRequest, RosService, _nested
 
 if TYPE_CHECKING:
     from ...geometry_msgs.msg._pose_with_covariance_stamped import PoseWithCovarianceStamped
@@ -24,7 +24,7 @@ class SetMap(RosService):
     __ros_type__ = "nav_msgs/srv/SetMap"
     __ros_hash__ = "RIHS01_5e11a5b2ca53d8ae85b666a019f16c9904ebc787828f1f566c4e048a1ddedfb4"
 
-    class Request(RosMessage):
+    class Request(RosRequest["SetMap.Response"]):
         """The request of the service ``nav_msgs/srv/SetMap`` (``nav_msgs/srv/SetMap_Request``).
 
         Set a new map together with an initial pose

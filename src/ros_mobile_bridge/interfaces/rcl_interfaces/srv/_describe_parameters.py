@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import rcl_interfaces as _rcl_interfaces
-from ..._base import RosMessage, RosService, _messages, _strings
+from ..._base import RosMessage, RosRequest, RosService, _messages, _strings
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class DescribeParameters(RosService):
     __ros_type__ = "rcl_interfaces/srv/DescribeParameters"
     __ros_hash__ = "RIHS01_845b484d71eb0673dae682f2e3ba3c4851a65a3dcfb97bddd82c5b57e91e4cff"
 
-    class Request(RosMessage):
+    class Request(RosRequest["DescribeParameters.Response"]):
         """The request of the service ``rcl_interfaces/srv/DescribeParameters`` (``rcl_interfaces/srv/DescribeParameters_Request``).
 
         ``names``: A list of parameters of which to get the descriptor.

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import rcl_interfaces as _rcl_interfaces
-from ..._base import RosMessage, RosService, _messages, _strings
+from ..._base import RosMessage, RosRequest, RosService, _messages, _strings
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class GetLoggerLevels(RosService):
     __ros_type__ = "rcl_interfaces/srv/GetLoggerLevels"
     __ros_hash__ = "RIHS01_03bf1bebd0d6514c7ed0ba7c5e08dc9f2f39c759fe99e1e30ea4157d7674f72d"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetLoggerLevels.Response"]):
         """The request of the service ``rcl_interfaces/srv/GetLoggerLevels`` (``rcl_interfaces/srv/GetLoggerLevels_Request``).
 
         ``names``: A list of logger names to get.

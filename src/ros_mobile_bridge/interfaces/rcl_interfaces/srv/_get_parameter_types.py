@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ..._base import RosMessage, RosService, _array, _strings
+from ..._base import RosMessage, RosRequest, RosService, _array, _strings
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class GetParameterTypes(RosService):
     __ros_type__ = "rcl_interfaces/srv/GetParameterTypes"
     __ros_hash__ = "RIHS01_da199c878688b3e530bdfe3ca8f74cb9fa0c303101e980a9e8f260e25e1c80ca"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetParameterTypes.Response"]):
         """The request of the service ``rcl_interfaces/srv/GetParameterTypes`` (``rcl_interfaces/srv/GetParameterTypes_Request``).
 
         ``names``: A list of parameter names.

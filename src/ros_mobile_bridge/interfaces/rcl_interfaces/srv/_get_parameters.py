@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import rcl_interfaces as _rcl_interfaces
-from ..._base import RosMessage, RosService, _messages, _strings
+from ..._base import RosMessage, RosRequest, RosService, _messages, _strings
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class GetParameters(RosService):
     __ros_type__ = "rcl_interfaces/srv/GetParameters"
     __ros_hash__ = "RIHS01_bf9803d5c74cf989a5de3e0c2e99444599a627c7ff75f97b8c05b01003675cbc"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetParameters.Response"]):
         """The request of the service ``rcl_interfaces/srv/GetParameters`` (``rcl_interfaces/srv/GetParameters_Request``).
 
         TODO(wjwwood): Decide on the rules for grouping, nodes, and parameter "names"

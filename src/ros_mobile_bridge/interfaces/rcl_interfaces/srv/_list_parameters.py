@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, ClassVar
 
 from ... import rcl_interfaces as _rcl_interfaces
-from ..._base import RosMessage, RosService, _nested, _strings
+from ..._base import RosMessage, RosRequest, RosService, _nested, _strings
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class ListParameters(RosService):
     __ros_type__ = "rcl_interfaces/srv/ListParameters"
     __ros_hash__ = "RIHS01_3e6062bfbb27bfb8730d4cef2558221f51a11646d78e7bb30a1e83afac3aad9d"
 
-    class Request(RosMessage):
+    class Request(RosRequest["ListParameters.Response"]):
         """The request of the service ``rcl_interfaces/srv/ListParameters`` (``rcl_interfaces/srv/ListParameters_Request``).
 
         ``DEPTH_RECURSIVE``: Recursively get parameters with unlimited depth.

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import rcl_interfaces as _rcl_interfaces
-from ..._base import RosMessage, RosService, _messages
+from ..._base import RosMessage, RosRequest, RosService, _messages
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -25,7 +25,7 @@ class SetLoggerLevels(RosService):
     __ros_type__ = "rcl_interfaces/srv/SetLoggerLevels"
     __ros_hash__ = "RIHS01_3ff86cb4e91fbf9abae15c234ecc874448de6ece8e193401c077cf116e4f6d78"
 
-    class Request(RosMessage):
+    class Request(RosRequest["SetLoggerLevels.Response"]):
         """The request of the service ``rcl_interfaces/srv/SetLoggerLevels`` (``rcl_interfaces/srv/SetLoggerLevels_Request``).
 
         ``levels``: A list of loggers to set.

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import rcl_interfaces as _rcl_interfaces
-from ..._base import RosMessage, RosService, _messages
+from ..._base import RosMessage, RosRequest, RosService, _messages
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -25,7 +25,7 @@ class SetParameters(RosService):
     __ros_type__ = "rcl_interfaces/srv/SetParameters"
     __ros_hash__ = "RIHS01_56eed9a67e169f9cb6c1f987bc88f868c14a8fc9f743a263bc734c154015d7e0"
 
-    class Request(RosMessage):
+    class Request(RosRequest["SetParameters.Response"]):
         """The request of the service ``rcl_interfaces/srv/SetParameters`` (``rcl_interfaces/srv/SetParameters_Request``).
 
         ``parameters``: A list of parameters to set.

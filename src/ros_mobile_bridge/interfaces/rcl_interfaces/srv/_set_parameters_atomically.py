@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import rcl_interfaces as _rcl_interfaces
-from ..._base import RosMessage, RosService, _messages, _nested
+from ..._base import RosMessage, RosRequest, RosService, _messages, _nested
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -25,7 +25,7 @@ class SetParametersAtomically(RosService):
     __ros_type__ = "rcl_interfaces/srv/SetParametersAtomically"
     __ros_hash__ = "RIHS01_0e192ef259c07fc3c07a13191d27002222e65e00ccec653ca05e856f79285fcd"
 
-    class Request(RosMessage):
+    class Request(RosRequest["SetParametersAtomically.Response"]):
         """The request of the service ``rcl_interfaces/srv/SetParametersAtomically`` (``rcl_interfaces/srv/SetParametersAtomically_Request``).
 
         ``parameters``: A list of parameters to set atomically.

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import sensor_msgs as _sensor_msgs
-from ..._base import RosMessage, RosService, _nested
+from ..._base import RosMessage, RosRequest, RosService, _nested
 
 if TYPE_CHECKING:
     from ...sensor_msgs.msg._camera_info import CameraInfo
@@ -22,7 +22,7 @@ class SetCameraInfo(RosService):
     __ros_type__ = "sensor_msgs/srv/SetCameraInfo"
     __ros_hash__ = "RIHS01_a10cca5d33dc637c8d49db50ab288701a3592bb9cd854f2f16a0659613b68984"
 
-    class Request(RosMessage):
+    class Request(RosRequest["SetCameraInfo.Response"]):
         """The request of the service ``sensor_msgs/srv/SetCameraInfo`` (``sensor_msgs/srv/SetCameraInfo_Request``).
 
         This service requests that a camera stores the given CameraInfo as that

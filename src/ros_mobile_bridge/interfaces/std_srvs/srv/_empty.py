@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ..._base import RosMessage, RosService
+from ..._base import RosMessage, RosRequest, RosService
 
 __all__ = ["Empty"]
 
@@ -16,7 +16,7 @@ class Empty(RosService):
     __ros_type__ = "std_srvs/srv/Empty"
     __ros_hash__ = "RIHS01_5888399dedec5ccc85ea6451949fd2c9f97bfdf963f9a588821639fcd31b5d19"
 
-    class Request(RosMessage):
+    class Request(RosRequest["Empty.Response"]):
         """The request of the service ``std_srvs/srv/Empty`` (``std_srvs/srv/Empty_Request``)."""
 
         __slots__ = ()

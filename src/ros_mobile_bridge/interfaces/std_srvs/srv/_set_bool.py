@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ..._base import RosMessage, RosService
+from ..._base import RosMessage, RosRequest, RosService
 
 __all__ = ["SetBool"]
 
@@ -16,7 +16,7 @@ class SetBool(RosService):
     __ros_type__ = "std_srvs/srv/SetBool"
     __ros_hash__ = "RIHS01_abe9e4bb6b41b40e6789712c00ec8871923e089af3f667a79992a428cff2da0a"
 
-    class Request(RosMessage):
+    class Request(RosRequest["SetBool.Response"]):
         """The request of the service ``std_srvs/srv/SetBool`` (``std_srvs/srv/SetBool_Request``).
 
         ``data``: e.g. for hardware enabling / disabling

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ..._base import RosMessage, RosService
+from ..._base import RosMessage, RosRequest, RosService
 
 __all__ = ["Trigger"]
 
@@ -16,7 +16,7 @@ class Trigger(RosService):
     __ros_type__ = "std_srvs/srv/Trigger"
     __ros_hash__ = "RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f"
 
-    class Request(RosMessage):
+    class Request(RosRequest["Trigger.Response"]):
         """The request of the service ``std_srvs/srv/Trigger`` (``std_srvs/srv/Trigger_Request``)."""
 
         __slots__ = ()

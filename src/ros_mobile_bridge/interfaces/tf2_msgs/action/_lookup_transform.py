@@ -10,7 +10,7 @@ from ... import builtin_interfaces as _builtin_interfaces
 from ... import geometry_msgs as _geometry_msgs
 from ... import tf2_msgs as _tf2_msgs
 from ... import unique_identifier_msgs as _unique_identifier_msgs
-from ..._base import RosAction, RosMessage, RosService, _nested
+from ..._base import RosAction, RosGoal, RosMessage, RosRequest, RosService, _nested
 
 if TYPE_CHECKING:
     from ...builtin_interfaces.msg._duration import Duration
@@ -29,7 +29,7 @@ class LookupTransform(RosAction):
     __ros_type__ = "tf2_msgs/action/LookupTransform"
     __ros_hash__ = "RIHS01_0b8adf6bc0b5958879e3265b41a457e03558fe523890a81252c70eba97a82c5d"
 
-    class Goal(RosMessage):
+    class Goal(RosGoal["LookupTransform.Result", "LookupTransform.Feedback"]):
         """The goal of the action ``tf2_msgs/action/LookupTransform`` (``tf2_msgs/action/LookupTransform_Goal``).
 
         Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.
@@ -130,7 +130,7 @@ class LookupTransform(RosAction):
         __ros_type__ = "tf2_msgs/action/LookupTransform_SendGoal"
         __ros_hash__ = "RIHS01_4646ff5706c86b04d0a1098d329951a9731a7517e16702905de6073cc72c8530"
 
-        class Request(RosMessage):
+        class Request(RosRequest["LookupTransform.SendGoal.Response"]):
             """The request of the service ``tf2_msgs/action/LookupTransform_SendGoal`` (``tf2_msgs/action/LookupTransform_SendGoal_Request``)."""
 
             __slots__ = (
@@ -189,7 +189,7 @@ class LookupTransform(RosAction):
         __ros_type__ = "tf2_msgs/action/LookupTransform_GetResult"
         __ros_hash__ = "RIHS01_3cd1715751899e3167b5aec3e4ac194f7da9e8493a77285f9f6a4c914f5e8b24"
 
-        class Request(RosMessage):
+        class Request(RosRequest["LookupTransform.GetResult.Response"]):
             """The request of the service ``tf2_msgs/action/LookupTransform_GetResult`` (``tf2_msgs/action/LookupTransform_GetResult_Request``)."""
 
             __slots__ = ("goal_id",)

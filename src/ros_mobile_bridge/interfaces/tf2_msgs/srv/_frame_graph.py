@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from ..._base import RosMessage, RosService
+from ..._base import RosMessage, RosRequest, RosService
 
 __all__ = ["FrameGraph"]
 
@@ -16,7 +16,7 @@ class FrameGraph(RosService):
     __ros_type__ = "tf2_msgs/srv/FrameGraph"
     __ros_hash__ = "RIHS01_0d1fbc6222c018ba5f33822904a2fdd4063705289956d3fdde07cd8c50fe8067"
 
-    class Request(RosMessage):
+    class Request(RosRequest["FrameGraph.Response"]):
         """The request of the service ``tf2_msgs/srv/FrameGraph`` (``tf2_msgs/srv/FrameGraph_Request``).
 
         Written from the interface's fields for ros-mobile-bridge; the upstream comments are not included.

@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import type_description_interfaces as _type_description_interfaces
-from ..._base import RosMessage, RosService, _messages, _nested
+from ..._base import RosMessage, RosRequest, RosService, _messages, _nested
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -26,7 +26,7 @@ class GetTypeDescription(RosService):
     __ros_type__ = "type_description_interfaces/srv/GetTypeDescription"
     __ros_hash__ = "RIHS01_69b9c19c1021405984cc60dbbb1edceb147a6538b411d812ba6afabeed962cd5"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetTypeDescription.Response"]):
         """The request of the service ``type_description_interfaces/srv/GetTypeDescription`` (``type_description_interfaces/srv/GetTypeDescription_Request``).
 
         ``type_name``: ROS interface type name, in PACKAGE/NAMESPACE/TYPENAME format.

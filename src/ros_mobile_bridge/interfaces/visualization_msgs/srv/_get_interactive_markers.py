@@ -7,7 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from ... import visualization_msgs as _visualization_msgs
-from ..._base import RosMessage, RosService, _messages
+from ..._base import RosMessage, RosRequest, RosService, _messages
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -24,7 +24,7 @@ class GetInteractiveMarkers(RosService):
     __ros_type__ = "visualization_msgs/srv/GetInteractiveMarkers"
     __ros_hash__ = "RIHS01_bfdfaa861f4a8422b4ec3bd02c6681e4a45a83bdc2913d8facdf923d8ad1376a"
 
-    class Request(RosMessage):
+    class Request(RosRequest["GetInteractiveMarkers.Response"]):
         """The request of the service ``visualization_msgs/srv/GetInteractiveMarkers`` (``visualization_msgs/srv/GetInteractiveMarkers_Request``)."""
 
         __slots__ = ()
