@@ -230,7 +230,7 @@ async def run_size(
                 ) as sub:
                     subs.append(sub)
                     async for msg in sub:
-                        msg.data.data
+                        _ = msg.data.data  # read the field, as a consumer does
                         delivered[i] += 1
         except rmb.RosBridgeError as exc:
             failures.append(f"client {i}: {exc!r}")
