@@ -186,7 +186,9 @@ async def test_unadvertised_topic_goes_pending_and_readvertised_topic_resumes(
                     if len(got) == 2:
                         break
     # the frame queued before the unadvertise decodes with its own channel's schema
-    assert got[0].schema_name == "std_msgs/msg/String" and got[0].data.to_dict() == {"data": "before"}
+    assert got[0].schema_name == "std_msgs/msg/String" and got[0].data.to_dict() == {
+        "data": "before"
+    }
     assert got[1].schema_name == "std_msgs/msg/Int32" and got[1].data.to_dict() == {"data": 42}
 
 
