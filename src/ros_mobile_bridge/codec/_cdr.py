@@ -187,9 +187,9 @@ def meet(a: tuple[int, int], b: tuple[int, int]) -> tuple[int, int]:
     return mod, a[1] % mod
 
 
-def compact(fmt: str) -> str:
-    """``fmt`` with runs of one code counted (``"ddd4x4x"`` -> ``"3d8x"``) and
-    no trailing pad bytes."""
+def compact(fmt: str, *, trim: bool = False) -> str:
+    """``fmt`` with runs of one code counted (``"ddd4x4x"`` -> ``"3d8x"``);
+    with ``trim``, without its trailing pad bytes (an unpack need not skip them)."""
     out: list[tuple[str, int]] = []
     count = ""
     for char in fmt:
@@ -202,7 +202,7 @@ def compact(fmt: str) -> str:
             out[-1] = (char, out[-1][1] + number)
         else:
             out.append((char, number))
-    while out and out[-1][0] == "x":
+    while trim and out and out[-1][0] == "x":
         out.pop()
     return "".join(f"{n}{c}" if n > 1 else c for c, n in out)
 
@@ -274,7 +274,7 @@ class _DecoderWriter:
         return name
 
     def unpacker(self, fmt: str) -> str:
-        fmt = compact(fmt)
+        fmt = compact(fmt, trim=True)
         name = "_u_" + fmt.replace("?", "o")
         if name not in self.namespace:
             self.namespace[name] = struct.Struct(self.order + fmt).unpack_from

@@ -78,7 +78,6 @@ class _Misfit(Exception):
     """The fast path met a value it does not take as it is."""
 
 
-
 class _EncoderWriter:
     """Generates the statements of one encoder.
 
@@ -234,7 +233,9 @@ class _EncoderWriter:
         self.flush()
         rest = residue(align)
         expr = self.at(self.offset + align - 1 - rest)
-        self.new_base(f"(({expr}) & -{align}) + {rest}" if rest else f"({expr}) & -{align}", (align, rest))
+        self.new_base(
+            f"(({expr}) & -{align}) + {rest}" if rest else f"({expr}) & -{align}", (align, rest)
+        )
 
     def item(self, fmt: str, align: int, value: str) -> int:
         self.align(align)
