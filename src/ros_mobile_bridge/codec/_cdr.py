@@ -489,19 +489,23 @@ class _DecoderWriter:
         self.known = meet((4, 0), after)  # an empty sequence ends after its count
 
     def strings(self, count: str, target: str) -> None:
-        """``count`` strings at the position (after their count, if any)."""
-        self.materialize()
-        lst = self.local("l")
+        """``count`` strings at the position (after their count, if any). The
+        loop keeps ``e``, the last terminator's offset: the next string's
+        length is at ``(e + 4) & -4``, the position after the loop ``e + 1``."""
+        self.flush()
+        lst, end = self.local("l"), self.local("e")
+        self.emit(f"{end} = {self.at(self.offset - 1)}")
         self.emit(f"{target} = {lst} = []")
+        self.emit(f"{lst}_append = {lst}.append")
         self.emit(f"for _ in range({count}):")
         self.indent += 1
-        self.emit("q = (q + 3) & -4")
+        self.emit(f"q = ({end} + 4) & -4")
         self.emit("n, = _u32(p, q)")
-        self.emit("e = q + 3 + n")
-        self.emit("if p[e] or n < 1: _bad(p, e)")
-        self.emit(f"{lst}.append(p[q + 4:e].tobytes().decode())")
-        self.emit("q = e + 1")
+        self.emit(f"{end} = q + 3 + n")
+        self.emit(f"if p[{end}] or n < 1: _bad(p, {end})")
+        self.emit(f"{lst}_append(p[q + 4:{end}].tobytes().decode())")
         self.indent -= 1
+        self.base, self.offset, self.start, self.end = end, 1, 1, 1
         self.known = (1, 0)
 
     def messages(self, name: str, count: str, target: str, fixed: bool) -> None:
@@ -510,6 +514,7 @@ class _DecoderWriter:
         before = self.known
         lst = self.local("l")
         self.emit(f"{target} = {lst} = []")
+        self.emit(f"{lst}_append = {lst}.append")
         self.emit(f"for _ in range({count}):")
         self.indent += 1
         first = first_alignment(name, self.defs, self.classes, self.fields)
@@ -532,7 +537,7 @@ class _DecoderWriter:
             top = after
         else:  # pragma: no cover - the knowledge only shrinks, in at most 4 steps
             raise AssertionError("no fixed point")
-        self.emit(f"{lst}.append({item})")
+        self.emit(f"{lst}_append({item})")
         self.indent -= 1
         self.known = top
 
