@@ -598,7 +598,7 @@ class _Decoder:
             _memoryview=memoryview,
             _u32=struct.Struct(">I" if big else "<I").unpack_from,
             _other=self.other,
-            _failed=self.failed,
+            _failed=self.failed_big if big else self.failed,
             _bad=self.bad_string,
             _leftover=self.leftover,
         )
@@ -663,6 +663,16 @@ class _Decoder:
         size = len(payload)
         if size < 4 or payload[0] != 0 or payload[1] > 1:
             raise self.header_error(payload) from None
+        if payload[1] == 0:  # big endian: the little-endian reads failed first
+            return self.big()(payload)
+        return self.failed_big(payload, exc)
+
+    def failed_big(self, payload: Any, exc: Exception) -> Any:
+        """The error path of the big-endian variant (and the end of the
+        little-endian one's): raise :class:`DecodeError`."""
+        if isinstance(exc, DecodeError):
+            raise exc
+        size = len(payload)
         if isinstance(exc, Invalid):
             raise DecodeError(f"cannot decode {self.key}: {exc}") from None
         raise DecodeError(
