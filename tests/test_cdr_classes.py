@@ -359,6 +359,9 @@ def test_other_buffers_decode() -> None:
         assert c.decode(form) == message
     with pytest.raises(DecodeError, match="contiguous"):
         c.decode(memoryview(payload * 2)[::2])
+    for junk in ("text", 3, None):
+        with pytest.raises(DecodeError, match="byte buffer"):
+            c.decode(junk)
 
 
 def test_arrays_are_views_of_the_payload() -> None:

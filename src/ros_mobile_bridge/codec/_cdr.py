@@ -45,6 +45,7 @@ either); the encoder checks them.
 
 from __future__ import annotations
 
+import linecache
 import struct
 import sys
 import threading
@@ -210,7 +211,10 @@ def compact(fmt: str, *, trim: bool = False) -> str:
 def compile_function(source: str, kind: str, key: str, namespace: dict[str, Any]) -> Any:
     """Compile and run the generated ``source``; return its ``function``,
     with the text as its ``__source__`` attribute."""
-    exec(compile(source, f"<cdr {kind} of {key}>", "exec"), namespace)
+    filename = f"<cdr {kind} of {key}>"
+    exec(compile(source, filename, "exec"), namespace)
+    # tracebacks and debuggers show the generated lines
+    linecache.cache[filename] = (len(source), None, source.splitlines(True), filename)
     function = namespace["function"]
     function.__source__ = source
     return function
@@ -562,14 +566,14 @@ def _decoder_source(
     writer.finish()
     writer.emit("return o")
     strings = any(".tobytes()" in line for line in writer.lines)
-    head = ["def function(p):"]
+    lines = writer.lines
     if strings:  # a string is sliced out of a memoryview
-        head.append("    if p.__class__ is not _memoryview: p = _memoryview(p)")
+        lines = ["        if p.__class__ is not _memoryview: p = _memoryview(p)", *lines]
     source = "\n".join(
         [
-            *head,
+            "def function(p):",
             "    try:",
-            *writer.lines,
+            *lines,
             "    except Exception as exc:",
             "        return _failed(p, exc)",
             "",

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import operator
 import struct
-import threading
 from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING, Any, Final
 
@@ -634,7 +633,6 @@ class _Encoder:
         )
         self.encode: Callable[[Any], bytes] = compile_function(source, "encoder", key, namespace)
         self.plain: Callable[[Any], bytes] = namespace["plain"]
-        self.lock = threading.Lock()
 
     def slow(self, message: Any) -> bytes:
         """Check ``message`` field by field: a :class:`MessageError` naming
