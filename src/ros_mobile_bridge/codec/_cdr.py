@@ -228,7 +228,9 @@ class _DecoderWriter:
 
     The position in the payload is ``base + offset``: ``base`` a variable
     (None at the start, where every offset is known) and ``offset`` a
-    constant; ``known`` is what is known of it, ``(modulus, remainder)``.
+    constant; ``known`` is what is known of ``base``: ``(modulus,
+    remainder)``, the payload offset modulo ``modulus`` (the body starts at
+    payload offset 4, so an 8-aligned body offset is 4 modulo 8).
     The open run (:attr:`fmt`, :attr:`targets`) is read by one
     ``unpack_from`` at ``base + start`` when something dynamic follows."""
 

@@ -28,8 +28,8 @@ dotted path, ``"pose.covariance"``, ``"transforms[2].header"``).
 What fits a field: an integer (``int``, a numpy integer, ``bool``) within
 its type's range (``byte`` and ``char``: 0..255); a real number for
 ``float32``/``float64`` (within float32's range for ``float32``; ``nan``
-and infinities pass); ``True``/``False`` (or a numpy bool, 0 or 1) for
-``bool``; a ``str`` encodable as UTF-8 within its bound for ``string``; for
+and infinities pass); for ``bool``, ``True``/``False`` or a value equal
+to one of them (a numpy bool, 0, 1); a ``str`` encodable as UTF-8 within its bound for ``string``; for
 a numeric array, what the constructors take (a numpy array, a list, a
 tuple, ``bytes`` for an 8-bit integer array) of the right length (fixed
 size) or at most the bound (bounded sequence); for arrays of strings and of
