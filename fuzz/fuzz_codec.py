@@ -18,6 +18,11 @@ and feeds the decoder:
   past the payload,
 * random bytes (after a valid header, or not).
 
+For the bundled types, the generated decoder into the message classes
+(``codec._cdr.build_class_decoder``) is fed the same payload and must agree
+with the dict decoder: both decode it to the same message (the instance's
+``to_dict()``), or both raise :class:`DecodeError`.
+
 The contract checked: the decoder returns a value or raises
 :class:`DecodeError` (never another exception), within a per-example deadline
 (:data:`DEADLINE_S`), and the peak memory it allocates (``tracemalloc``)
@@ -34,6 +39,7 @@ or import it and call :func:`run` (``tests/test_fuzz_parsers_smoke.py`` does).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import struct
 import sys
@@ -131,6 +137,26 @@ STATS: Counter[str] = Counter()
 """What the run reached (printed by ``main``)."""
 
 _registry = CodecRegistry()
+_class_decoders: dict[str, Any] = {}
+
+
+def _class_decoder(name: str) -> Any:
+    """The class decoder of ``name``, or None for a type without a class."""
+    if name not in _class_decoders:
+        from ros_mobile_bridge.codec._cdr import build_class_decoder
+        from ros_mobile_bridge.interfaces._base import message_class
+
+        decoder = None
+        if name != CUSTOM_NAME:
+            key, msgdef = _registry._find_ros(name)
+            decoder = build_class_decoder(key, _registry._closure(key, msgdef), message_class)
+            # build its big-endian variant now, not within a measured decode
+            with contextlib.suppress(DecodeError):
+                decoder(memoryview(bytes(4096)))
+        _class_decoders[name] = decoder
+    return _class_decoders[name]
+
+
 _registry.add_schema(CUSTOM_NAME, "ros2msg", CUSTOM_SCHEMA)
 
 _INT_RANGES = {
@@ -320,6 +346,13 @@ def run_session(data: st.DataObject) -> None:
     kind, payload = _payload(data, valid)
     outcome, decoded = check_decode(decode, payload)
     STATS[f"{kind}: {outcome}"] += 1
+    class_decode = _class_decoder(name)
+    if class_decode is not None:
+        class_outcome, instance = check_decode(class_decode, payload)
+        assert class_outcome == outcome, (name, payload.hex(), decoded, instance)
+        if outcome == "ok":
+            assert _same(_plain(instance.to_dict()), _plain(decoded)), (name, payload.hex())
+        STATS[f"class decoder agrees: {outcome}"] += 1
     if payload == valid:
         assert outcome == "ok", decoded
         assert _same(_plain(decoded), value), (name, value, decoded)
