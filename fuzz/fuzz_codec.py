@@ -340,7 +340,7 @@ def run_session(data: st.DataObject) -> None:
     name = data.draw(st.sampled_from(SCHEMAS), label="schema")
     value = data.draw(_STRATEGIES[name], label="value")
     encode = _registry.encoder(name, "cdr")
-    decode = _registry.decoder(name, "cdr")
+    decode = _registry.dict_decoder(name)
     valid = encode(value)
     assert isinstance(valid, bytes)
     kind, payload = _payload(data, valid)

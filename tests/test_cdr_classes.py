@@ -64,7 +64,7 @@ class Codec:
         self.cls: Any = message_class(key)
         self.decode: Callable[[Any], Any] = build_class_decoder(key, self.defs, message_class)
         self.encode: Callable[[Any], bytes] = build_class_encoder(key, self.defs, message_class)
-        self.dict_decode = REGISTRY.decoder(key, "cdr")
+        self.dict_decode = REGISTRY.dict_decoder(key)
         gen = REGISTRY._prepare(key, msgdef)
         self.store = gen.store
         self.build = build_builder(key, gen.defs, gen.store.types, gen.builders)

@@ -103,7 +103,11 @@ def _to_msgdefs(messages: list[Any], renames: dict[str, str]) -> dict[str, MsgDe
             for f in msgdef.fields
         )
         name = _checked_name(msgdef.name)
+        seen: set[str] = set()
         for spec in specs:
+            if spec.name in seen:  # rosidl refuses it too
+                raise ValueError(f"{name}: field {spec.name!r} is defined twice")
+            seen.add(spec.name)
             if spec.default is None:
                 continue
             if spec.ref is not None:

@@ -19,6 +19,7 @@ from ..interfaces._base import RosMessage
 from ._bundled import bundled_definition, bundled_interface
 from ._classes import class_for
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
+from ._cdr import build_class_decoder, build_class_encoder
 from ._dict_classes import build_dict_converter
 from ._flat import build_flat_decoder
 from ._lru import LruCache
@@ -555,12 +556,13 @@ class CodecRegistry:
             shared = _SHARED.get(shared_key)
             if shared is not None:
                 return cast(Decoder, shared)
-            to_dict = self._dict_decoder(key, msgdef)
-            convert = build_dict_converter(key, closure, self._classes(closure))
-
-            def decode(payload: memoryview) -> Any:
-                return convert(to_dict(payload))
-
+            for type_name in closure:
+                if not is_valid_type_name(type_name):
+                    raise SchemaError(f"invalid type name {type_name!r}")
+            try:
+                decode: Decoder = build_class_decoder(key, closure, self._classes(closure))
+            except SchemaError as exc:
+                raise SchemaError(f"cannot build a decoder for {key!r}: {exc}") from exc
             _SHARED.put(shared_key, decode)
             return decode
 

@@ -60,8 +60,8 @@ def build_class(
     by type name. Its ``__qualname__`` is the generated class's
     (``Name.Request``), its ``repr`` rclpy's (``pkg.srv.Name.Request(...)``).
     Raises :class:`~ros_mobile_bridge.SchemaError` when the classes cannot
-    express the definition (a field named like a method or a keyword, a
-    primitive with no Python type) or a nested class is missing."""
+    express the definition (a field named like a method or a keyword, or
+    twice, a primitive with no Python type) or a nested class is missing."""
     pkg, kind, qualname = location(type_name)
     writer = _Writer(type_hash)
     summary = f"The ROS message ``{type_name}``, a class made at run time from its definition."
@@ -81,7 +81,10 @@ def build_class(
             fields[spec.name] = nested[spec.ref]
     # annotations stay text, as in a generated module
     source = "from __future__ import annotations\n\n" + "\n".join(lines) + "\n"
-    code = compile(source, f"<class {type_name}>", "exec", dont_inherit=True)
+    try:
+        code = compile(source, f"<class {type_name}>", "exec", dont_inherit=True)
+    except SyntaxError as exc:  # a definition no parser here makes (a field twice)
+        raise SchemaError(f"{type_name}: no class can express it: {exc.msg}") from None
     exec(code, namespace)
     cls: type[RosMessage] = namespace[qualname.rpartition(".")[2]]
     cls.__qualname__ = qualname
