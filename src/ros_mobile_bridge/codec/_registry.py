@@ -256,6 +256,30 @@ _MSG_SEPARATOR_LINE: Final = "=" * 80 + "\n"
 _MSG_SEPARATOR: Final = re.compile(r"^={80}\n", re.MULTILINE)
 
 
+def _with_class_encoder(
+    key: str,
+    closure: Mapping[str, MsgDef],
+    classes: Callable[[str], type[RosMessage]],
+    general: Encoder,
+) -> Encoder:
+    """``general`` (a mapping, or any instance, via its dict), with an
+    instance of the type's own class encoded by the generated class
+    encoder: no dict, no builder, the same bytes. A type the class encoder
+    does not cover keeps ``general`` alone."""
+    try:
+        cls = classes(key)
+        direct = build_class_encoder(key, closure, classes)
+    except SchemaError:
+        return general
+
+    def encode(data: Mapping[str, Any] | RosMessage) -> bytes:
+        if data.__class__ is cls:
+            return direct(data)
+        return general(data)
+
+    return encode
+
+
 def _sub_closure(key: str, closure: Mapping[str, MsgDef]) -> dict[str, MsgDef]:
     """The part of ``closure`` that ``key`` uses (``key`` included)."""
     out = {key: closure[key]}
@@ -726,7 +750,8 @@ class CodecRegistry:
             raise _unsupported(message_encoding, schema_name)
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
-            shared_key = ("encode", key, frozenset(self._closure(key, msgdef).items()))
+            closure = self._closure(key, msgdef)
+            shared_key = ("encode", key, frozenset(closure.items()))
             shared = _SHARED.get(shared_key)
             if shared is not None:
                 return cast(Encoder, shared)
@@ -734,7 +759,9 @@ class CodecRegistry:
             encode = gen.encoders.get(key)
             if encode is None:
                 build = build_builder(key, gen.defs, gen.store.types, gen.builders)
-                encode = _make_cdr_encoder(key, gen.store, build)
+                encode = _with_class_encoder(
+                    key, closure, self._classes(closure), _make_cdr_encoder(key, gen.store, build)
+                )
                 gen.encoders[key] = encode
             _SHARED.put(shared_key, encode)
             return encode
