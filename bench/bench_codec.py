@@ -241,7 +241,8 @@ def class_row(
     reg: CodecRegistry, label: str, name: str, data: dict[str, Any], seconds: float, rounds: int
 ) -> None:
     """Measure and print one row of the class codec table."""
-    from ros_mobile_bridge.codec._cdr import build_class_decoder, build_class_encoder
+    from ros_mobile_bridge.codec._cdr import build_class_decoder
+    from ros_mobile_bridge.codec._cdr_encode import build_class_encoder
     from ros_mobile_bridge.interfaces._base import message_class
 
     clock = time.thread_time

@@ -25,7 +25,9 @@ from _util import examples
 from ros_mobile_bridge import DecodeError, MessageError, SchemaError
 from ros_mobile_bridge.codec import CodecRegistry, bundled_interface_names
 from ros_mobile_bridge.codec._bundled import bundled_interface
-from ros_mobile_bridge.codec._cdr import DTYPES, build_class_decoder, build_class_encoder
+from ros_mobile_bridge.codec._cdr import build_class_decoder
+from ros_mobile_bridge.codec._cdr_encode import build_class_encoder
+from ros_mobile_bridge.codec._cdr_layout import DTYPES
 from ros_mobile_bridge.codec._convert import build_builder
 from ros_mobile_bridge.codec._interface import interface_definitions
 from ros_mobile_bridge.codec._model import ARRAY, INT_RANGES, SCALAR, MsgDef

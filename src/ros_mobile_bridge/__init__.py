@@ -47,9 +47,9 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._signals import cancel_on_signals as cancel_on_signals
     from ._sync._background import ClientHandle as ClientHandle
     from ._sync._background import open_client as open_client
-    from ._sync._client import SyncActionGoal as SyncActionGoal
+    from ._sync._blocks import SyncActionGoal as SyncActionGoal
+    from ._sync._blocks import SyncSubscription as SyncSubscription
     from ._sync._client import SyncClient as SyncClient
-    from ._sync._client import SyncSubscription as SyncSubscription
     from ._sync._client import connect_sync as connect_sync
     from ._types import DEFAULT_PORTS as DEFAULT_PORTS
     from ._types import ActionOutcome as ActionOutcome
@@ -127,9 +127,9 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "ThrottleMode": (".flow._throttle", "ThrottleMode"),
     "ClientHandle": ("._sync._background", "ClientHandle"),
     "open_client": ("._sync._background", "open_client"),
-    "SyncActionGoal": ("._sync._client", "SyncActionGoal"),
+    "SyncActionGoal": ("._sync._blocks", "SyncActionGoal"),
     "SyncClient": ("._sync._client", "SyncClient"),
-    "SyncSubscription": ("._sync._client", "SyncSubscription"),
+    "SyncSubscription": ("._sync._blocks", "SyncSubscription"),
     "connect_sync": ("._sync._client", "connect_sync"),
     "Recording": ("._core._record", "Recording"),
     "RecordStats": ("._core._record", "RecordStats"),

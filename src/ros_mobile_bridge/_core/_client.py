@@ -12,7 +12,7 @@ import contextlib
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
-from typing import TYPE_CHECKING, Any, Generic, TypeVar, overload
+from typing import TYPE_CHECKING, Any, TypeVar, overload
 
 import anyio
 
@@ -39,12 +39,12 @@ from .._types import (
 )
 from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
-from ..flow import Subscription, Watcher
+from ..flow import Watcher
 from ..interfaces._base import RosGoal, RosMessage, RosRequest
 from ._action import ActionGoal
-from ._connection import Connection, RouteContext, is_velocity_type, zero_twist
+from ._arguments import goal_arguments, publish_arguments, subscribe_arguments
+from ._connection import Connection, SubscriptionContext, is_velocity_type, zero_twist
 from ._published_types import PublishTypes
-from ._router import Route
 from ._serve import DEFAULT_SERVE_BUFFER, DEFAULT_SERVE_TIMEOUT, ServiceRequests
 
 if TYPE_CHECKING:
@@ -236,7 +236,7 @@ class Client:
         compression: Compression | None = None,
         decode: bool = True,
         save_bandwidth: SaveBandwidth = False,
-    ) -> _SubscriptionContext[M]: ...
+    ) -> SubscriptionContext[M]: ...
 
     @overload
     def subscribe(
@@ -252,7 +252,7 @@ class Client:
         compression: Compression | None = None,
         decode: bool = True,
         save_bandwidth: SaveBandwidth = False,
-    ) -> _SubscriptionContext[Any]: ...
+    ) -> SubscriptionContext[Any]: ...
 
     def subscribe(
         self,
@@ -267,7 +267,7 @@ class Client:
         compression: Compression | None = None,
         decode: bool = True,
         save_bandwidth: SaveBandwidth = False,
-    ) -> _SubscriptionContext[Any]:
+    ) -> SubscriptionContext[Any]:
         """Subscribe to ``topic``; an async context manager yielding a
         :class:`~ros_mobile_bridge.Subscription` (``async for msg in sub``).
 
@@ -336,7 +336,7 @@ class Client:
         subscriptions to one topic pause only when every one asks for it.
         Arguments are checked here, at once."""
         check_name("topic", topic)
-        want, schema = _wanted(type, schema)
+        want, schema = subscribe_arguments(type, schema)
         if schema is not None:
             check_schema(schema)
         if compression is not None and compression not in ("cbor", "cbor-raw"):
@@ -358,7 +358,7 @@ class Client:
             save_bandwidth=mode,
             want=want,
         )
-        return _SubscriptionContext(self._conn, route)
+        return SubscriptionContext(self._conn, route)
 
     # -- publishing ---------------------------------------------------------
     async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
@@ -440,7 +440,7 @@ class Client:
         :class:`~ros_mobile_bridge.MessageError` (a ``ValueError``) naming
         the field when ``data`` does not fit the schema."""
         check_name("topic", topic)
-        schema, data = _published(schema, data)
+        schema, data = publish_arguments(schema, data)
         check_schema(schema)
         if priority not in ("data", "control"):
             raise ValueError(f"priority must be 'data' or 'control', got {priority!r}")
@@ -848,7 +848,7 @@ class Client:
         fit the goal type; ``ActionGoalError`` when no server offers the
         action or it refuses the goal."""
         check_name("action", action)
-        action_type, goal = _goal(action_type, goal)
+        action_type, goal = goal_arguments(action_type, goal)
         check_schema(action_type)
         conn = self._conn
         conn.require_connected()
@@ -875,102 +875,3 @@ class Client:
                     contextlib.suppress(ConnectError, NotConnected),
                 ):
                     await handle.cancel()
-
-
-def _goal(
-    action_type: str | RosGoal[Any, Any], goal: Mapping[str, Any] | RosMessage | None
-) -> tuple[str, dict[str, Any] | RosMessage]:
-    """``send_action_goal``'s ``action_type`` and ``goal`` as (the action
-    type, the goal): a goal instance given alone names its action
-    (``pkg/action/Name_Goal`` -> ``pkg/action/Name``). ``TypeError`` /
-    ``ValueError`` naming the mistake."""
-    if isinstance(action_type, RosMessage):
-        if goal is not None:
-            raise TypeError("send_action_goal(action, goal) takes no third argument")
-        goal, action_type = action_type, ""
-    elif goal is None:
-        raise TypeError("send_action_goal(action, action_type, goal) needs the goal")
-    if isinstance(goal, RosMessage):
-        own = type(goal).__ros_type__
-        if not own.endswith("_Goal") or "/action/" not in own:
-            raise TypeError(f"a {own} is not an action's goal (an action's Goal class is)")
-        named = own.removesuffix("_Goal")
-        if action_type and not same_type_name(action_type, named):
-            raise ValueError(f"the goal is a {own}, not a goal of {action_type}")
-        return action_type or named, goal
-    if not isinstance(goal, Mapping):
-        raise TypeError(
-            f"goal must be a mapping (dict) or a goal instance, not {type(goal).__name__}"
-        )
-    return action_type, dict(goal)
-
-
-def _published(
-    schema: str | RosMessage, data: Mapping[str, Any] | RosMessage | None
-) -> tuple[str, Mapping[str, Any] | RosMessage]:
-    """``publish``'s ``schema`` and ``data`` as (the type name, the
-    message): the type of an instance given alone is its class's; an
-    instance given with a name must be of that type. ``TypeError`` /
-    ``ValueError`` naming the mistake."""
-    if isinstance(schema, RosMessage):
-        if data is not None:
-            raise TypeError("publish(topic, message) takes no data: the message is the data")
-        return type(schema).__ros_type__, schema
-    if data is None:
-        raise TypeError("publish(topic, schema, data) needs the data (a dict or a message)")
-    if isinstance(data, RosMessage):
-        own = type(data).__ros_type__
-        if isinstance(schema, str) and not same_type_name(schema, own):
-            raise ValueError(f"the message is a {own}, not a {schema}")
-    elif not isinstance(data, Mapping):
-        raise TypeError(
-            f"data must be a mapping (dict) or a message instance, not {type(data).__name__}"
-        )
-    return schema, data
-
-
-def _wanted(
-    given: type[RosMessage] | str | None, schema: str | None
-) -> tuple[type[RosMessage] | None, str | None]:
-    """``subscribe``'s ``type`` and ``schema`` as (the class wanted, the
-    type name): ``TypeError`` for a ``type`` that is neither a message
-    class nor a name, ``ValueError`` when the two name different types."""
-    if given is None:
-        return None, schema
-    if isinstance(given, str):
-        want, name = None, given
-    elif isinstance(given, type) and issubclass(given, RosMessage) and given is not RosMessage:
-        want, name = given, given.__ros_type__
-    else:
-        raise TypeError(
-            f"type must be a message class (geometry_msgs.msg.Twist) or a type name, not {given!r}"
-        )
-    if schema is not None and not same_type_name(schema, name):
-        raise ValueError(f"type {name!r} and schema {schema!r} name different types")
-    return want, name
-
-
-class _SubscriptionContext(Generic[M]):
-    """What :meth:`Client.subscribe` returns: enter to subscribe, exit to
-    unsubscribe (the bridge stops sending once no local subscriber is left)."""
-
-    def __init__(self, conn: Connection, route: Route) -> None:
-        self._routed = RouteContext(conn, route)
-
-    async def __aenter__(self) -> Subscription[M]:
-        return (await self._routed.__aenter__()).sub
-
-    async def __aexit__(self, *exc_info: object) -> None:
-        await self._routed.__aexit__(*exc_info)
-
-    def __aiter__(self) -> None:
-        raise TypeError(_SUBSCRIBE_HINT)
-
-    def __iter__(self) -> None:
-        raise TypeError(_SUBSCRIBE_HINT)
-
-
-_SUBSCRIBE_HINT = (
-    "subscribe() returns a context manager, not an iterator: "
-    "use `async with client.subscribe(...) as sub: async for m in sub`"
-)

@@ -11,7 +11,7 @@ import logging
 import random
 import time
 from collections.abc import Awaitable, Callable, Mapping
-from typing import Any, Final
+from typing import Any, Final, Generic, TypeVar
 
 import anyio
 import anyio.abc
@@ -22,7 +22,8 @@ from .._options import ClientOptions
 from .._types import Status
 from ..adapters import Adapter, ServiceHost
 from ..codec import same_type_name
-from ..flow import Bucket, ThrottleMode, Watchable, participate
+from ..flow import Bucket, Subscription, ThrottleMode, Watchable, participate
+from ..interfaces._base import RosMessage
 from ._outbound import Outbound
 from ._router import Route, Router
 from ._serve import ServedServices
@@ -32,9 +33,12 @@ __all__ = [
     "TWIST_STAMPED",
     "Connection",
     "RouteContext",
+    "SubscriptionContext",
     "is_velocity_type",
     "zero_twist",
 ]
+
+_M = TypeVar("_M", bound=RosMessage)
 
 TWIST: Final = "geometry_msgs/msg/Twist"
 TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
@@ -361,3 +365,29 @@ class RouteContext:
 
     async def __aexit__(self, *exc_info: object) -> None:
         await self._conn.router.remove(self._route)
+
+
+class SubscriptionContext(Generic[_M]):
+    """What :meth:`Client.subscribe` returns: enter to subscribe, exit to
+    unsubscribe (the bridge stops sending once no local subscriber is left)."""
+
+    def __init__(self, conn: Connection, route: Route) -> None:
+        self._routed = RouteContext(conn, route)
+
+    async def __aenter__(self) -> Subscription[_M]:
+        return (await self._routed.__aenter__()).sub
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self._routed.__aexit__(*exc_info)
+
+    def __aiter__(self) -> None:
+        raise TypeError(_SUBSCRIBE_HINT)
+
+    def __iter__(self) -> None:
+        raise TypeError(_SUBSCRIBE_HINT)
+
+
+_SUBSCRIBE_HINT = (
+    "subscribe() returns a context manager, not an iterator: "
+    "use `async with client.subscribe(...) as sub: async for m in sub`"
+)

@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any, Final
 import numpy as np
 
 from .._errors import MessageError
-from ._cdr import (
+from ._cdr_layout import (
     DTYPES,
     FORMATS,
     LITTLE,
@@ -533,7 +533,7 @@ def _numbers(value: Any, base: str, size: int, fixed: bool, owner: RosMessage) -
         array = value
     else:
         try:
-            array = _base._converted(owner, "", value, dtype, base)
+            array = _base.converted_array(owner, "", value, dtype, base)
         except MessageError as exc:
             raise _Refused(exc.reason) from None
         if array.dtype != dtype:

@@ -17,9 +17,10 @@ from rosbags.typesys.store import Typestore
 from .._errors import DecodeError, MessageError, SchemaError
 from ..interfaces._base import RosMessage
 from ._bundled import bundled_definition, bundled_interface
+from ._cdr import build_class_decoder
+from ._cdr_encode import build_class_encoder
 from ._classes import class_for
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
-from ._cdr import build_class_decoder, build_class_encoder
 from ._dict_classes import build_dict_converter
 from ._flat import build_flat_decoder
 from ._lru import LruCache

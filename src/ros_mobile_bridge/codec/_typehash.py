@@ -46,15 +46,13 @@ import json
 import threading
 import weakref
 from collections.abc import Callable, Iterable, Mapping
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, TypeAlias
+from typing import Any, Protocol, TypeAlias
 
 from .._errors import SchemaError
 from ._model import ARRAY, DUMMY_FIELD, SCALAR, FieldSpec, MsgDef
 from ._names import canonical_name, is_valid_type_name, lookup_candidates, split_type_name
-
-if TYPE_CHECKING:
-    from ._registry import CodecRegistry
 
 __all__ = [
     "ARRAY_OFFSET",
@@ -76,6 +74,15 @@ __all__ = [
 _Find: TypeAlias = Callable[[str], "tuple[str, object] | None"]
 """A registry's ROS definition lookup (:meth:`CodecRegistry.ros_lookup`):
 ``(the name found, its definition)`` or ``None``."""
+
+
+class CodecRegistry(Protocol):
+    """What this module needs of a :class:`~._registry.CodecRegistry`: its
+    definition lookup, held for a block (named so, not imported: the
+    registry builds classes, whose hashes this module computes)."""
+
+    def ros_lookup(self) -> AbstractContextManager[_Find]: ...
+
 
 FIELD_TYPE_NESTED_TYPE = 1
 """``type_description_interfaces/msg/FieldType.FIELD_TYPE_NESTED_TYPE``."""

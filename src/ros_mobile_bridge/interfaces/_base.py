@@ -574,14 +574,14 @@ def _array(
     if isinstance(value, numpy.ndarray) and value.dtype == dtype:
         array: NDArray[Any] = value
     else:
-        array = _converted(owner, name, value, dtype, info.element)
+        array = converted_array(owner, name, value, dtype, info.element)
     if array.ndim != 1:
         array = array.reshape(-1)
     _length(owner, name, info, array.shape[0])
     return array
 
 
-def _converted(
+def converted_array(
     owner: RosMessage, name: str, value: object, dtype: numpy.dtype[Any], element: str
 ) -> NDArray[Any]:
     import numpy

@@ -1,0 +1,88 @@
+"""The public methods' two-form arguments, checked and made one form:
+``publish(topic, Twist(...))`` or ``publish(topic, schema, data)``,
+``send_action_goal(action, Fibonacci.Goal(...))`` or ``(action, type,
+goal)``, ``subscribe(topic, Odometry)`` or ``subscribe(topic, "pkg/msg/T")``.
+Each raises ``TypeError`` / ``ValueError`` naming the mistake, at once."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from ..codec import same_type_name
+from ..interfaces._base import RosGoal, RosMessage
+
+__all__ = ["goal_arguments", "publish_arguments", "subscribe_arguments"]
+
+
+def goal_arguments(
+    action_type: str | RosGoal[Any, Any], goal: Mapping[str, Any] | RosMessage | None
+) -> tuple[str, dict[str, Any] | RosMessage]:
+    """``send_action_goal``'s ``action_type`` and ``goal`` as (the action
+    type, the goal): a goal instance given alone names its action
+    (``pkg/action/Name_Goal`` -> ``pkg/action/Name``). ``TypeError`` /
+    ``ValueError`` naming the mistake."""
+    if isinstance(action_type, RosMessage):
+        if goal is not None:
+            raise TypeError("send_action_goal(action, goal) takes no third argument")
+        goal, action_type = action_type, ""
+    elif goal is None:
+        raise TypeError("send_action_goal(action, action_type, goal) needs the goal")
+    if isinstance(goal, RosMessage):
+        own = type(goal).__ros_type__
+        if not own.endswith("_Goal") or "/action/" not in own:
+            raise TypeError(f"a {own} is not an action's goal (an action's Goal class is)")
+        named = own.removesuffix("_Goal")
+        if action_type and not same_type_name(action_type, named):
+            raise ValueError(f"the goal is a {own}, not a goal of {action_type}")
+        return action_type or named, goal
+    if not isinstance(goal, Mapping):
+        raise TypeError(
+            f"goal must be a mapping (dict) or a goal instance, not {type(goal).__name__}"
+        )
+    return action_type, dict(goal)
+
+
+def publish_arguments(
+    schema: str | RosMessage, data: Mapping[str, Any] | RosMessage | None
+) -> tuple[str, Mapping[str, Any] | RosMessage]:
+    """``publish``'s ``schema`` and ``data`` as (the type name, the
+    message): the type of an instance given alone is its class's; an
+    instance given with a name must be of that type. ``TypeError`` /
+    ``ValueError`` naming the mistake."""
+    if isinstance(schema, RosMessage):
+        if data is not None:
+            raise TypeError("publish(topic, message) takes no data: the message is the data")
+        return type(schema).__ros_type__, schema
+    if data is None:
+        raise TypeError("publish(topic, schema, data) needs the data (a dict or a message)")
+    if isinstance(data, RosMessage):
+        own = type(data).__ros_type__
+        if isinstance(schema, str) and not same_type_name(schema, own):
+            raise ValueError(f"the message is a {own}, not a {schema}")
+    elif not isinstance(data, Mapping):
+        raise TypeError(
+            f"data must be a mapping (dict) or a message instance, not {type(data).__name__}"
+        )
+    return schema, data
+
+
+def subscribe_arguments(
+    given: type[RosMessage] | str | None, schema: str | None
+) -> tuple[type[RosMessage] | None, str | None]:
+    """``subscribe``'s ``type`` and ``schema`` as (the class wanted, the
+    type name): ``TypeError`` for a ``type`` that is neither a message
+    class nor a name, ``ValueError`` when the two name different types."""
+    if given is None:
+        return None, schema
+    if isinstance(given, str):
+        want, name = None, given
+    elif isinstance(given, type) and issubclass(given, RosMessage) and given is not RosMessage:
+        want, name = given, given.__ros_type__
+    else:
+        raise TypeError(
+            f"type must be a message class (geometry_msgs.msg.Twist) or a type name, not {given!r}"
+        )
+    if schema is not None and not same_type_name(schema, name):
+        raise ValueError(f"type {name!r} and schema {schema!r} name different types")
+    return want, name
