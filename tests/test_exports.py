@@ -365,6 +365,7 @@ LAYERS: tuple[frozenset[str], ...] = (
     frozenset(
         {
             "_core._serve",
+            "_core._arguments",
             "_core._outbound",
             "_core._action",
             "_core._published_types",
