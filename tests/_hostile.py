@@ -34,7 +34,7 @@ async def until_data(sub: rmb.Subscription, data: str, timeout: float = 10.0) ->
     its adaptive throttle then replaces a count with the next one."""
     with anyio.fail_after(timeout):
         async for msg in sub:
-            got = msg.data.get("data")
+            got = getattr(msg.data, "data", None)
             if got == data or (
                 data.isdigit() and isinstance(got, str) and got.isdigit() and int(got) >= int(data)
             ):

@@ -200,6 +200,9 @@ class RosbridgeAdapter:
         self._sub_topics: dict[str, str] = {}  # subscribe id -> topic
         self._live: set[str] = set()  # topics we reported active
         self._decoders: dict[tuple[str, str], Decoder | None] = {}
+        # type -> its dict -> instance converter
+        self._converters: dict[str, Decoder] = {}
+        self._unconvertible: set[str] = set()  # types whose definition cannot build one
         self._stray: set[str] = set()  # topics we were sent but never subscribed
         self._pubs: Advertisements[_Publisher] = Advertisements()
         self._foreign: str | None = None  # why the server looks like Foxglove
@@ -411,20 +414,24 @@ class RosbridgeAdapter:
         if kind != wire.compression and kind in COMPRESSIONS:
             return  # still in flight from before a change of compression
         schema = wire.type or self._discovery.topic_types.get(topic, "")
-        if kind == "parsed":
+        if kind == "cbor-raw":
             try:
-                convert = self._decoders[(topic, kind)]
-            except KeyError:
-                convert = self._make_decoder(topic, kind, schema or None)
-            if convert is None:
-                decode: Decoder | None = lambda _payload: message  # noqa: E731
-            else:
-                decode = lambda _payload: convert(message)  # noqa: E731
-        else:
-            try:
-                decode = self._decoders[(topic, kind)]
+                decode: Decoder | None = self._decoders[(topic, kind)]
             except KeyError:
                 decode = self._make_decoder(topic, kind, schema or None)
+        else:
+            # JSON and CBOR become instances of the type's class where the
+            # registry defines it; by type, since the type of a topic's
+            # messages is learnt and may change while subscribed
+            convert = self._converters.get(schema) or self._converter(topic, schema)
+            if kind == "parsed":
+                if convert is None:
+                    decode = lambda _payload: message  # noqa: E731
+                else:
+                    decode = lambda _payload: convert(message)  # noqa: E731
+            else:
+                parse = _decode_json if kind == "json" else _decode_cbor
+                decode = parse if convert is None else lambda p: convert(parse(p))
         if topic not in self._live:
             self._set_live(topic, True)
         self._events.pending.append(
@@ -440,50 +447,43 @@ class RosbridgeAdapter:
         )
 
     def _make_decoder(self, topic: str, kind: str, schema: str | None) -> Decoder | None:
-        """The decoder of ``topic``'s messages of ``kind`` (for ``"parsed"``,
-        the converter of the message the reader parsed; None: kept as it
-        is), kept until the topic's subscription changes. A JSON or CBOR
-        message of a type the registry defines becomes an instance of its
-        class; of any other type, it stays the dict it is."""
-        decode: Decoder | None
-        if kind in ("parsed", "json", "cbor"):
-            convert = self._converter(topic, schema)
-            if kind == "parsed":
-                decode = convert
-            elif convert is None:
-                decode = _decode_json if kind == "json" else _decode_cbor
-            else:
-                parse = _decode_json if kind == "json" else _decode_cbor
-                decode = lambda payload: convert(parse(payload))  # noqa: E731
-        else:
-            decode = None
-            try:
-                if schema is None:
-                    raise SchemaError("the topic's type is not known")
-                decode = self.codecs.decoder(schema, "cdr")
-            except SchemaError as exc:
-                self._log.warning(
-                    "%s: no CDR decoder, cbor-raw messages will be delivered raw: %s",
-                    topic,
-                    truncate_for_log(str(exc)),
-                )
-                if isinstance(exc, SchemaTooLarge):
-                    self._events.reject("schema_too_large", f"{topic}: {exc}")
+        """The CDR decoder of ``topic``'s cbor-raw messages (None: none,
+        they are delivered raw), kept until the topic's subscription
+        changes."""
+        decode: Decoder | None = None
+        try:
+            if schema is None:
+                raise SchemaError("the topic's type is not known")
+            decode = self.codecs.decoder(schema, "cdr")
+        except SchemaError as exc:
+            self._log.warning(
+                "%s: no CDR decoder, cbor-raw messages will be delivered raw: %s",
+                topic,
+                truncate_for_log(str(exc)),
+            )
+            if isinstance(exc, SchemaTooLarge):
+                self._events.reject("schema_too_large", f"{topic}: {exc}")
         self._decoders[(topic, kind)] = decode
         return decode
 
-    def _converter(self, topic: str, schema: str | None) -> Decoder | None:
-        """The dict -> instance converter of ``schema`` (None when the
-        registry has no ROS definition of it, or it is too large)."""
-        if not schema:
+    def _converter(self, topic: str, schema: str) -> Decoder | None:
+        """The dict -> instance converter of ``schema``, kept; None (asked
+        again next time: a definition may be learnt meanwhile) when the
+        registry has no ROS definition of it, or it is too large."""
+        if not schema or schema in self._unconvertible:
             return None
         try:
-            return self.codecs.dict_converter(schema)
+            convert = self.codecs.dict_converter(schema)
         except SchemaError as exc:
+            if len(self._unconvertible) < _STRAY_LOGGED:  # logged once per type, bounded
+                self._unconvertible.add(schema)
             self._log.warning("%s: messages stay dicts: %s", topic, truncate_for_log(str(exc)))
             if isinstance(exc, SchemaTooLarge):
                 self._events.reject("schema_too_large", f"{topic}: {exc}")
             return None
+        if convert is not None:
+            self._converters[schema] = convert
+        return convert
 
     async def _handle(self, event: rb.Event) -> None:
         if isinstance(event, rb.ServiceResponse):
@@ -601,8 +601,7 @@ class RosbridgeAdapter:
             await self._ws.send(self._engine.unsubscribe(topic, id=current.id))
         self._subs[topic] = want
         self._sub_topics[want.id] = topic
-        for kind in ("parsed", "json", "cbor", "cbor-raw"):
-            self._decoders.pop((topic, kind), None)
+        self._decoders.pop((topic, "cbor-raw"), None)
         if want.compression == "cbor-raw" and want.type:
             await self._prepare_decoder(topic, want.type)
         await self._send_subscribe(topic, want)

@@ -31,6 +31,7 @@ import anyio
 from .._errors import ConnectError, DecodeError, SchemaError, ServiceError
 from ..codec import CodecRegistry
 from ..flow import Decoder
+from ..interfaces._base import RosMessage
 from ..wire import rmw_zenoh as rz
 from ..wire._limits import truncate_for_log
 from ._seam import ServiceHandler
@@ -184,7 +185,7 @@ class ZenohServing:
         except DecodeError as exc:
             self._refuse(item, name, "decode", f"the request does not decode: {exc}")
             return
-        if not isinstance(args, dict):  # a decoder returns a dict for a message
+        if not isinstance(args, RosMessage):  # a CDR decoder gives an instance
             self._refuse(item, name, "decode", "the request is not a message")
             return
         request_id = str(item.query_id)

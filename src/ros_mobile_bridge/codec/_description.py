@@ -34,6 +34,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any, Final
 
 from .._errors import SchemaError
+from ..interfaces._base import RosMessage
 from ._convert import Invalid, check_default
 from ._lru import LruCache
 from ._model import DUMMY_FIELD, SCALAR, DescribedTypes, FieldSpec, MsgDef
@@ -296,7 +297,11 @@ def describe(
     :class:`SchemaError` for a description that is not well formed, over
     :data:`MAX_DESCRIBED_TYPES` types or ``max_fields`` fields in all, or
     whose types the codec cannot build. Source texts that do not parse or
-    describe other fields are ignored."""
+    describe other fields are ignored. Each may be a message instance (a
+    ``type_description_interfaces`` class) or its dict."""
+    if isinstance(description, RosMessage):
+        description = description.to_dict()
+    type_sources = [s.to_dict() if isinstance(s, RosMessage) else s for s in type_sources]
     top, individuals = _individuals(description)
     actual = digest(top, (desc for desc, _ in individuals.values()))
     if expected_hash is not None and actual != expected_hash:
