@@ -21,8 +21,8 @@ from typing import Any
 import anyio
 
 import ros_mobile_bridge as rmb
-
-TWIST = "geometry_msgs/msg/Twist"
+from ros_mobile_bridge.interfaces.geometry_msgs.msg import Twist, Vector3
+from ros_mobile_bridge.interfaces.nav_msgs.msg import Odometry
 
 
 @dataclass
@@ -32,13 +32,22 @@ class Report:
     detail: str = "not started"
 
 
-async def first(robot: rmb.Client, topic: str, timeout: float = 5.0) -> dict[str, Any]:
+async def first(robot: rmb.Client, topic: str, timeout: float = 5.0) -> Any:
     """The next message on ``topic`` (raises ``TimeoutError`` after ``timeout`` seconds)."""
     with anyio.fail_after(timeout):
         async with robot.subscribe(topic) as sub:
             async for msg in sub:
-                return dict(msg.data)
+                return msg.data
     raise rmb.NotConnected(f"{topic}: subscription ended")
+
+
+async def odometry(robot: rmb.Client, timeout: float = 5.0) -> Odometry:
+    """The next odometry message (``TimeoutError`` after ``timeout`` seconds)."""
+    with anyio.fail_after(timeout):
+        async with robot.subscribe("/odom", Odometry) as sub:
+            async for msg in sub:
+                return msg.data
+    raise rmb.NotConnected("/odom: subscription ended")
 
 
 async def run_robot(url: str, report: Report, seconds: float, speed: float) -> None:
@@ -47,14 +56,14 @@ async def run_robot(url: str, report: Report, seconds: float, speed: float) -> N
     )
     try:
         async with rmb.connect(url, options=options) as robot:
-            status = await first(robot, "/status")
+            status = await first(robot, "/status")  # a JSON channel: a dict
             with anyio.move_on_after(seconds):
                 while True:
-                    twist = {"linear": {"x": speed}}
-                    await robot.publish("/cmd_vel", TWIST, twist, priority="control")
+                    await robot.publish(
+                        "/cmd_vel", Twist(linear=Vector3(x=speed)), priority="control"
+                    )
                     await anyio.sleep(0.1)
-            odom: Any = await first(robot, "/odom")
-            x = odom["pose"]["pose"]["position"]["x"]
+            x = (await odometry(robot)).pose.pose.position.x
             report.ok = True
             report.detail = f"mode={status['mode']} battery={status['battery_percentage']:.0%}"
             report.detail += f" x={x:.2f}"

@@ -20,6 +20,9 @@ from typing import Any
 import trio
 
 import ros_mobile_bridge as rmb
+from ros_mobile_bridge.interfaces import RosMessage
+from ros_mobile_bridge.interfaces.nav_msgs.msg import Odometry
+from ros_mobile_bridge.interfaces.sensor_msgs.msg import BatteryState
 
 
 @dataclass
@@ -38,13 +41,15 @@ class TopicStats:
 
 def summary(topic: str, data: Any) -> dict[str, Any]:
     """A few readable fields of the messages the demo robot sends (else the field names)."""
-    if topic == "/odom":
-        p = data["pose"]["pose"]["position"]
-        return {"x": round(p["x"], 3), "y": round(p["y"], 3)}
-    if topic == "/battery":
-        return {"percentage": round(float(data["percentage"]), 4)}
-    if topic == "/status":
+    if isinstance(data, Odometry):
+        p = data.pose.pose.position
+        return {"x": round(p.x, 3), "y": round(p.y, 3)}
+    if isinstance(data, BatteryState):
+        return {"percentage": round(data.percentage, 4)}
+    if topic == "/status":  # a JSON channel: a dict
         return {"mode": data["mode"], "speed": data["speed"]}
+    if isinstance(data, RosMessage):
+        return {"fields": list(data.get_fields_and_field_types())[:6]}
     return {"fields": sorted(data)[:6]} if isinstance(data, dict) else {}
 
 

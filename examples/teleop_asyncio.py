@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import anyio
 
 import ros_mobile_bridge as rmb
+from ros_mobile_bridge.interfaces.geometry_msgs.msg import Twist, Vector3
+from ros_mobile_bridge.interfaces.nav_msgs.msg import Odometry
 
 TWIST = "geometry_msgs/msg/Twist"
 RATE_HZ = 10.0
@@ -43,16 +45,16 @@ class Pose:
 
 
 async def follow_odometry(robot: rmb.Client, pose: Pose) -> None:
-    async with robot.subscribe("/odom", dispatch="latest") as sub:
+    async with robot.subscribe("/odom", Odometry, dispatch="latest") as sub:
         async for msg in sub:
             position = msg.data.pose.pose.position
-            pose.x, pose.y = position["x"], position["y"]
+            pose.x, pose.y = position.x, position.y
             pose.messages += 1
 
 
 async def send(robot: rmb.Client, linear_x: float, angular_z: float) -> None:
-    twist = {"linear": {"x": linear_x}, "angular": {"z": angular_z}}
-    await robot.publish("/cmd_vel", TWIST, twist, priority="control")
+    twist = Twist(linear=Vector3(x=linear_x), angular=Vector3(z=angular_z))
+    await robot.publish("/cmd_vel", twist, priority="control")
 
 
 async def drive_route(robot: rmb.Client, pose: Pose) -> None:

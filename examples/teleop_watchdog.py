@@ -19,6 +19,7 @@ import sys
 import anyio
 
 import ros_mobile_bridge as rmb
+from ros_mobile_bridge.interfaces.geometry_msgs.msg import Twist, Vector3
 
 
 async def main(url: str, seconds: float) -> int:
@@ -30,12 +31,8 @@ async def main(url: str, seconds: float) -> int:
         await robot.advertise("/cmd_vel", "geometry_msgs/msg/Twist")  # no set-up pause later
         with anyio.move_on_after(seconds):
             while True:
-                await robot.publish(
-                    "/cmd_vel",
-                    "geometry_msgs/msg/Twist",
-                    {"linear": {"x": 0.3}, "angular": {"z": 0.5}},
-                    priority="control",
-                )
+                twist = Twist(linear=Vector3(x=0.3), angular=Vector3(z=0.5))
+                await robot.publish("/cmd_vel", twist, priority="control")
                 await anyio.sleep(0.05)
     if stop.signal is not None:
         print(f"stopped by {stop.signal.name}: zero Twist sent on teardown")

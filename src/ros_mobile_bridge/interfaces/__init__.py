@@ -26,7 +26,9 @@ from a definition learnt while running, from the same source.
 """
 
 from ._base import RosAction as RosAction
+from ._base import RosGoal as RosGoal
 from ._base import RosMessage as RosMessage
+from ._base import RosRequest as RosRequest
 from ._base import RosService as RosService
 
-__all__ = ["RosAction", "RosMessage", "RosService"]
+__all__ = ["RosAction", "RosGoal", "RosMessage", "RosRequest", "RosService"]
