@@ -40,7 +40,7 @@ from .._types import (
 from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
 from ..flow import Watcher
-from ..interfaces._base import RosGoal, RosMessage, RosRequest
+from ..interfaces._base import RosGoal, RosMessage, RosRequest, RosService
 from ._action import ActionGoal
 from ._arguments import goal_arguments, publish_arguments, subscribe_arguments
 from ._connection import Connection, SubscriptionContext, is_velocity_type, zero_twist
@@ -613,18 +613,19 @@ class Client:
     def serve(
         self,
         name: str,
-        service_type: str,
+        service_type: str | type[RosService],
         *,
         timeout: float = DEFAULT_SERVE_TIMEOUT,
         buffer: int = DEFAULT_SERVE_BUFFER,
     ) -> AbstractAsyncContextManager[ServiceRequests]:
-        """Offer service ``name`` of type ``service_type``
-        (``"pkg/srv/Name"``) to the ROS graph through the bridge; an async
-        context manager yielding :class:`~ros_mobile_bridge.ServiceRequests`::
+        """Offer service ``name`` of type ``service_type`` (the service's
+        class, ``AddTwoInts``, or its name, ``"pkg/srv/Name"``) to the ROS
+        graph through the bridge; an async context manager yielding
+        :class:`~ros_mobile_bridge.ServiceRequests`::
 
-            async with robot.serve("/add", "example_interfaces/srv/AddTwoInts") as requests:
-                async for req in requests:
-                    await req.reply({"sum": req.args["a"] + req.args["b"]})
+            async with robot.serve("/add", AddTwoInts) as requests:
+                async for req in requests:  # req.args: an AddTwoInts.Request
+                    await req.reply(AddTwoInts.Response(sum=req.args.a + req.args.b))
 
         Every call is answered exactly once: by ``req.reply(values)`` or
         ``req.fail(message)``, else with ``result: false`` and a reason when
@@ -642,6 +643,8 @@ class Client:
         ``ServiceError`` when another client serves the name, ``ValueError``
         when this client serves it already."""
         check_name("service name", name)
+        if isinstance(service_type, type) and issubclass(service_type, RosService):
+            service_type = service_type.__ros_type__
         check_schema(service_type)
         if service_type.count("/") == 2 and service_type.split("/")[1] != "srv":
             raise ValueError(

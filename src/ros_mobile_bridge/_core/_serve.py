@@ -31,6 +31,7 @@ from .._errors import (
     ServiceError,
 )
 from ..adapters import ServiceHost
+from ..interfaces._base import RosMessage
 
 __all__ = ["ServeStats", "ServedServices", "ServiceRequest", "ServiceRequests", "Serving"]
 
@@ -96,7 +97,8 @@ Answer = Callable[[_Call, Outcome, Any, bool], Awaitable[None]]
 
 class ServiceRequest:
     """One call to a service this client serves. ``args`` is the decoded
-    request (a dict), ``id`` the server's id for the call, ``service`` the
+    request: an instance of the service's ``Request`` class when the
+    library knows the type's definition (``req.args.a``), else a dict; ``id`` the server's id for the call, ``service`` the
     service name, ``deadline`` the ``anyio.current_time()`` after which the
     library answers it ``result: false``.
 
@@ -104,7 +106,7 @@ class ServiceRequest:
 
     __slots__ = ("_answer", "_call", "args", "deadline", "id", "service")
 
-    def __init__(self, call: _Call, service: str, args: dict[str, Any], answer: Answer) -> None:
+    def __init__(self, call: _Call, service: str, args: Any, answer: Answer) -> None:
         self._call = call
         self._answer = answer
         self.id = call.id
@@ -125,10 +127,11 @@ class ServiceRequest:
         """How it was answered (a :class:`ServeStats` counter name), or None."""
         return self._call.outcome
 
-    async def reply(self, values: Mapping[str, Any] | None = None) -> None:
-        """Answer with the response ``values`` (a dict; missing fields are
-        zero when the type is known). Raises ``TypeError`` for a value that
-        is not a mapping, :class:`~ros_mobile_bridge.MessageError` (a
+    async def reply(self, values: Mapping[str, Any] | RosMessage | None = None) -> None:
+        """Answer with the response ``values``: an instance of the
+        service's ``Response`` class (``AddTwoInts.Response(sum=3)``) or a
+        dict (missing fields are zero when the type is known). Raises
+        ``TypeError`` for a value that is neither, :class:`~ros_mobile_bridge.MessageError` (a
         ``ValueError``) naming the field when it does not fit the response
         type (the request stays unanswered then), ``ServiceError`` when the
         request was answered already (by the library at its deadline, for
@@ -139,8 +142,13 @@ class ServiceRequest:
         written, it counts as replied even if a cancellation lands next."""
         if values is None:
             values = {}
+        if isinstance(values, RosMessage):
+            await self._answer(self._call, "replied", values, True)
+            return
         if not isinstance(values, Mapping):
-            raise TypeError(f"values must be a mapping (dict), not {type(values).__name__}")
+            raise TypeError(
+                f"values must be a message instance or a mapping (dict), not {type(values).__name__}"
+            )
         await self._answer(self._call, "replied", dict(values), True)
 
     async def fail(self, message: str = "the service failed") -> None:
