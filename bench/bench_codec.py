@@ -32,6 +32,7 @@ thread (``time.thread_time``: other processes on the machine do not count).
 from __future__ import annotations
 
 import argparse
+import functools
 import importlib.metadata
 import platform
 import sys
@@ -93,7 +94,7 @@ def bench_case(
 ) -> None:
     """Measure and print one message type."""
     encode = reg.encoder(name, "cdr")
-    decode = reg.decoder(name, "cdr")
+    decode = reg.dict_decoder(name)  # the dict form (what decoder() gave before classes)
     payload = encode(data)
     view = memoryview(payload)
     store, msgdef = raw_rosbags(reg, name)
@@ -253,7 +254,7 @@ def class_row(
     payload = reg.encoder(name, "cdr")(data)
     view = memoryview(payload)
     store, _msgdef = raw_rosbags(reg, key)
-    dict_decode = reg.decoder(name, "cdr")
+    dict_decode = reg.dict_decoder(name)
     fast = mcap_fast_decoder(reg, key)
     instance = decode(view)
     native = store.deserialize_cdr(view, key)
@@ -308,6 +309,62 @@ def class_table(seconds: float, rounds: int) -> None:
     print()
 
 
+def _base64_bytes(value: Any) -> Any:
+    """``uint8[]`` fields as rosbridge writes them: bytes (base64 in JSON)."""
+    if isinstance(value, dict):
+        return {k: _base64_bytes(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_base64_bytes(v) for v in value]
+    if isinstance(value, np.ndarray) and value.dtype == np.uint8:
+        return value.tobytes()
+    return value
+
+
+def _convert_json(convert: Callable[[Any], object], text: bytes) -> object:
+    import json
+
+    return convert(json.loads(text))
+
+
+def json_table(seconds: float, rounds: int) -> None:
+    """JSON (as rosbridge sends it: ``uint8[]`` as base64 text) -> dict
+    (``json.loads``, what a JSON message was before classes) against JSON ->
+    instance (``json.loads`` then the registry's generated dict converter),
+    per message of the class table."""
+    import json
+
+    from ros_mobile_bridge import jsonable
+
+    clock = time.thread_time
+    reg = CodecRegistry()
+    print(
+        f"JSON -> class (rosbridge's form): calls per second, best of {rounds} rounds "
+        f"of {seconds:g} s CPU time each"
+    )
+    head = f"{'message':<17} {'bytes':>9} | {'-> dict':>10} {'-> class':>10} {'ratio':>7}"
+    print(head)
+    print("-" * len(head))
+    for label, name, data in class_cases():
+        message = reg.decoder(name, "cdr")(memoryview(reg.encoder(name, "cdr")(data)))
+        text = json.dumps(jsonable(_base64_bytes(message.to_dict()))).encode()
+        convert = reg.dict_converter(name)
+        assert convert is not None
+        assert convert(json.loads(text)) == message
+        contenders: dict[str, Callable[[], object]] = {
+            "dict": functools.partial(json.loads, text),
+            "class": functools.partial(_convert_json, convert, text),
+        }
+        best: dict[str, float] = {}
+        for _ in range(rounds):
+            for what, func in contenders.items():
+                best[what] = max(best.get(what, 0.0), rate(func, seconds, clock))
+        print(
+            f"{label:<17} {len(text):>9,} | {fmt_rate(best['dict']):>10} "
+            f"{fmt_rate(best['class']):>10} {fmt_ratio(best['class'] / best['dict']):>7}"
+        )
+    print()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=0.5, help="time per measurement")
@@ -315,6 +372,7 @@ def main() -> None:
         "--rounds", type=int, default=5, help="rounds of the class codec table (best of)"
     )
     parser.add_argument("--classes-only", action="store_true", help="only the class codec table")
+    parser.add_argument("--json-only", action="store_true", help="only the JSON -> class table")
     args = parser.parse_args()
     seconds: float = args.seconds
 
@@ -356,10 +414,14 @@ def main() -> None:
     if args.classes_only:
         class_table(min(seconds, 0.2), args.rounds)
         return
+    if args.json_only:
+        json_table(min(seconds, 0.2), args.rounds)
+        return
     print(f"{seconds:g} s per measurement, best batch rate\n")
     for label, name, data in cases:
         bench_case(reg, label, name, data, seconds)
     class_table(min(seconds, 0.2), args.rounds)
+    json_table(min(seconds, 0.2), args.rounds)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ from __future__ import annotations
 import base64
 import binascii
 import keyword
+import sys
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -37,13 +38,25 @@ _INTS = frozenset(
 _STRINGS = frozenset({"string", "wstring"})
 
 
+if sys.version_info >= (3, 11):
+
+    def _from_base64(text: str) -> bytes:
+        """Strict base64 (binascii's own check: twice as fast as base64's)."""
+        return binascii.a2b_base64(text, strict_mode=True)
+
+else:  # pragma: no cover - Python 3.10 has no strict_mode
+
+    def _from_base64(text: str) -> bytes:
+        return base64.b64decode(text, validate=True)
+
+
 def _array(value: Any, dtype: np.dtype[Any]) -> np.ndarray[Any, Any]:
     """A numeric or bool array field's value as a numpy array of ``dtype``."""
     if type(value) is np.ndarray:
         return value if value.dtype == dtype else value.astype(dtype)
     if isinstance(value, str):  # rosbridge: uint8[] / byte[] / char[] as base64
         try:
-            raw = base64.b64decode(value, validate=True)
+            raw = _from_base64(value)
         except (binascii.Error, ValueError) as exc:
             raise ValueError(f"not base64: {exc}") from None
         return np.frombuffer(raw, np.uint8).view(dtype)
