@@ -501,7 +501,7 @@ async def test_zero_twist_is_the_last_message_on_exit_and_on_cancel(
     probe = 0.25
 
     def speeds() -> list[float]:  # what arrived after the probes
-        got = [decode(memoryview(payload))["linear"]["x"] for payload in received]
+        got = [decode(memoryview(payload)).linear.x for payload in received]
         return [x for x in got if x != probe]
 
     try:
@@ -648,7 +648,7 @@ def test_rmb_pub_killed_leaves_a_zero_twist_last(
 
     def on_sample(sample: Any) -> None:
         with lock:
-            received.append(decode(memoryview(bytes(sample.payload)))["linear"]["x"])
+            received.append(decode(memoryview(bytes(sample.payload))).linear.x)
 
     sub = raw.declare_subscriber(data_key(zenoh_domain, "/cmd_vel", TWIST), on_sample)
     twist = json.dumps({"linear": {"x": 0.3}})
