@@ -22,13 +22,13 @@ import numpy as np
 import pytest
 
 import ros_mobile_bridge as rmb
-from ros_mobile_bridge.interfaces.std_msgs.msg import String
-from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool
 from _cli_run import rmb as rmb_cli
 from _util import rosbridge_options as options
 from _util import take, wait_until, websocket_of
 from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph, random_domain_id
+from ros_mobile_bridge.interfaces.std_msgs.msg import String
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool
 
 pytest_plugins = ["peers.ros_fixtures"]
 
