@@ -279,17 +279,6 @@ async def test_a_named_class_refuses_another_definition_of_its_type(
 # -- rosbridge ------------------------------------------------------------------------
 
 
-_JSON_INLINE_BUG = (
-    "library bug: rosbridge JSON publish frames taken by the inline fast path "
-    "(RosbridgeAdapter._take_inline, adapters/_rosbridge.py) get _decode_json "
-    "without the type's dict->instance converter, so most JSON messages arrive "
-    "as dicts, and a subscription naming a class gets them raw ('not a "
-    "std_msgs/msg/String but a dict'); only frames that go through _on_publish "
-    "are converted"
-)
-
-
-@pytest.mark.xfail(strict=True, reason=_JSON_INLINE_BUG)
 @one_loop
 async def test_rosbridge_json_subscriptions_give_instances(rosbridge: RosBridge) -> None:
     """The graph's ``/chatter`` with its class named and ``/odom`` without
@@ -372,15 +361,6 @@ async def test_rosbridge_published_instances_reach_ros_and_come_back(
     ]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "library bug: RosbridgeAdapter.call_service (adapters/_rosbridge.py) takes the "
-        "response type only from discovery's service_types, looked up in the background "
-        "seconds after connecting; the request instance's own type "
-        "(std_srvs/srv/SetBool_Request) is ignored, so the response is a dict"
-    ),
-)
 @one_loop
 async def test_rosbridge_call_service_with_a_request_instance_right_after_connecting(
     rosbridge: RosBridge,
@@ -466,7 +446,6 @@ async def test_rosbridge_serve_with_the_service_class(
             tg.start_soon(answer, requests)
             first = await ros_call(True)
             second = await ros_call(False)
-            # (once the caller's graph shows the type: see the xfail test above)
             await wait_until(
                 lambda: (
                     {s.name: s.type for s in caller.services}.get(name) == "std_srvs/srv/SetBool"

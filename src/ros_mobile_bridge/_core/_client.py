@@ -636,8 +636,8 @@ class Client:
         ``options.teardown_timeout``). After a reconnect it is advertised
         again; calls that were in flight on the lost connection are lost.
 
-        rosbridge only: ``NotSupportedError`` over Foxglove (its protocol has
-        no way to offer a service) and Zenoh. Arguments are checked here, at
+        Over rosbridge and Zenoh; ``NotSupportedError`` over Foxglove (its
+        protocol has no way to offer a service). Arguments are checked here, at
         once (``ValueError`` / ``TypeError``); entering raises
         ``SchemaError`` when the bridge does not know the type,
         ``ServiceError`` when another client serves the name, ``ValueError``

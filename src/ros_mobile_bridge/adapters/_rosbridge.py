@@ -84,6 +84,16 @@ def _decode_cbor(payload: memoryview) -> Any:
         raise DecodeError(f"invalid CBOR publish frame: {exc}") from None
 
 
+def _service_of(request: Any) -> str | None:
+    """The service type a request instance belongs to (``pkg/srv/Name``
+    of a ``pkg/srv/Name_Request``), else None: a call made before discovery
+    learnt the service's type still gets its typed answer."""
+    own = getattr(type(request), "__ros_type__", "")
+    if isinstance(own, str) and "/srv/" in own and own.endswith("_Request"):
+        return own.removesuffix("_Request")
+    return None
+
+
 def _is_foxglove_rejection(exc: HandshakeRejected) -> bool:
     """The Foxglove SDK server's answer to a handshake without its
     subprotocols: HTTP 400 naming the missing header."""
@@ -203,6 +213,8 @@ class RosbridgeAdapter:
         # type -> its dict -> instance converter
         self._converters: dict[str, Decoder] = {}
         self._unconvertible: set[str] = set()  # types whose definition cannot build one
+        # (type, "json" or "cbor") -> parse, then convert
+        self._text_decoders: dict[tuple[str, str], Decoder] = {}
         self._stray: set[str] = set()  # topics we were sent but never subscribed
         self._pubs: Advertisements[_Publisher] = Advertisements()
         self._foreign: str | None = None  # why the server looks like Foxglove
@@ -371,16 +383,31 @@ class RosbridgeAdapter:
         sink = self._events.sink
         if wire is None or wire.compression is not None or sink is None:
             return False
+        schema = wire.type or self._discovery.topic_types.get(topic, "")
         frame = RawFrame(
             topic,
-            wire.type or self._discovery.topic_types.get(topic, ""),
+            schema,
             "json",
             memoryview(raw),
             None,
             time.time_ns(),
-            _decode_json,
+            self._text_decoder(topic, schema, "json"),
         )
         return sink.deliver_now(frame)
+
+    def _text_decoder(self, topic: str, schema: str, kind: str) -> Decoder:
+        """The decoder of a JSON or CBOR ``publish`` of ``schema``: the
+        message parsed, then made an instance of its class where the
+        registry defines the type (built once per type and kind)."""
+        decode = self._text_decoders.get((schema, kind))
+        if decode is not None:
+            return decode
+        parse = _decode_json if kind == "json" else _decode_cbor
+        convert = self._converter(topic, schema)
+        if convert is None:
+            return parse  # asked again next time: a definition may be learnt meanwhile
+        decode = self._text_decoders[(schema, kind)] = lambda p: convert(parse(p))
+        return decode
 
     def _on_event(self, event: rb.Publish, received_ns: int) -> None:
         topic = event.topic
@@ -423,15 +450,15 @@ class RosbridgeAdapter:
             # JSON and CBOR become instances of the type's class where the
             # registry defines it; by type, since the type of a topic's
             # messages is learnt and may change while subscribed
-            convert = self._converters.get(schema) or self._converter(topic, schema)
+            convert = None
             if kind == "parsed":
-                if convert is None:
-                    decode = lambda _payload: message  # noqa: E731
-                else:
-                    decode = lambda _payload: convert(message)  # noqa: E731
+                convert = self._converters.get(schema) or self._converter(topic, schema)
+            if kind != "parsed":
+                decode = self._text_decoder(topic, schema, kind)
+            elif convert is None:
+                decode = lambda _payload: message  # noqa: E731
             else:
-                parse = _decode_json if kind == "json" else _decode_cbor
-                decode = parse if convert is None else lambda p: convert(parse(p))
+                decode = lambda _payload: convert(message)  # noqa: E731
         if topic not in self._live:
             self._set_live(topic, True)
         self._events.pending.append(
@@ -711,7 +738,7 @@ class RosbridgeAdapter:
     # -- services ------------------------------------------------------------------
     async def call_service(self, name: str, request: Any, timeout: float) -> Any:
         args = plain(request) if request is not None else {}
-        service_type = self._discovery.service_types.get(name)
+        service_type = self._discovery.service_types.get(name) or _service_of(request)
         if not service_type:
             return await self._calls.call(name, args, timeout)
         request_type, response_type = CodecRegistry.service_type_names(service_type)
