@@ -33,6 +33,7 @@ from _util import rosbridge_options, wait_until, zenoh_options
 from peers.rosbridge import RosBridge, RosGraph
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.demo import DemoRobot
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool
 
 pytest_plugins = ["peers.ros_fixtures"]
 
@@ -83,10 +84,9 @@ async def test_foxglove_publish_and_call_misfits_are_one_class(robot: DemoRobot)
         with pytest.raises(rmb.NotSupportedError):
             async with client.serve("/rmb_contract_served", SET_BOOL):
                 pass
-        assert await client.call_service("/set_led", {"data": False}) == {
-            "success": True,
-            "message": "led off",
-        }
+        assert await client.call_service("/set_led", {"data": False}) == SetBool.Response(
+            success=True, message="led off"
+        )
     assert robot.received_cmd_vel()[before:] == []  # nothing that did not fit was sent
 
 
@@ -234,7 +234,7 @@ async def test_rosbridge_misfits_are_one_class(rosbridge: RosBridge, ros_graph: 
                 pass
         assert_misfit(goal.value, "send_action_goal /fibonacci", "Fibonacci_Goal", "ordr")
         answer = await client.call_service("/set_flag", {"data": True})
-        assert answer["success"] is True
+        assert answer.success is True
 
 
 async def answer_a_typo_first(
@@ -320,7 +320,7 @@ async def test_zenoh_misfits_are_one_class(
                 goal.value, "send_action_goal /fibonacci", "SendGoal_Request", "goal.order"
             )
             answer = await c.call_service("/sdk_set_bool", {"data": True}, timeout=10)
-            assert answer["success"] is True
+            assert answer.success is True
     finally:
         action.stop()
 

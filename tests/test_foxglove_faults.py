@@ -709,7 +709,7 @@ async def test_decoder_is_built_off_the_event_loop_before_the_first_message() ->
                         msg = await sub.__anext__()
     finally:
         mp.undo()
-    assert msg.data == {"a": 1.5, "b": 2.5}
+    assert msg.data.to_dict() == {"a": 1.5, "b": 2.5}
     assert threads and loop_thread not in threads
 
 

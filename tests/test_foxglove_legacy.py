@@ -22,6 +22,7 @@ from _util import fast_options as options
 from _util import wait_until
 from peers.foxglove_legacy import LegacyServer
 from peers.foxglove_sdk import SdkServer, decode, string_msg
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool, Trigger
 from ros_mobile_bridge.transport import HandshakeRejected, connect_websocket
 
 # Marked here, not only by conftest: anyio's plugin rebuilds items it marks
@@ -135,7 +136,7 @@ async def test_topics_and_services_with_ids_from_zero(server: LegacyServer) -> N
                 msg = await sub.__anext__()
         assert msg.data.to_dict() == {"data": "zero"}
         reply = await robot.call_service("/set_flag", {"data": True}, timeout=5)
-        assert reply == {"success": True, "message": "on"}
+        assert reply == SetBool.Response(success=True, message="on")
     assert server.recorder.subscribed == [0]
     assert [r.service_id for r in server.service_requests()] == [0]
 
@@ -290,8 +291,8 @@ async def test_service_call_round_trip_cdr(server: LegacyServer) -> None:
     async with rmb.connect(server.url, options=options()) as robot:
         on = await robot.call_service("/set_flag", {"data": True}, timeout=5)
         off = await robot.call_service("/set_flag", {"data": False}, timeout=5)
-    assert on == {"success": True, "message": "on"}
-    assert off == {"success": True, "message": "off"}
+    assert on == SetBool.Response(success=True, message="on")
+    assert off == SetBool.Response(success=True, message="off")
     requests = server.service_requests()
     assert [(r.service_id, r.encoding, r.payload) for r in requests] == [
         (0, "cdr", b"\x00\x01\x00\x00\x01"),
@@ -354,7 +355,7 @@ async def test_service_with_the_old_flat_schema_fields(server: LegacyServer) -> 
     )
     async with rmb.connect(server.url, options=options()) as robot:
         reply = await robot.call_service("/trigger", timeout=5)
-    assert reply == {"success": True, "message": "triggered"}
+    assert reply == Trigger.Response(success=True, message="triggered")
     [request] = server.service_requests()
     assert request.payload == b"\x00\x01\x00\x00"
     assert request.encoding == "cdr"
@@ -379,10 +380,9 @@ async def test_failing_service_handler_answers_only_a_status_and_the_call_times_
         assert robot.status == "connected"
         # the connection still works afterwards
         server.service_handlers[0] = setbool_handler
-        assert await robot.call_service("/set_flag", {"data": False}, timeout=5) == {
-            "success": True,
-            "message": "off",
-        }
+        assert await robot.call_service(
+            "/set_flag", {"data": False}, timeout=5
+        ) == SetBool.Response(success=True, message="off")
     errors = [
         r.getMessage() for r in caplog.records if r.name == LOGGER and r.levelno >= logging.ERROR
     ]

@@ -21,6 +21,7 @@ import ros_mobile_bridge as rmb
 from _util import fast_options as options
 from _util import wait_until
 from peers.foxglove_sdk import SdkServer, cdr, decode, image_msg, ros2_service, string_msg
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool, Trigger
 
 
 @pytest.fixture
@@ -374,8 +375,8 @@ async def test_call_service_sends_cdr_and_decodes_the_response() -> None:
         async with rmb.connect(srv.url, options=options(on_latency=latencies.append)) as robot:
             reply = await robot.call_service("/set_flag", {"data": True}, timeout=5)
             reply2 = await robot.call_service("/set_flag", {"data": False}, timeout=5)
-    assert reply == {"success": True, "message": "on"}
-    assert reply2 == {"success": True, "message": "off"}
+    assert reply == SetBool.Response(success=True, message="on")
+    assert reply2 == SetBool.Response(success=True, message="off")
     assert calls[0] == b"\x00\x01\x00\x00\x01"
     assert len(latencies) == 2 and all(x >= 0 for x in latencies)
 
@@ -431,7 +432,7 @@ async def test_schemaless_service_gets_the_bare_cdr_header() -> None:
             reply = await robot.call_service("/trigger", timeout=5)
     assert calls == [b"\x00\x01\x00\x00"]
     # std_srvs/srv/Trigger is bundled, so the response decodes without a server schema
-    assert reply == {"success": True, "message": "ok"}
+    assert reply == Trigger.Response(success=True, message="ok")
 
 
 # -- parameters ---------------------------------------------------------------------
