@@ -42,6 +42,8 @@ from ros_mobile_bridge.codec import (
 )
 from ros_mobile_bridge.codec._bundled import DATA_FILE, bundled_packages
 from ros_mobile_bridge.codec._interface import interface_definitions
+from ros_mobile_bridge.interfaces.example_interfaces.action import Fibonacci
+from ros_mobile_bridge.interfaces.example_interfaces.srv import AddTwoInts
 
 pytest_plugins = ["peers.ros_fixtures"]
 
@@ -186,12 +188,11 @@ def test_add_two_ints_encodes_and_decodes_cdr() -> None:
     assert request == bytes([0, 1, 0, 0]) + (2).to_bytes(8, "little") + (-3).to_bytes(
         8, "little", signed=True
     )
-    assert registry.decoder(f"{ADD_TWO_INTS}_Request", "cdr")(memoryview(request)) == {
-        "a": 2,
-        "b": -3,
-    }
+    decode_request = registry.decoder(f"{ADD_TWO_INTS}_Request", "cdr")
+    assert decode_request(memoryview(request)) == AddTwoInts.Request(a=2, b=-3)
     response = registry.encoder(f"{ADD_TWO_INTS}_Response", "cdr")({"sum": -1})
-    assert registry.decoder(f"{ADD_TWO_INTS}_Response", "cdr")(memoryview(response)) == {"sum": -1}
+    decode_response = registry.decoder(f"{ADD_TWO_INTS}_Response", "cdr")
+    assert decode_response(memoryview(response)) == AddTwoInts.Response(sum=-1)
 
 
 def test_an_action_goal_encodes_and_decodes_cdr() -> None:
@@ -200,8 +201,8 @@ def test_an_action_goal_encodes_and_decodes_cdr() -> None:
     value = {"goal_id": {"uuid": list(range(16))}, "goal": {"order": 7}}
     payload = registry.encoder(name, "cdr")(value)
     decoded = registry.decoder(name, "cdr")(memoryview(payload))
-    assert list(decoded["goal_id"]["uuid"]) == list(range(16))
-    assert decoded["goal"] == {"order": 7}
+    assert list(decoded.goal_id.uuid) == list(range(16))
+    assert decoded.goal == Fibonacci.Goal(order=7)
 
 
 def test_importing_the_package_reads_no_interface_file() -> None:
@@ -265,14 +266,16 @@ def check_custom_types(registry: CodecRegistry) -> None:
     value = {"inner": {"x": 2.0}, "many": [{"label": "a"}], "header": {"frame_id": "f"}}
     payload = registry.encoder("my_robot_msgs/msg/Outer", "cdr")(value)
     decoded = registry.decoder("my_robot_msgs/msg/Outer", "cdr")(memoryview(payload))
-    assert decoded["inner"] == {"x": 2.0, "label": ""}
-    assert decoded["many"] == [{"x": 1.5, "label": "a"}]
-    assert decoded["header"]["frame_id"] == "f"
+    assert decoded.inner.to_dict() == {"x": 2.0, "label": ""}
+    assert [m.to_dict() for m in decoded.many] == [{"x": 1.5, "label": "a"}]
+    assert decoded.header.frame_id == "f"
     request = registry.encoder("my_robot_msgs/srv/Move_Request", "cdr")({})
-    assert registry.decoder("my_robot_msgs/srv/Move_Request", "cdr")(memoryview(request))
+    moved = registry.decoder("my_robot_msgs/srv/Move_Request", "cdr")(memoryview(request))
+    assert moved.target.inner.to_dict() == {"x": 1.5, "label": ""}  # the defaults
+    assert list(moved.target.many) == []
     goal = "my_robot_msgs/action/Dock_SendGoal_Request"
     payload = registry.encoder(goal, "cdr")({"goal": {"station": "s1"}})
-    assert registry.decoder(goal, "cdr")(memoryview(payload))["goal"] == {"station": "s1"}
+    assert registry.decoder(goal, "cdr")(memoryview(payload)).goal.to_dict() == {"station": "s1"}
     assert type_hash(registry, "my_robot_msgs/srv/Move").startswith("RIHS01_")
 
 
@@ -416,7 +419,7 @@ async def test_a_local_type_crosses_zenoh(
                 got.append(message)
                 if len(got) == 3:
                     break
-    assert [m.data.inner for m in got] == [{"x": float(i), "label": ""} for i in range(3)]
+    assert [m.data.inner.to_dict() for m in got] == [{"x": float(i), "label": ""} for i in range(3)]
     assert {m.schema_name for m in got} == {outer}
 
 
@@ -463,7 +466,7 @@ async def test_we_call_the_tutorial_service_over_zenoh(
             await client.call_service("/add_two_ints", {"a": a, "b": b}, timeout=5)
             for a, b in ((2, 3), (-7, 4), (2**40, 1))
         ]
-    assert sums == [{"sum": 5}, {"sum": -3}, {"sum": 2**40 + 1}]
+    assert sums == [AddTwoInts.Response(sum=s) for s in (5, -3, 2**40 + 1)]
 
 
 def test_the_bundled_hashes_are_the_peer_envs_official_ones(ros_peer_env: PeerEnv) -> None:
