@@ -71,7 +71,7 @@ async def test_a_client_opened_in_one_task_is_used_and_closed_from_others(
                 if len(received) == 3:
                     break
         await handle.publish("/cmd_vel", TWIST, {"linear": {"x": 0.3}}, priority="control")
-        assert (await handle.call_service("/set_led", {"data": True}))["success"] is True
+        assert (await handle.call_service("/set_led", {"data": True})).success is True
 
     async def cell_close() -> None:
         await handle.aclose()

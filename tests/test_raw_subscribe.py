@@ -20,6 +20,7 @@ from peers.rosbridge import RosBridge
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry
 from ros_mobile_bridge.flow import _subscription
+from ros_mobile_bridge.interfaces.std_msgs.msg import String
 
 pytest_plugins = ["peers.ros_fixtures"]
 
@@ -120,7 +121,7 @@ async def test_zenoh_raw_messages_are_the_cdr_payload(
         got = await take(sub, 20)
     check_raw(got, sub)
     decode = CodecRegistry().decoder(STRING, "cdr")
-    numbers = [int(decode(m.data)["data"].split()[1]) for m in got]
+    numbers = [int(decode(m.data).data.split()[1]) for m in got]
     assert numbers == list(range(numbers[0], numbers[0] + 20))
     # rmw_zenoh's attachment: the publisher's sequence number and clock
     sequences = [m.sequence for m in got]
@@ -142,7 +143,7 @@ async def test_decoded_subscriptions_still_go_through_the_decoder(
             for i in range(5):
                 good.log(string_msg(f"n {i}"))
             got = await take(sub, 5)
-    assert [m.data for m in got] == [{"data": f"n {i}"} for i in range(5)]
+    assert [m.data for m in got] == [String(data=f"n {i}") for i in range(5)]
     assert decodes == ["/good"] * 5
 
 
