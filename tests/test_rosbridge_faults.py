@@ -20,6 +20,8 @@ import pytest
 import ros_mobile_bridge as rmb
 from _util import wait_until
 from peers.scripted import Peer, scripted_server
+from ros_mobile_bridge.interfaces.std_msgs.msg import String
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool
 
 LOGGER = "ros_mobile_bridge"
 TOPICS = {
@@ -179,7 +181,7 @@ async def test_escaped_topic_and_reordered_keys_are_recognised() -> None:
         async with rmb.connect(url, protocol="rosbridge", options=options()) as robot:
             async with robot.subscribe("/chatter") as sub:
                 got = await first_messages(sub, 3)
-    assert [m.data for m in got] == [{"data": "a"}, {"data": "b"}, {"data": "c"}]
+    assert [m.data for m in got] == [String(data="a"), String(data="b"), String(data="c")]
     assert {m.topic for m in got} == {"/chatter"}
 
 
@@ -224,7 +226,7 @@ async def test_incomplete_late_and_oversized_fragments_are_dropped(
                 got = await first_messages(sub, 1)
                 with anyio.move_on_after(0.3):
                     got += await first_messages(sub, 1)
-    assert [m.data for m in got] == [{"data": "whole"}]
+    assert [m.data for m in got] == [String(data="whole")]
     assert "over 2048 characters" in caplog.text
 
 
@@ -393,8 +395,8 @@ def test_message_details_become_a_definition_the_codec_reads() -> None:
     data = {"ok": True, "raw": 7, "gain": 0.5, "values": [1.5, 2.5], "corners": [1, 2, 3, 4]}
     encoded = codecs.encoder("my_pkg/msg/Reading", "cdr")(data)
     decoded = codecs.decoder("my_pkg/msg/Reading", "cdr")(memoryview(encoded))
-    assert decoded["ok"] is True and decoded["raw"] == 7 and decoded["gain"] == 0.5
-    assert list(decoded["values"]) == [1.5, 2.5] and list(decoded["corners"]) == [1, 2, 3, 4]
+    assert decoded.ok is True and decoded.raw == 7 and decoded.gain == 0.5
+    assert list(decoded.values) == [1.5, 2.5] and list(decoded.corners) == [1, 2, 3, 4]
     with pytest.raises(ValueError, match="do not define"):
         typedefs_to_msg("other/msg/Thing", answer)
 
@@ -501,7 +503,8 @@ async def test_messages_read_with_a_reply_are_delivered_before_it_resolves_the_c
                 continue
             reply = {"op": "service_response", "service": obj["service"], "result": True}
             frames = [publish("/chatter", str(i)) for i in range(3)]
-            frames.append(json.dumps({**reply, "values": {"success": True}, "id": obj["id"]}))
+            values = {"success": True, "message": "set"}  # whole, as a bridge sends it
+            frames.append(json.dumps({**reply, "values": values, "id": obj["id"]}))
             frames += [publish("/chatter", str(i)) for i in range(3, 5)]
             for frame in frames:
                 peer.proto.send_text(frame.encode())
@@ -513,7 +516,8 @@ async def test_messages_read_with_a_reply_are_delivered_before_it_resolves_the_c
         robot.subscribe("/chatter", buffer=10) as sub,
     ):
         await robot.call_service("/rosapi/get_time", {}, timeout=2)  # subscribed by now
-        assert await robot.call_service("/set_flag", {"data": True}, timeout=2) == {"success": True}
+        answer = await robot.call_service("/set_flag", {"data": True}, timeout=2)
+        assert answer == SetBool.Response(success=True, message="set")
         assert sub.stats.received >= 3
         got = await first_messages(sub, 5)
         assert [m.data.data for m in got] == ["0", "1", "2", "3", "4"]

@@ -96,10 +96,10 @@ async def until_watched(setter: rmb.Client, updates: AsyncIterator[dict[str, Any
 
 def speed_of(message: rmb.Message) -> float | None:
     """The new speed of a ``/parameter_events`` message of ``/rmb_params``, if any."""
-    data = message.data
-    changed = data["changed_parameters"]
-    if data["node"] == "/rmb_params" and changed:
-        return float(changed[0]["value"]["double_value"])
+    event = message.data
+    changed = event.changed_parameters
+    if event.node == "/rmb_params" and changed:
+        return float(changed[0].value.double_value)
     return None
 
 
@@ -207,12 +207,12 @@ async def test_a_user_subscription_to_parameter_events_lives_beside_the_watch(
         async def user_sees(sub: rmb.Subscription, value: float) -> None:
             with anyio.fail_after(10):
                 async for message in sub:
-                    data = message.data
-                    changed = data["changed_parameters"]
+                    event = message.data
+                    changed = event.changed_parameters
                     if (
-                        data["node"] == "/rmb_params"
+                        event.node == "/rmb_params"
                         and changed
-                        and changed[0]["value"]["double_value"] == value
+                        and changed[0].value.double_value == value
                     ):
                         return
 
