@@ -27,6 +27,8 @@ import ros_mobile_bridge as rmb
 from _util import wait_until
 from ros_mobile_bridge._sync import _client as _sync
 from ros_mobile_bridge.demo import DemoRobot
+from ros_mobile_bridge.interfaces.nav_msgs.msg import Odometry
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool
 
 pytestmark = pytest.mark.peer
 
@@ -81,23 +83,21 @@ def test_messages_arrive_publish_reaches_the_robot_and_close_sends_zero_twist_la
         assert [m.schema_name for m in received] == ["nav_msgs/msg/Odometry"] * 3
         stamps = [m.receive_time_ns for m in received]
         assert stamps == sorted(stamps) and len(set(stamps)) == 3
-        assert "pose" in received[0].data
+        assert isinstance(received[0].data, Odometry)
 
         client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.3}}, priority="control")
         client.publish("/cmd_vel", TWIST, {"linear": {"x": 0.2}, "angular": {"z": 0.1}})
-        assert client.call_service("/set_led", {"data": True}) == {
-            "success": True,
-            "message": "led on",
-        }
+        assert client.call_service("/set_led", {"data": True}) == SetBool.Response(
+            success=True, message="led on"
+        )
         assert client.set_parameters({"max_speed": 0.75}) == {"max_speed": 0.75}
         assert client.get_parameters(["max_speed"]) == {"max_speed": 0.75}
         assert client.list_parameters()["robot_name"] == "rmb-demo-robot"
         assert client.schema_template(TWIST)["linear"] == {"x": 0.0, "y": 0.0, "z": 0.0}
         assert [f.name for f in client.schema_definition(TWIST)] == ["linear", "angular"]
-        assert client.run(lambda c: c.call_service("/set_led", {"data": False})) == {
-            "success": True,
-            "message": "led off",
-        }
+        assert client.run(lambda c: c.call_service("/set_led", {"data": False})) == (
+            SetBool.Response(success=True, message="led off")
+        )
         thread = client.worker_thread
     assert client.closed and client.status == "closed"
     assert commands_since(robot, before) == [(0.3, 0.0), (0.2, 0.1), (0.0, 0.0)]
@@ -212,7 +212,7 @@ def test_keyboard_interrupt_cancels_the_interrupted_call_in_the_loop(
                     return _tasks_now()
 
                 assert client.run(settled) == baseline
-            assert client.call_service("/set_led", {"data": True})["success"] is True
+            assert client.call_service("/set_led", {"data": True}).success is True
     finally:
         timer.cancel()
         signal.signal(signal.SIGINT, previous)
@@ -272,7 +272,7 @@ def test_a_receive_timeout_raises_timeout_error_and_loses_nothing(
             with pytest.raises(TimeoutError):
                 client.wait_for_topic("/never_published", timeout=0.2)
         # after a timed-out call the client still works
-        assert client.call_service("/set_led", {"data": True})["success"] is True
+        assert client.call_service("/set_led", {"data": True}).success is True
 
 
 def test_timed_out_receives_lose_no_message(robot: DemoRobot, backend: str) -> None:
@@ -312,7 +312,7 @@ def test_several_threads_share_one_client(robot: DemoRobot, backend: str) -> Non
             t.join(30)
         assert errors == []
         assert len(replies) == 20
-        assert all(isinstance(r, dict) and r["success"] is True for r in replies)
+        assert all(isinstance(r, SetBool.Response) and r.success is True for r in replies)
 
 
 def test_a_blocking_call_from_the_worker_loop_raises_instead_of_deadlocking(
@@ -470,7 +470,7 @@ def test_close_from_inside_run_raises_and_leaves_the_client_open(
         with pytest.raises(RuntimeError, match="own event loop"):
             client.run(close_inside, timeout=5)
         assert not client.closed and client.connected
-        assert client.call_service("/set_led", {"data": True}, timeout=5)["success"] is True
+        assert client.call_service("/set_led", {"data": True}, timeout=5).success is True
     finally:
         client.close()
     assert commands_since(robot, before) == [(0.35, 0.0), (0.0, 0.0)]

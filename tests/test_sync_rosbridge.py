@@ -35,10 +35,11 @@ def test_an_action_goal_gives_feedback_and_its_result(rosbridge: RosBridge, back
                 for _ in range(6):  # the newest unseen feedback, if any, then the end
                     later.append(goal.next_feedback(timeout=1))
     assert outcome.status == "succeeded"
-    assert outcome.result == {"sequence": [0, 1, 1, 2, 3, 5]}
+    assert outcome.result.sequence.tolist() == [0, 1, 1, 2, 3, 5]
     assert len(later) <= 1
     for feedback in (first, *later):
-        assert feedback["sequence"] == [0, 1, 1, 2, 3, 5][: len(feedback["sequence"])]
+        sequence = feedback.sequence.tolist()
+        assert sequence == [0, 1, 1, 2, 3, 5][: len(sequence)]
 
 
 def test_a_goal_is_cancelled_on_request_and_when_its_block_is_left(
@@ -52,7 +53,7 @@ def test_a_goal_is_cancelled_on_request_and_when_its_block_is_left(
             goal.cancel(timeout=5)
             outcome = goal.result(timeout=10)
         assert outcome.status == "canceled"
-        assert len(outcome.result["sequence"]) < 52
+        assert len(outcome.result.sequence) < 52
         with robot.send_action_goal("/fibonacci", FIB, {"order": 50}) as left:
             left.accepted(timeout=10)
         assert left.result(timeout=10).status == "canceled"  # the handle hears the end
@@ -71,4 +72,4 @@ def test_a_ros_topic_arrives_and_a_slow_service_times_out(
         assert int(second.data.data.removeprefix("hello ")) > n1
         with pytest.raises(rmb.ServiceTimeout):
             robot.call_service("/slow_trigger", {}, timeout=0.5)
-        assert robot.call_service("/set_flag", {"data": True}, timeout=10)["success"] is True
+        assert robot.call_service("/set_flag", {"data": True}, timeout=10).success is True
