@@ -23,6 +23,7 @@ from _util import rosbridge_options as options
 from _util import wait_until
 from peers.foxglove_sdk import SdkServer
 from peers.rosbridge import RosBridge, RosGraph
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool, Trigger
 from ros_mobile_bridge.wire import rosbridge as rb
 
 pytest_plugins = ["peers.ros_fixtures"]
@@ -86,7 +87,7 @@ async def test_an_unknown_type_is_refused_by_the_bridge(rosbridge: RosBridge) ->
             async with robot.serve(unique("/rmb_served"), "nosuch_pkg/srv/Nope"):
                 pytest.fail("served an unknown type")
         # the name is free again, and the connection fine
-        assert (await robot.call_service("/set_flag", {"data": True}))["success"] is True
+        assert (await robot.call_service("/set_flag", {"data": True})).success is True
 
 
 async def test_foxglove_cannot_serve() -> None:
@@ -111,7 +112,7 @@ async def test_a_ros_call_reaches_us_and_the_reply_reaches_the_ros_caller(
             async def answer() -> None:
                 async for req in requests:
                     seen.append(req)
-                    await req.reply({"success": True, "message": f"got {req.args['data']}"})
+                    await req.reply(SetBool.Response(success=True, message=f"got {req.args.data}"))
 
             tg.start_soon(answer)
             first = await ros_call(ros_graph, name, SETBOOL, {"data": True})
@@ -120,7 +121,7 @@ async def test_a_ros_call_reaches_us_and_the_reply_reaches_the_ros_caller(
         stats = requests.stats
     assert first == {"response": {"success": True, "message": "got True"}}
     assert second == {"response": {"success": True, "message": "got False"}}
-    assert [r.args for r in seen] == [{"data": True}, {"data": False}]
+    assert [r.args for r in seen] == [SetBool.Request(data=True), SetBool.Request(data=False)]
     assert all(r.service == name and r.id and r.outcome == "replied" for r in seen)
     assert (stats.received, stats.replied, stats.pending) == (2, 2, 0)
 
@@ -140,7 +141,7 @@ async def test_a_second_client_calls_through_the_bridge(rosbridge: RosBridge) ->
             tg.start_soon(answer)
             reply = await caller.call_service(name, {}, timeout=5)
             tg.cancel_scope.cancel()
-    assert reply == {"success": True, "message": "triggered"}
+    assert reply == Trigger.Response(success=True, message="triggered")
 
 
 async def test_a_reply_that_does_not_fit_the_type_raises_and_stays_answerable(
