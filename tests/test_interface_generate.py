@@ -248,3 +248,35 @@ def test_what_cannot_be_generated_is_said(tmp_path: Path) -> None:
     result = rmb("--interface-path", str(src / "robot_msgs"), "--out", out)
     assert result.returncode == 1 and "cannot name a field 'replace'" in result.stderr
     assert not Path(out).exists()
+
+
+def test_a_remembered_generated_class_is_what_its_messages_decode_to(
+    generated: tuple[Path, Path],
+) -> None:
+    """What ``subscribe(topic, Plan)`` does with a generated class: messages
+    of its type and hash decode to it (its nested types to theirs), not to
+    classes made at run time; ``from_dict`` finds the nested generated class."""
+    from ros_mobile_bridge.codec import _classes
+
+    src, _out = generated
+    route_cls = _module("robot_msgs.msg").Route
+    plan_cls = _module("fleet_msgs.msg").Plan
+    plan = plan_cls.from_dict({"routes": [{"label": "a", "points": [{"x": 2.0}]}], "robot": "r1"})
+    assert type(plan.routes[0]) is route_cls
+    saved = dict(_classes._KNOWN)
+    try:
+        before = CodecRegistry(interfaces=InterfacePaths([src / p for p in PACKAGES]))
+        payload = memoryview(before.encoder("fleet_msgs/msg/Plan", "cdr")(plan))
+        unknown = before.decoder("fleet_msgs/msg/Plan", "cdr")(payload)
+        assert type(unknown) is not plan_cls  # a class made at run time
+        assert unknown.to_dict() == plan.to_dict()
+        _classes.remember(plan_cls)
+        after = CodecRegistry(interfaces=InterfacePaths([src / p for p in PACKAGES]))
+        decoded = after.decoder("fleet_msgs/msg/Plan", "cdr")(payload)
+        assert type(decoded) is plan_cls
+        assert type(decoded.routes[0]) is route_cls
+        assert decoded == plan
+        assert after.message_class("robot_msgs/msg/Route") is route_cls
+    finally:
+        _classes._KNOWN.clear()
+        _classes._KNOWN.update(saved)

@@ -39,6 +39,7 @@ from .._types import (
 )
 from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
+from ..codec._classes import remember
 from ..flow import Watcher
 from ..interfaces._base import RosGoal, RosMessage, RosRequest, RosService
 from ._action import ActionGoal
@@ -55,6 +56,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Client"]
 
+_BUNDLED = "ros_mobile_bridge.interfaces."
 T = TypeVar("T")
 M = TypeVar("M", bound=RosMessage)
 R = TypeVar("R", bound=RosMessage)
@@ -337,6 +339,8 @@ class Client:
         Arguments are checked here, at once."""
         check_name("topic", topic)
         want, schema = subscribe_arguments(type, schema)
+        if want is not None and not want.__module__.startswith(_BUNDLED):
+            remember(want)  # a generated class of the user's: received as itself
         if schema is not None:
             check_schema(schema)
         if compression is not None and compression not in ("cbor", "cbor-raw"):

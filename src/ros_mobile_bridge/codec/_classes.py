@@ -36,7 +36,7 @@ from ._typehash import definitions_closure, definitions_hash
 if TYPE_CHECKING:
     from ..interfaces._base import RosMessage
 
-__all__ = ["RUNTIME_CLASSES", "RUNTIME_CLASSES_MAX", "class_for"]
+__all__ = ["RUNTIME_CLASSES", "RUNTIME_CLASSES_MAX", "class_for", "known_generation", "remember"]
 
 RUNTIME_CLASSES_MAX: Final = 512
 """How many classes (per type and definitions) :func:`class_for` keeps."""
@@ -51,6 +51,49 @@ _BUILD: Final = threading.RLock()
 asking for the same new type get one class."""
 
 
+_KNOWN: Final[dict[tuple[str, str], type[RosMessage]]] = {}
+"""Classes the user named (a subscription's class, ``rmb interface
+generate``'s), by (type name, RIHS01 hash): a type of that hash decodes to
+them, not to a class made at run time."""
+_known_generation = [0]
+
+
+def known_generation() -> int:
+    """Counts the classes :func:`remember` added: codecs built before a
+    change may hold other classes (part of the registry's codec keys)."""
+    return _known_generation[0]
+
+
+def remember(cls: type[RosMessage]) -> None:
+    """Make ``cls`` (and the classes of its nested fields) the class
+    :func:`class_for` gives for its type and hash, in place of one made at
+    run time: a subscription naming a class ``rmb interface generate``
+    wrote then receives instances of it. Bundled classes need not be
+    remembered (they are found anyway); a class without a type or hash is
+    ignored."""
+    from ..interfaces._base import MESSAGE, MESSAGES, _plan
+
+    pending = [cls]
+    with _BUILD:
+        while pending:
+            current = pending.pop()
+            key = getattr(current, "__ros_type__", None)
+            digest_ = getattr(current, "__ros_hash__", None)
+            if not isinstance(key, str) or not isinstance(digest_, str):
+                continue
+            if _KNOWN.get((key, digest_)) is current:
+                continue
+            _KNOWN[(key, digest_)] = current
+            _known_generation[0] += 1
+            plan = _plan(current)
+            for name, kind in zip(plan.names, plan.kinds, strict=True):
+                if kind in (MESSAGE, MESSAGES):
+                    try:
+                        pending.append(plan.nested_class(name))
+                    except SchemaError:
+                        continue
+
+
 def class_for(key: str, defs: Mapping[str, MsgDef]) -> type[RosMessage]:
     """The message class of the type ``key`` (canonical: ``pkg/msg/Name``,
     ``pkg/srv/Name_Request``, ``pkg/action/Name_SendGoal_Request``,
@@ -58,7 +101,8 @@ def class_for(key: str, defs: Mapping[str, MsgDef]) -> type[RosMessage]:
     holds its definition and that of every type it uses, directly or not,
     by canonical name (other entries are ignored).
 
-    When every one of those definitions has the bundled one's fields
+    A class :func:`remember` was given for the type and the closure's hash
+    comes first. When every one of those definitions has the bundled one's fields
     (:func:`~ros_mobile_bridge.codec._bundled.bundled_definition`: names
     and types in order; defaults and constants, which do not change the
     wire format, are not compared), the bundled generated class
@@ -75,6 +119,10 @@ def class_for(key: str, defs: Mapping[str, MsgDef]) -> type[RosMessage]:
     named like a method or a Python keyword, a primitive with no Python
     type such as ``float128``)."""
     closure = definitions_closure(key, defs)
+    if _KNOWN:
+        known = _KNOWN.get((key, definitions_hash(key, closure)))
+        if known is not None:
+            return known
     ident = _ident(key, closure)
     found = RUNTIME_CLASSES.get(ident)
     if found is not None:

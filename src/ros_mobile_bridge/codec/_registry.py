@@ -19,7 +19,7 @@ from ..interfaces._base import RosMessage
 from ._bundled import bundled_definition, bundled_interface
 from ._cdr import build_class_decoder
 from ._cdr_encode import build_class_encoder
-from ._classes import class_for
+from ._classes import class_for, known_generation
 from ._convert import Builder, Converter, Invalid, build_builder, build_converter
 from ._dict_classes import build_dict_converter
 from ._flat import build_flat_decoder
@@ -577,7 +577,7 @@ class CodecRegistry:
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
             closure = self._closure(key, msgdef)
-            shared_key = ("decode", key, frozenset(closure.items()))
+            shared_key = ("decode", key, frozenset(closure.items()), known_generation())
             shared = _SHARED.get(shared_key)
             if shared is not None:
                 return cast(Decoder, shared)
@@ -631,7 +631,7 @@ class CodecRegistry:
                 return None
             key, msgdef = found[0], found[1]
             closure = self._closure(key, msgdef)
-            shared_key = ("from-dict", key, frozenset(closure.items()))
+            shared_key = ("from-dict", key, frozenset(closure.items()), known_generation())
             shared = _SHARED.get(shared_key)
             if shared is None:
                 shared = build_dict_converter(key, closure, self._classes(closure))
@@ -752,7 +752,7 @@ class CodecRegistry:
         with self._lock:
             key, msgdef = self._find_ros(schema_name)
             closure = self._closure(key, msgdef)
-            shared_key = ("encode", key, frozenset(closure.items()))
+            shared_key = ("encode", key, frozenset(closure.items()), known_generation())
             shared = _SHARED.get(shared_key)
             if shared is not None:
                 return cast(Encoder, shared)

@@ -163,7 +163,12 @@ class _Plan:
     def nested_class(self, name: str) -> type[RosMessage]:
         cls = self.classes.get(name)
         if cls is None:
-            cls = self.classes[name] = message_class(self.fields[name].element)
+            element = self.fields[name].element
+            try:
+                cls = message_class(element)
+            except SchemaError:
+                cls = generated_class(element)
+            self.classes[name] = cls
         return cls
 
 
@@ -221,6 +226,30 @@ def message_class(type_name: str) -> type[RosMessage]:
         for part in name.split("_"):
             found = getattr(found, part, None)
     if not (isinstance(found, type) and issubclass(found, RosMessage)):
+        raise SchemaError(f"no message class for {type_name!r}")
+    return found
+
+
+def generated_class(type_name: str) -> type[RosMessage]:
+    """The class of ``type_name`` in a package ``rmb interface generate``
+    wrote (importable as ``<package>.<kind>``, beside the bundled ones).
+    Raises :class:`~ros_mobile_bridge.SchemaError` when there is none, or
+    when what that path holds is not the class of that type."""
+    parts = type_name.split("/")
+    found: object = None
+    if len(parts) == 3 and parts[1] in ("msg", "srv", "action") and parts[0].isidentifier():
+        pkg, kind, name = parts
+        try:
+            found = importlib.import_module(f"{pkg}.{kind}")
+        except ImportError:
+            found = None
+        for part in name.split("_"):
+            found = getattr(found, part, None)
+    if not (
+        isinstance(found, type)
+        and issubclass(found, RosMessage)
+        and getattr(found, "__ros_type__", None) == type_name
+    ):
         raise SchemaError(f"no message class for {type_name!r}")
     return found
 
