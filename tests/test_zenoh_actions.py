@@ -98,10 +98,10 @@ async def test_feedback_in_order_then_the_result(
         )
         async with client.send_action_goal("/fibonacci", FIB, {"order": 8}) as goal:
             await goal.accepted()
-            feedback = [list(f["sequence"]) async for f in goal.feedback]
+            feedback = [list(f.sequence) async for f in goal.feedback]
             outcome = await goal.result()
     assert outcome.status == "succeeded"
-    assert list(outcome.result["sequence"]) == fibonacci(8)
+    assert list(outcome.result.sequence) == fibonacci(8)
     assert goal.state == "succeeded"
     # newest wins, so some may be skipped, but what came is in order and right
     lengths = [len(f) for f in feedback]
@@ -126,7 +126,7 @@ async def test_a_canceled_goal_ends_canceled(
             with anyio.fail_after(10):
                 outcome = await goal.result()
     assert outcome.status == "canceled"
-    got = list(outcome.result["sequence"])
+    got = list(outcome.result.sequence)
     assert 3 <= len(got) < 202
     assert got == fibonacci(200)[: len(got)]
     assert goal.state == "canceled"
@@ -166,7 +166,7 @@ async def test_a_rejected_goal_raises_action_goal_error(
         # the server still serves after a rejection
         async with client.send_action_goal("/fibonacci", FIB, {"order": 2}) as goal:
             outcome = await goal.result()
-    assert list(outcome.result["sequence"]) == fibonacci(2)
+    assert list(outcome.result.sequence) == fibonacci(2)
 
 
 async def test_a_goal_fails_with_a_reason_when_the_router_goes(

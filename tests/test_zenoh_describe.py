@@ -110,16 +110,16 @@ async def test_an_unknown_type_with_nested_types_is_fetched_and_decoded(
     assert {m.schema_name for m in got} == {type_name}
     data = got[0].data
     if type_name == NESTED:
-        basic = data["basic_types_value"]
-        assert (basic["bool_value"], basic["int32_value"]) == (True, -42)
-        assert (basic["uint64_value"], basic["float64_value"]) == (2**63, 1.5)
-        assert (basic["uint8_value"], basic["int16_value"]) == (200, 0)
+        basic = data.basic_types_value
+        assert (basic.bool_value, basic.int32_value) == (True, -42)
+        assert (basic.uint64_value, basic.float64_value) == (2**63, 1.5)
+        assert (basic.uint8_value, basic.int16_value) == (200, 0)
     else:
-        assert list(data["int32_values"]) == [1, -2, 3]
-        assert data["string_values"] == ["a", "bc", "def"]
-        assert [b["int8_value"] for b in data["basic_types_values"]] == [-1, 0, 0]
-        assert data["basic_types_values"][1]["float32_value"] == 0.5
-        assert len(data["defaults_values"]) == 3
+        assert list(data.int32_values) == [1, -2, 3]
+        assert data.string_values == ["a", "bc", "def"]
+        assert [b.int8_value for b in data.basic_types_values] == [-1, 0, 0]
+        assert data.basic_types_values[1].float32_value == 0.5
+        assert len(data.defaults_values) == 3
     assert node.described() == [type_name]  # asked once for all five
 
 
@@ -137,8 +137,8 @@ async def test_a_service_of_an_unknown_type_is_called_and_answered(
             answer = await client.call_service(
                 "/echo_basic", {"int32_value": value, "string_value": f"v{value}"}, timeout=10
             )
-            assert (answer["int32_value"], answer["string_value"]) == (value, f"v{value}")
-            assert answer["bool_value"] is False
+            assert (answer.int32_value, answer.string_value) == (value, f"v{value}")
+            assert answer.bool_value is False
         assert client.rejections == {}
     assert node.described() == [BASIC_SRV]
 

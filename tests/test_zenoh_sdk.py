@@ -21,6 +21,7 @@ from _util import wait_until
 from _util import zenoh_options as options
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool
 
 pytest_plugins = ["peers.ros_fixtures"]
 pytest.importorskip("zenoh_ros2_sdk")
@@ -113,7 +114,7 @@ async def test_we_call_the_sdk_service(
         assert {s.name: s.type for s in client.services}["/sdk_set_bool"] == "std_srvs/srv/SetBool"
         for value in (True, False, True):
             answer = await client.call_service("/sdk_set_bool", {"data": value}, timeout=5)
-            assert answer == {"success": value, "message": f"set to {value}"}
+            assert answer == SetBool.Response(success=value, message=f"set to {value}")
 
 
 async def test_parameters_through_the_nodes_parameter_services(

@@ -26,6 +26,7 @@ from _util import wait_until
 from _util import zenoh_options as options
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge.codec import CodecRegistry, type_hash
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool
 from ros_mobile_bridge.wire import rmw_zenoh as rz
 
 pytest_plugins = ["peers.ros_fixtures"]
@@ -44,7 +45,9 @@ def client_of(sdk: Callable[..., SdkNode], name: str, type_: str, requests: list
 async def answer_set_bool(requests: rmb.ServiceRequests, seen: list[Any]) -> None:
     async for req in requests:
         seen.append(req.args)
-        await req.reply({"success": req.args["data"], "message": f"#{len(seen)} {req.args}"})
+        await req.reply(
+            SetBool.Response(success=req.args.data, message=f"#{len(seen)} data={req.args.data}")
+        )
 
 
 async def test_an_sdk_client_calls_our_set_bool_and_gets_each_answer_in_order(
@@ -62,11 +65,11 @@ async def test_an_sdk_client_calls_our_set_bool_and_gets_each_answer_in_order(
         assert caller.hashes[SET_BOOL] == type_hash(CodecRegistry(), SET_BOOL)
         await wait_until(lambda: caller.done, timeout=30.0, what="the sdk's calls")
         assert caller.records() == [
-            {"response": {"success": True, "message": "#1 {'data': True}"}},
-            {"response": {"success": False, "message": "#2 {'data': False}"}},
-            {"response": {"success": True, "message": "#3 {'data': True}"}},
+            {"response": {"success": True, "message": "#1 data=True"}},
+            {"response": {"success": False, "message": "#2 data=False"}},
+            {"response": {"success": True, "message": "#3 data=True"}},
         ]
-        assert seen == calls
+        assert seen == [SetBool.Request(**c) for c in calls]
         assert requests.stats.received == 3 and requests.stats.replied == 3
         tg.cancel_scope.cancel()
 
@@ -103,7 +106,7 @@ async def test_a_registered_service_type_is_served_to_the_sdk(
 
     async def add(requests: rmb.ServiceRequests) -> None:
         async for req in requests:
-            await req.reply({"sum": req.args["a"] + req.args["b"]})
+            await req.reply({"sum": req.args.a + req.args.b})
 
     async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
         client.register_type(ADD_TWO_INTS, ADD_TWO_INTS_SRV)
@@ -217,7 +220,7 @@ async def test_two_sdk_clients_at_once_are_each_answered(
             assert len({a["success"] for a in answers}) == 1  # each got its own answers
             numbers = [int(a["message"].split()[0][1:]) for a in answers]
             assert numbers == sorted(numbers)  # in its own order
-        assert sorted(a["data"] for a in seen) == [False] * 5 + [True] * 5
+        assert sorted(a.data for a in seen) == [False] * 5 + [True] * 5
         assert requests.stats.replied == 10
         tg.cancel_scope.cancel()
 
@@ -260,10 +263,8 @@ async def test_a_request_that_does_not_decode_is_answered_with_an_error_and_coun
             bare_get, good, attachment
         )
         assert kind == "ok"
-        assert CodecRegistry().decoder(f"{SET_BOOL}_Response", "cdr")(memoryview(payload)) == {
-            "success": True,
-            "message": "#1 {'data': True}",
-        }
+        decode = CodecRegistry().decoder(f"{SET_BOOL}_Response", "cdr")
+        assert decode(memoryview(payload)) == SetBool.Response(success=True, message="#1 data=True")
         decoded = rz.decode_attachment(reply_attachment)
         assert (decoded.sequence, decoded.gid) == (1, bytes(range(16)))
         assert decoded.timestamp_ns > 0
@@ -272,9 +273,7 @@ async def test_a_request_that_does_not_decode_is_answered_with_an_error_and_coun
             client_of, sdk, "/rmb_set_bool", SET_BOOL, [{"data": False}]
         )
         await wait_until(lambda: caller.done, timeout=30.0, what="the sdk's call")
-        assert caller.records() == [
-            {"response": {"success": False, "message": "#2 {'data': False}"}}
-        ]
+        assert caller.records() == [{"response": {"success": False, "message": "#2 data=False"}}]
         assert requests.stats.received == 2
         tg.cancel_scope.cancel()
 
@@ -299,8 +298,8 @@ async def test_our_client_calls_another_clients_served_service(
         answers = [
             await caller.call_service("/rmb_set_bool", {"data": d}) for d in (True, False, True)
         ]
-        assert [a["success"] for a in answers] == [True, False, True]
-        assert [a["message"][:2] for a in answers] == ["#1", "#2", "#3"]
+        assert [a.success for a in answers] == [True, False, True]
+        assert [a.message[:2] for a in answers] == ["#1", "#2", "#3"]
         tg.cancel_scope.cancel()
 
     # a refusal reaches our caller as a ServiceError with the reason, at once
@@ -353,7 +352,7 @@ async def test_a_served_service_is_served_again_after_a_router_restart(
                     what="1",
                 )
                 first = await caller.call_service("/rmb_set_bool", {"data": True})
-                assert first["message"].startswith("#1")
+                assert first.message.startswith("#1")
             router.stop()
             await wait_until(
                 lambda: server.status == "reconnecting", timeout=30.0, what="reconnecting"
@@ -367,7 +366,7 @@ async def test_a_served_service_is_served_again_after_a_router_restart(
                     what="2",
                 )
                 again = await caller.call_service("/rmb_set_bool", {"data": False})
-                assert again == {"success": False, "message": "#2 {'data': False}"}
+                assert again == SetBool.Response(success=False, message="#2 data=False")
             assert requests.stats.received == 2
             tg.cancel_scope.cancel()
     finally:

@@ -316,8 +316,8 @@ def test_action_text_registers_the_derived_types() -> None:
     decode = reg.decoder("test_msgs/action/Fibonacci_SendGoal_Request", "cdr")
     payload = encode({"goal_id": {"uuid": list(range(16))}, "goal": {"order": 7}})
     back = decode(memoryview(payload))
-    assert back["goal"] == {"order": 7}
-    assert list(back["goal_id"]["uuid"]) == list(range(16))
+    assert back.goal.to_dict() == {"order": 7}
+    assert list(back.goal_id.uuid) == list(range(16))
     for suffix in ("_GetResult_Response", "_FeedbackMessage", "_SendGoal_Response"):
         reg.decoder(f"test_msgs/action/Fibonacci{suffix}", "cdr")
     with pytest.raises(rmb.SchemaError, match="three sections"):
