@@ -62,6 +62,7 @@ from ._cdr_layout import (
     Classes,
     Field,
     Invalid,
+    SourceWriter,
     class_fields,
     compact,
     compile_function,
@@ -77,7 +78,7 @@ if TYPE_CHECKING:
 __all__ = ["build_class_decoder"]
 
 
-class _DecoderWriter:
+class _DecoderWriter(SourceWriter):
     """Generates the statements of one decoder (one byte order).
 
     The position in the payload is ``base + offset``: ``base`` a variable
@@ -89,19 +90,11 @@ class _DecoderWriter:
     ``unpack_from`` at ``base + start`` when something dynamic follows."""
 
     def __init__(self, key: str, defs: Mapping[str, MsgDef], classes: Classes, big: bool) -> None:
-        self.key = key
-        self.defs = defs
-        self.classes = classes
+        super().__init__(key, defs, classes, 2)
         self.big = big
         self.order = ">" if big else "<"
         self.swap = big != (sys.byteorder == "big")
         """Whether arrays are converted to native byte order (copies)."""
-        self.fields: dict[str, list[Field]] = {}
-        self.lines: list[str] = []
-        self.indent = 2
-        self.names = 0
-        self.namespace: dict[str, Any] = {}
-        self.constants: dict[int, str] = {}
         self.base: str | None = None
         self.offset = 0
         self.known = (8, 0)
@@ -116,22 +109,6 @@ class _DecoderWriter:
         self.checked_header = False
 
     # -- helpers ------------------------------------------------------------------------
-
-    def emit(self, line: str) -> None:
-        self.lines.append("    " * self.indent + line)
-
-    def local(self, prefix: str) -> str:
-        self.names += 1
-        return f"{prefix}{self.names}"
-
-    def const(self, value: object, prefix: str) -> str:
-        """A global of the generated module holding ``value``."""
-        name = self.constants.get(id(value))
-        if name is None:
-            name = f"_{prefix}{len(self.constants)}"
-            self.constants[id(value)] = name
-            self.namespace[name] = value
-        return name
 
     def unpacker(self, fmt: str) -> str:
         fmt = compact(fmt, trim=True)

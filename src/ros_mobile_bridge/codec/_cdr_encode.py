@@ -53,6 +53,7 @@ from ._cdr_layout import (
     SIZES,
     Classes,
     Field,
+    SourceWriter,
     class_fields,
     compact,
     compile_function,
@@ -77,7 +78,7 @@ class _Misfit(Exception):
     """The fast path met a value it does not take as it is."""
 
 
-class _EncoderWriter:
+class _EncoderWriter(SourceWriter):
     """Generates the statements of one encoder.
 
     The position being written is ``base + offset`` (``base`` None: every
@@ -89,15 +90,7 @@ class _EncoderWriter:
     list ``L`` before and inside loops)."""
 
     def __init__(self, key: str, defs: Mapping[str, MsgDef], classes: Classes) -> None:
-        self.key = key
-        self.defs = defs
-        self.classes = classes
-        self.fields: dict[str, list[Field]] = {}
-        self.lines: list[str] = []
-        self.indent = 1
-        self.names = 0
-        self.namespace: dict[str, Any] = {}
-        self.constants: dict[int, str] = {}
+        super().__init__(key, defs, classes, 1)
         self.base: str | None = None
         self.offset = 0
         self.known = (8, 0)
@@ -111,21 +104,6 @@ class _EncoderWriter:
         """Whether the parts list ``L`` exists (a loop came)."""
 
     # -- helpers ------------------------------------------------------------------------
-
-    def emit(self, line: str) -> None:
-        self.lines.append("    " * self.indent + line)
-
-    def local(self, prefix: str) -> str:
-        self.names += 1
-        return f"{prefix}{self.names}"
-
-    def const(self, value: object, prefix: str) -> str:
-        name = self.constants.get(id(value))
-        if name is None:
-            name = f"_{prefix}{len(self.constants)}"
-            self.constants[id(value)] = name
-            self.namespace[name] = value
-        return name
 
     def packer(self, fmt: str) -> str:
         fmt = compact(fmt)

@@ -28,6 +28,7 @@ __all__ = [
     "Classes",
     "Field",
     "Invalid",
+    "SourceWriter",
     "class_fields",
     "compact",
     "compile_function",
@@ -181,3 +182,37 @@ def compile_function(source: str, kind: str, key: str, namespace: dict[str, Any]
 
 
 # --------------------------------------------------------------------------- decoder
+
+
+class SourceWriter:
+    """The text of one generated function, as a writer builds it: its lines
+    (at an indent), fresh local names, and the constants its module holds.
+    The decoder's and the encoder's writers build on it."""
+
+    def __init__(self, key: str, defs: Mapping[str, MsgDef], classes: Classes, indent: int) -> None:
+        self.key = key
+        self.defs = defs
+        self.classes = classes
+        self.fields: dict[str, list[Field]] = {}
+        self.lines: list[str] = []
+        self.indent = indent
+        self.names = 0
+        self.namespace: dict[str, Any] = {}
+        self.constants: dict[int, str] = {}
+
+    def emit(self, line: str) -> None:
+        self.lines.append("    " * self.indent + line)
+
+    def local(self, prefix: str) -> str:
+        """A local name not used before (``prefix`` and a number)."""
+        self.names += 1
+        return f"{prefix}{self.names}"
+
+    def const(self, value: object, prefix: str) -> str:
+        """A global of the generated module holding ``value``."""
+        name = self.constants.get(id(value))
+        if name is None:
+            name = f"_{prefix}{len(self.constants)}"
+            self.constants[id(value)] = name
+            self.namespace[name] = value
+        return name

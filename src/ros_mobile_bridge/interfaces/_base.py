@@ -215,17 +215,8 @@ def message_class(type_name: str) -> type[RosMessage]:
     ``Name.Request``, ``"pkg/action/Name_SendGoal_Request"`` is
     ``Name.SendGoal.Request``). Imports its module. Raises
     :class:`~ros_mobile_bridge.SchemaError` when there is none."""
-    parts = type_name.split("/")
-    found: object = None
-    if len(parts) == 3 and parts[1] in ("msg", "srv", "action") and parts[0].isidentifier():
-        pkg, kind, name = parts
-        try:
-            found = importlib.import_module(f"{_PACKAGE}.{pkg}.{kind}")
-        except ModuleNotFoundError:
-            found = None
-        for part in name.split("_"):
-            found = getattr(found, part, None)
-    if not (isinstance(found, type) and issubclass(found, RosMessage)):
+    found = _class_at(type_name, f"{_PACKAGE}.")
+    if found is None:
         raise SchemaError(f"no message class for {type_name!r}")
     return found
 
@@ -235,23 +226,26 @@ def generated_class(type_name: str) -> type[RosMessage]:
     wrote (importable as ``<package>.<kind>``, beside the bundled ones).
     Raises :class:`~ros_mobile_bridge.SchemaError` when there is none, or
     when what that path holds is not the class of that type."""
+    found = _class_at(type_name, "")
+    if found is None or found.__ros_type__ != type_name:
+        raise SchemaError(f"no message class for {type_name!r}")
+    return found
+
+
+def _class_at(type_name: str, root: str) -> type[RosMessage] | None:
+    """The message class ``<root><pkg>.<kind>`` holds for ``type_name``
+    (importing it), or None."""
     parts = type_name.split("/")
     found: object = None
     if len(parts) == 3 and parts[1] in ("msg", "srv", "action") and parts[0].isidentifier():
         pkg, kind, name = parts
         try:
-            found = importlib.import_module(f"{pkg}.{kind}")
+            found = importlib.import_module(f"{root}{pkg}.{kind}")
         except ImportError:
             found = None
         for part in name.split("_"):
             found = getattr(found, part, None)
-    if not (
-        isinstance(found, type)
-        and issubclass(found, RosMessage)
-        and getattr(found, "__ros_type__", None) == type_name
-    ):
-        raise SchemaError(f"no message class for {type_name!r}")
-    return found
+    return found if isinstance(found, type) and issubclass(found, RosMessage) else None
 
 
 class RosMessage:
