@@ -84,7 +84,7 @@ def test_a_float_field_written_as_an_integer_is_a_float() -> None:
 @pytest.mark.parametrize(
     ("fields", "words"),
     [
-        ({"header": {"stamp": {"sec": 1}, "frame_id": ""}, "height": 1}, "'nanosec' missing"),
+        ({"height": 1, "bogus": 2}, "unknown field"),
         (
             {**Image().to_dict(), "data": "not base64!"},
             "not base64",
@@ -97,6 +97,14 @@ def test_what_does_not_fit_is_a_decode_error_naming_it(fields: dict[str, Any], w
     assert convert is not None
     with pytest.raises(rmb.DecodeError, match=words):
         convert(fields)
+
+
+def test_a_partial_message_is_completed_with_the_defaults() -> None:
+    """A JSON channel may leave out zeros (``{"linear": {"x": 0.5}}``)."""
+    convert = REG.dict_converter("geometry_msgs/msg/Twist")
+    assert convert is not None
+    twist = convert({"linear": {"x": 0.5}, "angular": {"z": -1}})
+    assert (twist.linear.x, twist.linear.y, twist.angular.z) == (0.5, 0.0, -1.0)
 
 
 def test_a_json_schema_type_keeps_its_dict() -> None:

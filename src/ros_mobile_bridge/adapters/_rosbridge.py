@@ -84,6 +84,18 @@ def _decode_cbor(payload: memoryview) -> Any:
         raise DecodeError(f"invalid CBOR publish frame: {exc}") from None
 
 
+def _tolerant(convert: Decoder) -> Decoder:
+    """``convert``, giving back what it was given when that does not fit."""
+
+    def tolerant(message: Any) -> Any:
+        try:
+            return convert(message)
+        except DecodeError:
+            return message
+
+    return tolerant
+
+
 def _service_of(request: Any) -> str | None:
     """The service type a request instance belongs to (``pkg/srv/Name``
     of a ``pkg/srv/Name_Request``), else None: a call made before discovery
@@ -214,7 +226,7 @@ class RosbridgeAdapter:
         self._converters: dict[str, Decoder] = {}
         self._unconvertible: set[str] = set()  # types whose definition cannot build one
         # (type, "json" or "cbor") -> parse, then convert
-        self._text_decoders: dict[tuple[str, str], Decoder] = {}
+        self._text_decoders: dict[tuple[str, str, bool], Decoder] = {}
         self._stray: set[str] = set()  # topics we were sent but never subscribed
         self._pubs: Advertisements[_Publisher] = Advertisements()
         self._foreign: str | None = None  # why the server looks like Foxglove
@@ -383,7 +395,7 @@ class RosbridgeAdapter:
         sink = self._events.sink
         if wire is None or wire.compression is not None or sink is None:
             return False
-        schema = wire.type or self._discovery.topic_types.get(topic, "")
+        schema, hinted = self._type_of(topic, wire)
         frame = RawFrame(
             topic,
             schema,
@@ -391,22 +403,37 @@ class RosbridgeAdapter:
             memoryview(raw),
             None,
             time.time_ns(),
-            self._text_decoder(topic, schema, "json"),
+            self._text_decoder(topic, schema, "json", hinted),
         )
         return sink.deliver_now(frame)
 
-    def _text_decoder(self, topic: str, schema: str, kind: str) -> Decoder:
+    def _type_of(self, topic: str, wire: _WireSub) -> tuple[str, bool]:
+        """The type of ``topic``'s messages, and whether it is only the
+        user's ``schema=`` hint (the graph does not say yet): the bridge's
+        subscription's type, else the graph's, else the hint."""
+        schema = wire.type or self._discovery.topic_types.get(topic, "")
+        if schema:
+            return schema, False
+        hints = self._wanted.get(topic)
+        hint = hints.schema if hints is not None else None
+        return (hint, True) if hint else ("", False)
+
+    def _text_decoder(self, topic: str, schema: str, kind: str, hinted: bool = False) -> Decoder:
         """The decoder of a JSON or CBOR ``publish`` of ``schema``: the
         message parsed, then made an instance of its class where the
-        registry defines the type (built once per type and kind)."""
-        decode = self._text_decoders.get((schema, kind))
+        registry defines the type (built once per type and kind). For a
+        type that is only the user's hint (``hinted``), a message that does
+        not fit it stays the dict it is."""
+        decode = self._text_decoders.get((schema, kind, hinted))
         if decode is not None:
             return decode
         parse = _decode_json if kind == "json" else _decode_cbor
         convert = self._converter(topic, schema)
         if convert is None:
             return parse  # asked again next time: a definition may be learnt meanwhile
-        decode = self._text_decoders[(schema, kind)] = lambda p: convert(parse(p))
+        if hinted:
+            convert = _tolerant(convert)
+        decode = self._text_decoders[(schema, kind, hinted)] = lambda p: convert(parse(p))
         return decode
 
     def _on_event(self, event: rb.Publish, received_ns: int) -> None:
@@ -440,12 +467,12 @@ class RosbridgeAdapter:
             return
         if kind != wire.compression and kind in COMPRESSIONS:
             return  # still in flight from before a change of compression
-        schema = wire.type or self._discovery.topic_types.get(topic, "")
+        schema, hinted = self._type_of(topic, wire)
         if kind == "cbor-raw":
             try:
                 decode: Decoder | None = self._decoders[(topic, kind)]
-            except KeyError:
-                decode = self._make_decoder(topic, kind, schema or None)
+            except KeyError:  # (CDR: the graph's type only, never the hint alone)
+                decode = self._make_decoder(topic, kind, None if hinted else schema or None)
         else:
             # JSON and CBOR become instances of the type's class where the
             # registry defines it; by type, since the type of a topic's
@@ -453,8 +480,10 @@ class RosbridgeAdapter:
             convert = None
             if kind == "parsed":
                 convert = self._converters.get(schema) or self._converter(topic, schema)
+                if convert is not None and hinted:
+                    convert = _tolerant(convert)
             if kind != "parsed":
-                decode = self._text_decoder(topic, schema, kind)
+                decode = self._text_decoder(topic, schema, kind, hinted)
             elif convert is None:
                 decode = lambda _payload: message  # noqa: E731
             else:
@@ -738,7 +767,7 @@ class RosbridgeAdapter:
     # -- services ------------------------------------------------------------------
     async def call_service(self, name: str, request: Any, timeout: float) -> Any:
         args = plain(request) if request is not None else {}
-        service_type = self._discovery.service_types.get(name) or _service_of(request)
+        service_type = _service_of(request) or await self._discovery.service_type(name)
         if not service_type:
             return await self._calls.call(name, args, timeout)
         request_type, response_type = CodecRegistry.service_type_names(service_type)

@@ -118,6 +118,24 @@ class RosbridgeDiscovery:
             self._events.reject(reason, detail)
         return names[:limit]
 
+    async def service_type(self, name: str) -> str | None:
+        """The type of service ``name``: the graph's, else asked of
+        ``/rosapi/service_type`` now (and kept for the graph); None when the
+        bridge does not say (no such service, no rosapi)."""
+        known = self.service_types.get(name)
+        if known:
+            return known
+        try:
+            answer = await self._rosapi("/rosapi/service_type", {"service": name})
+        except (ServiceError, TimeoutError):
+            return None
+        schema = answer.get("type") if isinstance(answer, dict) else None
+        if not isinstance(schema, str) or not schema:
+            return None
+        if name in self.service_types:
+            self.service_types[name] = schema
+        return schema
+
     async def _lookup_service_types(self) -> bool:
         unknown = [n for n, t in self.service_types.items() if not t][:_TYPE_LOOKUPS_PER_POLL]
         changed = False

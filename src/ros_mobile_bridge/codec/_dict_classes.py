@@ -4,14 +4,15 @@ A JSON bridge (rosbridge, a Foxglove ``json`` channel of a ROS type) hands
 over a message as nested dicts and lists; :func:`build_dict_converter` makes,
 for one type and the definitions it uses, a function that turns such a
 mapping into an instance of the type's class, built as a decoder builds one
-(``cls.__new__`` and a store per slot; no constructor, no defaults): every
-field must be present. Values are taken as the bridge wrote them, converted
+(``cls.__new__`` and a store per slot; no constructor) when every field is
+present; a message with fields left out is completed with the defaults
+through :meth:`RosMessage.from_dict` (slower, and checked). Values are taken as the bridge wrote them, converted
 only where the class's form differs from JSON's: a ``float`` field given an
 ``int`` (``0`` for ``0.0``) is made a float, a numeric or bool array becomes a
 numpy array of the field's dtype (from a list, or from the base64 text
 rosbridge sends for ``uint8[]``/``byte[]``/``char[]``, or kept when it is
 one already), an array of strings a new list. A mapping that does not fit
-(a field missing, a value of the wrong shape) raises
+(an unknown field, a value of the wrong shape) raises
 :class:`~ros_mobile_bridge.DecodeError` naming the type and the field."""
 
 from __future__ import annotations
@@ -143,20 +144,31 @@ def build_dict_converter(
     """A function turning a decoded mapping of type ``key`` into an instance
     of ``classes(key)``; ``defs`` holds ``key`` and every type it uses,
     ``classes`` gives each one's class. The function raises
-    :class:`~ros_mobile_bridge.DecodeError` and nothing else."""
+    :class:`~ros_mobile_bridge.DecodeError` and nothing else. A message
+    with fields left out (a JSON channel may leave out zeros) is completed
+    with the definition's defaults (:meth:`RosMessage.from_dict`, with its
+    checks: a slower path)."""
     source = _Source(defs, classes)
     top = source.function(key)
     text = "\n".join(source.lines)
     exec(compile(text, f"<dict converter of {key}>", "exec"), source.env)
     convert: Callable[[Any], RosMessage] = source.env[top]
 
+    cls = classes(key)
+
     def to_instance(data: Any) -> RosMessage:
         """``data`` (nested mappings and lists) as an instance of its class."""
         try:
             return convert(data)
         except KeyError as exc:
-            raise DecodeError(f"cannot decode {key}: field {exc.args[0]!r} missing") from None
+            missing = exc.args[0]
         except Exception as exc:
             raise DecodeError(f"cannot decode {key}: {type(exc).__name__}: {exc}") from None
+        try:  # a partial message (a JSON channel may leave out zeros): the defaults fill it
+            return cls.from_dict(data)
+        except Exception as exc:
+            raise DecodeError(
+                f"cannot decode {key}: field {missing!r} missing, and as a partial message: {exc}"
+            ) from None
 
     return to_instance
