@@ -101,7 +101,11 @@ class FakeBridge:
         values: Any = {
             "/rosapi/topics": TOPICS,
             "/rosapi/services": {"services": ["/set_flag"]},
-            "/rosapi/service_type": {"type": "std_srvs/srv/SetBool"},
+            "/rosapi/service_type": {
+                "type": {"/set_flag": "std_srvs/srv/SetBool"}.get(
+                    (obj.get("args") or {}).get("service"), ""
+                )
+            },
             "/rosapi/get_time": {"time": {"sec": 1, "nanosec": 2}},
             "/rosapi/action_servers": {"action_servers": ["/fibonacci"]},
         }.get(service, {})

@@ -275,7 +275,8 @@ async def _count(robot: Client, service: str, topic: str, key: str) -> str:
         reply = await robot.call_service(service, {"topic": topic}, timeout=5)
     except RosBridgeError:
         return "unknown"
-    names = reply.get(key) if isinstance(reply, Mapping) else None
+    # an instance of rosapi's response class where the bridge described it, else a dict
+    names = reply.get(key) if isinstance(reply, Mapping) else getattr(reply, key, None)
     return str(len(names)) if isinstance(names, list) else "unknown"
 
 
