@@ -20,6 +20,7 @@ from .. import _connect
 from .._options import ClientOptions
 from ..interfaces.nav_msgs.msg import Odometry
 from ..interfaces.sensor_msgs.msg import BatteryState
+from ..interfaces.std_srvs.srv import SetBool
 from ._verb import Verb, run_signalled
 
 __all__ = ["VERBS"]
@@ -49,8 +50,8 @@ async def _drive_demo(url: str, seconds: float, out: Callable[[str], None]) -> N
         out("services: " + ", ".join(f"{s.name} [{s.type}]" for s in robot.services))
         params = await robot.list_parameters()
         out(f"parameters: {json.dumps(params, sort_keys=True)}")
-        reply = await robot.call_service("/set_led", {"data": True}, timeout=5)
-        out(f"call /set_led {{data: true}} -> {reply}")
+        reply = await robot.call_service("/set_led", SetBool.Request(data=True), timeout=5)
+        out(f"call /set_led {{data: true}} -> {reply.to_dict()}")
         await robot.advertise("/cmd_vel", "geometry_msgs/msg/Twist")
 
         rates = _Rates()
