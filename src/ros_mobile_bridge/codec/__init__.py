@@ -1,8 +1,9 @@
 """Schemas and payloads -> Python objects, and back.
 
 :class:`CodecRegistry` holds the schemas one server advertised and makes
-decoders (CDR or JSON payload -> ``dict``) and encoders (``dict`` -> payload)
-for them, falling back to local interface files (:class:`InterfacePaths`),
+decoders (CDR or JSON payload -> an instance of the type's message class,
+:mod:`ros_mobile_bridge.interfaces`; ``dict_decoder`` for a ``dict``) and
+encoders (an instance or a ``dict`` -> payload) for them, falling back to local interface files (:class:`InterfacePaths`),
 then to the standard ROS 2 Jazzy interfaces bundled with the package
 (:func:`bundled_interface`, :func:`bundled_hash`), then to rosbags' Jazzy
 messages. :func:`find_interface` and :func:`interface_names` look interfaces
