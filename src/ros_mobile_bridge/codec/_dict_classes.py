@@ -28,14 +28,10 @@ import numpy as np
 
 from .._errors import DecodeError
 from ..interfaces._base import _DTYPES, RosMessage
-from ._model import DUMMY_FIELD, SCALAR, FieldSpec, MsgDef
+from ._model import DUMMY_FIELD, FLOAT_TYPES, INT_RANGES, SCALAR, FieldSpec, MsgDef
 
 __all__ = ["build_dict_converter"]
 
-_FLOATS = frozenset({"float32", "float64"})
-_INTS = frozenset(
-    {"byte", "char", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64"}
-)
 _STRINGS = frozenset({"string", "wstring"})
 
 
@@ -129,9 +125,9 @@ class _Source:
                 raise DecodeError(f"no array form for {base}[]")
             self.env[f"D_{dtype}"] = np.dtype(dtype)
             return f"_array({item}, D_{dtype})"
-        if base in _FLOATS:
+        if base in FLOAT_TYPES:
             return f"float({item})"
-        if base in _INTS:
+        if base in INT_RANGES:  # (the codec's integer types)
             return f"int({item})"
         if base == "bool":
             return f"bool({item})"

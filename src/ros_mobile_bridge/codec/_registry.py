@@ -108,6 +108,8 @@ def _json_decode(payload: memoryview | bytes | str) -> Any:
 
 
 def _json_default(value: Any) -> Any:
+    if isinstance(value, RosMessage):
+        return value.to_dict()
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, np.generic):
@@ -218,8 +220,6 @@ def _make_cdr_encoder(typename: str, store: Typestore, build: Builder) -> Encode
         CDR with the 4-byte encapsulation header. Raises
         :class:`MessageError` naming the field for an unknown field or a
         value of the wrong type."""
-        if isinstance(data, RosMessage):
-            data = data.to_dict()
         try:
             message = build(data)
         except Invalid as exc:
@@ -279,18 +279,6 @@ def _with_class_encoder(
         return general(data)
 
     return encode
-
-
-def _sub_closure(key: str, closure: Mapping[str, MsgDef]) -> dict[str, MsgDef]:
-    """The part of ``closure`` that ``key`` uses (``key`` included)."""
-    out = {key: closure[key]}
-    stack = [closure[key]]
-    while stack:
-        for ref in stack.pop().refs():
-            if ref not in out:
-                out[ref] = closure[ref]
-                stack.append(closure[ref])
-    return out
 
 
 def _builtin(name: str) -> MsgDef | None:
@@ -654,7 +642,7 @@ class CodecRegistry:
         """The class of each type of ``closure`` (a closure itself)."""
 
         def classes(name: str) -> type[RosMessage]:
-            return class_for(name, _sub_closure(name, closure))
+            return class_for(name, closure)  # (it takes the part ``name`` uses)
 
         return classes
 
@@ -784,8 +772,6 @@ class CodecRegistry:
         def encode(data: Mapping[str, Any] | RosMessage) -> bytes:
             """Encode a message instance or a (partial) mapping as compact
             JSON (UTF-8 bytes)."""
-            if isinstance(data, RosMessage):
-                data = data.to_dict()
             try:
                 merged = _merge(template, data, strict, "") if template is not None else data
             except Invalid as exc:
