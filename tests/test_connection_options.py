@@ -419,10 +419,14 @@ async def test_auth_callable_failing_on_a_reconnection_is_retried(
 async def test_no_answer_after_auth_says_a_refused_auth_looks_like_this() -> None:
     """A server that swallows every frame (as one checking the MAC may
     ignore a client whose MAC is wrong): the error says that a refused
-    ``auth`` looks like this; without ``auth`` it does not."""
+    ``auth`` looks like this; without ``auth`` it does not.
+
+    The timeout covers the handshake too: 2 s, not less, so a loaded
+    machine's slow handshake is not mistaken for the silence (CI once
+    timed out the handshake itself at 0.5 s)."""
     with Relay(None) as silent:
         for auth, hinted in [(AUTH, True), (None, False)]:
-            opts = options(rosbridge_auth=auth, connect_timeout=0.5, reconnect=None)
+            opts = options(rosbridge_auth=auth, connect_timeout=2.0, reconnect=None)
             with pytest.raises(rmb.ProtocolMismatchError) as caught:
                 async with rmb.connect(silent.url, protocol="rosbridge", options=opts):
                     pass
