@@ -169,11 +169,15 @@ def parse_target(
     return Endpoint(host=host, port=chosen, secure=is_secure, path=path, zenoh=zenoh)
 
 
-async def _open_adapter(endpoint: Endpoint, protocol: str, options: ClientOptions) -> Adapter:
+async def _open_adapter(
+    endpoint: Endpoint, protocol: str, options: ClientOptions, previous: Adapter | None = None
+) -> Adapter:
+    """``previous``: the connection a reconnect replaces (what the Zenoh
+    adapter carries over from it: the record of latched samples delivered)."""
     if endpoint.zenoh or protocol == "zenoh":
         from .adapters._zenoh import open_zenoh  # eclipse-zenoh is an optional extra
 
-        return await open_zenoh(endpoint.zenoh_locator, options)
+        return await open_zenoh(endpoint.zenoh_locator, options, previous)
     if protocol == "rosbridge":
         return await open_rosbridge(endpoint.url, options)
     if protocol == "foxglove-ws":
@@ -223,7 +227,7 @@ async def connect(
 
     async def reopen() -> Adapter:
         # the same endpoint and the protocol the first connection settled on
-        return await _open_adapter(endpoint, adapter.protocol, options)
+        return await _open_adapter(endpoint, adapter.protocol, options, conn.adapter)
 
     conn = Connection(adapter, options, presets, reopen)
     client = Client(conn, options)

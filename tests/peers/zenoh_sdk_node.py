@@ -6,8 +6,10 @@ write, as the peer of the Zenoh tests. One process runs one role:
 
 Roles: ``talker`` (``std_msgs/msg/String`` "hello N", or ``--type
 sensor_msgs/msg/Imu`` with :func:`imu_fields`, or any ``--type`` with the
-field values ``--values`` gives as JSON, the rest zero), ``listener`` (one JSON
-line ``{"msg": {...}}`` per message, any type), ``service``
+field values ``--values`` gives as JSON, the rest zero), ``listener`` (one
+JSON line ``{"msg": {...}}`` per message, any type; ``--qos`` as the
+talker's, a transient-local one asks the publishers' caches at start),
+``service``
 (``std_srvs/srv/SetBool``: success = data, message "set to <data>"; any
 other ``--type`` answers each request with the response fields of the same
 name copied from it), ``add_two_ints`` (``example_interfaces/srv/AddTwoInts``:
@@ -111,7 +113,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--name", default="/sdk_set_bool")
     parser.add_argument("--values", default="", help="talker: JSON field values")
     parser.add_argument(
-        "--qos", default="", help="talker: its QoS, in rmw_zenoh's token form (default: the sdk's)"
+        "--qos",
+        default="",
+        help="talker, listener: its QoS, in rmw_zenoh's token form (default: the sdk's)",
     )
     parser.add_argument("--node", default="", help="node name (default per role)")
     describe = parser.add_mutually_exclusive_group()
@@ -178,7 +182,12 @@ def main(argv: list[str]) -> int:
                 emit(json.dumps({"msg": plain(msg)}))
 
         sub = sdk.ROS2Subscriber(
-            args.topic, args.type, on_message, node_name="sdk_listener", **where
+            args.topic,
+            args.type,
+            on_message,
+            node_name="sdk_listener",
+            qos=args.qos or None,  # transient local: it asks the publishers' caches at start
+            **where,
         )
         closers.append(sub)
         emit("HASH", args.type, sub.type_hash)

@@ -12,7 +12,24 @@ from typing import Any
 from ..codec import same_type_name
 from ..interfaces._base import RosGoal, RosMessage
 
-__all__ = ["goal_arguments", "publish_arguments", "subscribe_arguments"]
+__all__ = ["advertise_arguments", "goal_arguments", "publish_arguments", "subscribe_arguments"]
+
+
+def advertise_arguments(latch: Any, queue_size: Any, best_effort: Any) -> dict[str, Any]:
+    """``advertise``'s publisher options, checked (``TypeError`` /
+    ``ValueError`` naming the mistake), as keyword arguments for the
+    adapter: only those that differ from the defaults."""
+    if not isinstance(latch, bool):
+        raise TypeError("latch must be a bool")
+    if not isinstance(best_effort, bool):
+        raise TypeError("best_effort must be a bool")
+    if queue_size is not None:
+        if isinstance(queue_size, bool) or not isinstance(queue_size, int):
+            raise TypeError(f"queue_size must be an int or None, not {type(queue_size).__name__}")
+        if not 1 <= queue_size <= 10_000:
+            raise ValueError(f"queue_size must be between 1 and 10000, got {queue_size}")
+    given = {"latch": latch, "queue_size": queue_size, "best_effort": best_effort}
+    return {name: value for name, value in given.items() if value not in (False, None)}
 
 
 def goal_arguments(

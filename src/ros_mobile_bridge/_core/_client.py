@@ -43,7 +43,12 @@ from ..codec._classes import remember
 from ..flow import Watcher
 from ..interfaces._base import RosGoal, RosMessage, RosRequest, RosService
 from ._action import ActionGoal
-from ._arguments import goal_arguments, publish_arguments, subscribe_arguments
+from ._arguments import (
+    advertise_arguments,
+    goal_arguments,
+    publish_arguments,
+    subscribe_arguments,
+)
 from ._connection import Connection, SubscriptionContext, is_velocity_type, zero_twist
 from ._published_types import PublishTypes
 from ._serve import DEFAULT_SERVE_BUFFER, DEFAULT_SERVE_TIMEOUT, ServiceRequests
@@ -365,24 +370,33 @@ class Client:
         return SubscriptionContext(self._conn, route)
 
     # -- publishing ---------------------------------------------------------
-    async def advertise(self, topic: str, schema: str, *, latch: bool = False) -> None:
+    async def advertise(
+        self,
+        topic: str,
+        schema: str,
+        *,
+        latch: bool = False,
+        queue_size: int | None = None,
+        best_effort: bool = False,
+    ) -> None:
         """Advertise ``topic`` with type ``schema`` ahead of the first publish,
         taking the bridge's set-up time out of the hot path. ``latch=True``
-        (rosbridge) keeps the last message for subscribers that join later;
-        the Foxglove protocol cannot (``NotSupportedError``)."""
+        (rosbridge, Zenoh) keeps the last message (``queue_size`` of them)
+        for subscribers that join later; ``queue_size`` is the publisher's
+        depth (rosbridge, Zenoh); ``best_effort=True`` (Zenoh) publishes best
+        effort. Where the protocol cannot: ``NotSupportedError``."""
         check_name("topic", topic)
         check_schema(schema)
-        if not isinstance(latch, bool):
-            raise TypeError("latch must be a bool")
+        options = advertise_arguments(latch, queue_size, best_effort)
         self._conn.require_connected()
-        await self._conn.adapter.advertise(topic, schema, latch=latch)
+        await self._conn.advertise(topic, schema, options)
 
     async def unadvertise(self, topic: str) -> None:
         """Stop publishing ``topic``. A velocity topic still gets its zero
         Twist on teardown."""
         check_name("topic", topic)
         self._conn.require_connected()
-        await self._conn.adapter.unadvertise(topic)
+        await self._conn.unadvertise(topic)
 
     @overload
     async def publish(

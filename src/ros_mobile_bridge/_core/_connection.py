@@ -81,6 +81,9 @@ class Connection:
         self.router = Router(adapter, options, presets, self.status, self.outbound)
         self.served = ServedServices(options.teardown_timeout, options.logger)
         self.velocity: dict[str, str] = {}
+        # topic -> the publisher options advertise was given (latch, queue_size,
+        # best_effort), for the restore after a reconnect
+        self._publisher_options: dict[str, dict[str, Any]] = {}
         """Velocity topic -> the type this client published there."""
         self._task_scopes: dict[str, anyio.CancelScope] = {}
         self._traffic_before = (0, 0)  # bytes and messages of the connections lost
@@ -98,6 +101,19 @@ class Connection:
                 f"the connection is {self.status.value}"
                 + (f": {self.last_error}" if self.last_error else "")
             )
+
+    async def advertise(self, topic: str, schema: str, options: dict[str, Any]) -> None:
+        """Advertise ``topic`` with the publisher ``options`` (checked
+        keyword arguments of the adapter's ``advertise``), which a reconnect
+        restores with it; forgotten by :meth:`unadvertise`."""
+        new = topic not in self.adapter.publishing()
+        await self.adapter.advertise(topic, schema, **options)
+        if new:
+            self._publisher_options[topic] = options
+
+    async def unadvertise(self, topic: str) -> None:
+        self._publisher_options.pop(topic, None)
+        await self.adapter.unadvertise(topic)
 
     def current(self) -> Adapter | None:
         """The adapter while connected, else None."""
@@ -238,7 +254,8 @@ class Connection:
         self.router.adapter = adapter
         for topic, schema in old.publishing().items():
             # unconfirmed: the new connection's reader starts after this
-            await adapter.advertise(topic, schema, confirm=False)
+            options = self._publisher_options.get(topic, {})
+            await adapter.advertise(topic, schema, confirm=False, **options)
         await self.router.restore()
         await self.served.restore(adapter.serving)
 

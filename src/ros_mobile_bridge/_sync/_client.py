@@ -428,11 +428,19 @@ class SyncClient:
 
     @_mirrors
     def advertise(
-        self, topic: str, schema: str, *, latch: bool = False, timeout: float | None = None
+        self,
+        topic: str,
+        schema: str,
+        *,
+        latch: bool = False,
+        queue_size: int | None = None,
+        best_effort: bool = False,
+        timeout: float | None = None,
     ) -> None:
         """:meth:`Client.advertise`, blocking."""
+        options = (latch, queue_size, best_effort)
         self._call(
-            _advertise, self._client, topic, schema, latch, timeout=timeout, what="advertise"
+            _advertise, self._client, topic, schema, options, timeout=timeout, what="advertise"
         )
 
     @_mirrors
@@ -665,8 +673,13 @@ async def _publish(
     await publish(topic, schema, data, priority=priority, check_velocity=check_velocity)
 
 
-async def _advertise(client: Client, topic: str, schema: str, latch: bool) -> None:
-    await client.advertise(topic, schema, latch=latch)
+async def _advertise(
+    client: Client, topic: str, schema: str, options: tuple[bool, int | None, bool]
+) -> None:
+    latch, queue_size, best_effort = options
+    await client.advertise(
+        topic, schema, latch=latch, queue_size=queue_size, best_effort=best_effort
+    )
 
 
 async def _wait_for_topic(client: Client, topic: str, timeout: float | None) -> TopicInfo:

@@ -600,10 +600,19 @@ class FoxgloveAdapter:
         raise NotSupportedError(f"the server accepts none of our encodings: {', '.join(supported)}")
 
     async def advertise(
-        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+        self,
+        topic: str,
+        schema: str,
+        *,
+        latch: bool = False,
+        queue_size: int | None = None,
+        best_effort: bool = False,
+        confirm: bool = True,
     ) -> None:
         if latch:
             raise NotSupportedError("the Foxglove protocol has no latched publishing")
+        if best_effort:
+            raise NotSupportedError("the Foxglove protocol has no best-effort publishing")
         if await self._pubs.reuse(topic, schema):
             return
         if "clientPublish" not in self.server_info.capabilities:

@@ -19,6 +19,7 @@ from .._errors import (
     ConnectError,
     DecodeError,
     NotConnected,
+    NotSupportedError,
     ProtocolMismatchError,
     RosBridgeError,
     SchemaError,
@@ -717,8 +718,17 @@ class RosbridgeAdapter:
 
     # -- publishing --------------------------------------------------------------
     async def advertise(
-        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+        self,
+        topic: str,
+        schema: str,
+        *,
+        latch: bool = False,
+        queue_size: int | None = None,
+        best_effort: bool = False,
+        confirm: bool = True,
     ) -> None:
+        if best_effort:
+            raise NotSupportedError("rosbridge's advertise has no best-effort publishing")
         if await self._pubs.reuse(topic, schema):
             return
         pub = _Publisher(
@@ -734,7 +744,9 @@ class RosbridgeAdapter:
         try:
             start = anyio.current_time()
             await self._ws.send(
-                self._engine.advertise(topic, schema, id=pub.id, latch=latch, queue_size=100)
+                self._engine.advertise(
+                    topic, schema, id=pub.id, latch=latch, queue_size=queue_size or 100
+                )
             )
             if confirm:
                 await self._calls.round_trip()  # a refusal arrives before this answer

@@ -322,12 +322,23 @@ class Adapter(Protocol):
         """No local subscriber wants ``topic`` any more."""
 
     async def advertise(
-        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+        self,
+        topic: str,
+        schema: str,
+        *,
+        latch: bool = False,
+        queue_size: int | None = None,
+        best_effort: bool = False,
+        confirm: bool = True,
     ) -> None:
         """Make ``topic`` publishable with type ``schema`` (waits for the
         bridge to be ready). A no-op when already advertised with it.
-        ``latch``: the bridge keeps the last message for late subscribers
-        (``NotSupportedError`` where the protocol cannot). ``confirm=False``:
+        ``latch``: the bridge keeps the last message (``queue_size`` of
+        them) for late subscribers; ``queue_size``: the publisher's depth
+        where the protocol has one (rosbridge's ``queue_size``, a Zenoh
+        publisher's history), else ignored; ``best_effort``: a best-effort
+        publisher (``NotSupportedError`` where the protocol cannot do
+        either). ``confirm=False``:
         do not wait for an answer only the reader could read (a reconnect
         restores advertisements before the new connection's reader runs); a
         refusal is logged when it arrives."""

@@ -49,7 +49,7 @@ from typing import Any, Final
 
 import anyio
 
-from .._errors import ConnectError, NotSupportedError, RosBridgeError, SchemaError, ServiceError
+from .._errors import ConnectError, RosBridgeError, SchemaError, ServiceError
 from .._options import ClientOptions
 from .._types import ServerInfo, ServiceInfo, TopicInfo
 from ..flow import TopicMessage, WireMessage
@@ -62,6 +62,7 @@ from ._zenoh_actions import ZenohActions
 from ._zenoh_calls import ZenohQueries
 from ._zenoh_describe import ZenohDescriptions
 from ._zenoh_graph import ZenohGraph
+from ._zenoh_latched import LatchedMemory, ZenohLatched
 from ._zenoh_node import ZenohNode
 from ._zenoh_parameters import ZenohParameters
 from ._zenoh_samples import ZenohSamples
@@ -99,10 +100,14 @@ class _Publisher(Advertisement):
     seq: int = 0
 
 
-async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
+async def open_zenoh(
+    endpoint: str, options: ClientOptions, previous: object = None
+) -> ZenohAdapter:
     """Open a zenoh client session to the router at ``endpoint`` and read
     the domain's graph, within ``options.connect_timeout``. ``ConnectError``
-    when the router is refused or unreachable."""
+    when the router is refused or unreachable. ``previous``: the adapter this
+    one replaces (a reconnect), whose record of the latched samples delivered
+    carries over (``_zenoh_latched``)."""
     deadline = anyio.current_time() + options.connect_timeout
     session = await ZenohSession.open(
         endpoint,
@@ -112,7 +117,8 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
         max_bytes=options.zenoh_backlog_bytes,
     )
     try:
-        adapter = ZenohAdapter(session, options, endpoint)
+        memory = previous.latched.memory if isinstance(previous, ZenohAdapter) else None
+        adapter = ZenohAdapter(session, options, endpoint, memory)
         await adapter.bootstrap(deadline)
     except BaseException:
         await session.aclose()
@@ -135,7 +141,13 @@ class ZenohAdapter:
     protocol = "zenoh"
     wire_timeout_slack = 0.0  # the client's deadline is the query's timeout
 
-    def __init__(self, session: ZenohSession, options: ClientOptions, endpoint: str) -> None:
+    def __init__(
+        self,
+        session: ZenohSession,
+        options: ClientOptions,
+        endpoint: str,
+        memory: LatchedMemory | None = None,
+    ) -> None:
         self._session = session
         self._options = options
         domain = options.domain_id
@@ -176,6 +188,7 @@ class ZenohAdapter:
         self.parameters: ZenohParameters = ZenohParameters(node, queries)
         self.node_list: ZenohGraph = node.graph
         self._samples = ZenohSamples(node, self.descriptions, self._subs)
+        self.latched = ZenohLatched(node, self._samples, self._subs, memory)
         self._node_token = session.declare_token(node.node_key)
 
     # -- the graph ----------------------------------------------------------------------
@@ -222,6 +235,8 @@ class ZenohAdapter:
         for topic, sub in self._subs.items():
             if sub.token is None and topic in topics:
                 self._declare_subscription_token(sub, topics[topic])
+        if self._subs:
+            self.latched.on_graph()  # history of the transient-local publishers that came
 
     @property
     def topics(self) -> list[TopicInfo]:
@@ -269,7 +284,7 @@ class ZenohAdapter:
         inbox = self._session.inbox
         by_tag = self._routes
         on_samples = self._samples.on_samples
-        queries, serving = self._queries, self.serving
+        queries, serving, latched = self._queries, self.serving, self.latched
         saving = self._pauses.rates  # (updated in place)
         pace_below = self._options.zenoh_backlog // 2
         while True:
@@ -305,9 +320,11 @@ class ZenohAdapter:
                 elif type(item) is rz.LivelinessChange:
                     graph_changed |= self._graph.on_token(item.key, item.alive)
                 elif type(item) is rz.Reply:
-                    queries.on_reply(item)
+                    if not latched.on_reply(item):
+                        queries.on_reply(item)
                 elif type(item) is rz.QueryDone:
-                    queries.on_done(item.query_id)
+                    if not latched.on_done(item.query_id):
+                        queries.on_done(item.query_id)
                 elif type(item) is rz.Request:
                     requests.append(item)
                 elif type(item) is rz.SessionLost:
@@ -377,6 +394,7 @@ class ZenohAdapter:
         self._routes[tag] = sub
         if type_name is not None:
             self._declare_subscription_token(sub, type_name)
+        self.latched.watch(sub)
         if topic in self._graph.publishers_of:
             self._events.emit(TopicState(topic, True))
         self._events.post()
@@ -443,6 +461,7 @@ class ZenohAdapter:
             return
         self._routes.pop(sub.tag, None)
         self._samples.forget(topic)
+        self.latched.forget(topic)
         self._pauses.forget(topic)
         if sub.handle is not None:
             self._session.undeclare(sub.handle)
@@ -451,17 +470,25 @@ class ZenohAdapter:
 
     # -- publishing ---------------------------------------------------------------------
     async def advertise(
-        self, topic: str, schema: str, *, latch: bool = False, confirm: bool = True
+        self,
+        topic: str,
+        schema: str,
+        *,
+        latch: bool = False,
+        queue_size: int | None = None,
+        best_effort: bool = False,
+        confirm: bool = True,
     ) -> None:
+        """A publisher (reliable or best effort) and its token, whose QoS says
+        so; ``latch``: transient local, keeping the last ``queue_size``
+        samples (1 by default) for late joiners (``_zenoh_latched``).
+        ``queue_size`` is the depth the token announces (10 by default)."""
         if await self._pubs.reuse(topic, schema):
             return
-        if latch:
-            raise NotSupportedError(
-                "latched (transient-local) publishing is not implemented over zenoh yet"
-            )
         encode = self.codecs.encoder(schema, "cdr")
         key = self._node.key(topic, schema)
-        qos = rz.Qos()
+        depth = queue_size if queue_size is not None else (1 if latch else 10)
+        qos = rz.Qos(reliable=not best_effort, transient_local=latch, depth=depth)
         token_key = self._node.entity_key(
             rz.EntityKind.PUBLISHER,
             name=topic,
@@ -469,7 +496,10 @@ class ZenohAdapter:
             hash_=rz.parse_key(key).type_hash,
             qos=qos,
         )
-        publisher = self._session.declare_publisher(key, reliable=qos.reliable, express=False)
+        if latch:
+            publisher = self.latched.publisher(key, qos)
+        else:
+            publisher = self._session.declare_publisher(key, reliable=qos.reliable, express=False)
         token = self._session.declare_token(token_key)
         ready = anyio.Event()
         ready.set()

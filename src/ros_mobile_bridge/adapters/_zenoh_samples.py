@@ -31,9 +31,10 @@ from .._errors import SchemaError
 from ..flow import RawFrame
 from ..wire import rmw_zenoh as rz
 from ..wire._limits import truncate_for_log
+from ._seam import Replayed
 from ._zenoh_describe import ZenohDescriptions
 from ._zenoh_node import ZenohNode
-from ._zenoh_values import Subscription
+from ._zenoh_values import Subscription, fresh
 
 __all__ = ["ZenohSamples"]
 
@@ -91,10 +92,12 @@ class ZenohSamples:
         held = self._held
         topic = sub.topic
         unpack = _HEAD.unpack_from
+        latched = sub.seen is not None  # each sample checked against the record
         for key, payload, attachment in samples:
             entry = keys.get(key)
             if (
-                entry is None
+                latched
+                or entry is None
                 or attachment is None
                 or len(attachment) != _FIXED
                 or (held and topic in held)
@@ -131,6 +134,7 @@ class ZenohSamples:
         general case of :meth:`on_samples`, and the held samples' replay."""
         if attachment is not None and len(attachment) == _FIXED and attachment[16] == _GID_SIZE:
             sequence, stamp, _ = _HEAD.unpack_from(attachment)
+            gid = attachment[17:]
         else:  # the older keyed form, or nothing readable
             try:
                 older = rz.decode_attachment(attachment)
@@ -141,7 +145,10 @@ class ZenohSamples:
                     f"({'none' if attachment is None else f'{len(attachment)} bytes'})",
                 )
                 return
-            stamp, sequence = older.timestamp_ns, older.sequence
+            stamp, sequence, gid = older.timestamp_ns, older.sequence, older.gid
+        if sub.seen is not None and not fresh(sub.seen, gid, sequence):
+            self._events.emit(Replayed(sub.topic, len(payload)))  # delivered already
+            return
         if self._held and sub.topic in self._held:  # its type is being described
             self._hold(sub.topic, self._held[sub.topic], key, payload, attachment)
             return
@@ -171,6 +178,13 @@ class ZenohSamples:
                 sequence,
             )
         )
+
+    def on_kept(
+        self, sub: Subscription, key: str, payload: bytes, attachment: bytes | None
+    ) -> None:
+        """A sample a transient-local publisher kept (a reply to a history
+        query of ``_zenoh_latched``): checked and delivered as a live one."""
+        self._on_sample(sub, key, payload, attachment)
 
     def _hold(
         self, topic: str, held: _Held, key: str, payload: bytes, attachment: bytes | None

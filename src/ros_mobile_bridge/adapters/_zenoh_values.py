@@ -15,11 +15,13 @@ from ._parameter_events import by_node, parameter_from_ros, ros_field
 from ._seam import GoalEvents
 
 __all__ = [
+    "MAX_GIDS_PER_TOPIC",
     "Goal",
     "Query",
     "Subscription",
     "by_node",
     "default_domain",
+    "fresh",
     "parameter_from_ros",
     "parameter_to_ros",
     "ros_field",
@@ -28,6 +30,9 @@ __all__ = [
 ]
 
 _ATTACHMENT_SIZE: Final = rz.ATTACHMENT_SIZE
+MAX_GIDS_PER_TOPIC: Final = 1024
+"""Publishers (gids) whose last delivered sequence number is kept per topic
+of a transient-local publisher (see ``_zenoh_latched``)."""
 
 
 def default_domain() -> int:
@@ -48,6 +53,9 @@ class Subscription:
     parameter_events: bool = False  # the internal /parameter_events subscription
     # sample key -> (type name, decoder); bounded by _zenoh_samples._MAX_KEYS_PER_TOPIC
     keys: dict[str, tuple[str, Decoder | None]] = field(default_factory=dict)
+    # a topic of a transient-local publisher: gid -> the highest sequence number
+    # delivered (a _zenoh_latched.LatchedMemory record), else None
+    seen: dict[bytes, int] | None = None
 
 
 @dataclass(slots=True)
@@ -68,6 +76,20 @@ class Goal:
     # went): the keep-alive asks again or fails it (see ZenohActions)
     orphaned: bool = False
     asked: int = 0  # get_result queries sent
+
+
+def fresh(seen: dict[bytes, int], gid: bytes, sequence: int) -> bool:
+    """Whether a sample from ``gid`` numbered ``sequence`` was not delivered
+    yet (nothing at or above it from that gid in ``seen``, a subscription's
+    record); if so it is recorded. :data:`MAX_GIDS_PER_TOPIC` gids at most,
+    the one recorded first forgotten first."""
+    last = seen.get(gid)
+    if last is not None and sequence <= last:
+        return False
+    if last is None and len(seen) >= MAX_GIDS_PER_TOPIC:
+        del seen[next(iter(seen))]
+    seen[gid] = sequence
+    return True
 
 
 def valid_attachment(attachment: bytes | None) -> bool:

@@ -87,6 +87,9 @@ PUMP_BATCH: Final = 512
 """The most samples a pump hands to the inbox at once."""
 _PUMP_JOIN_TIMEOUT: Final = 5.0
 """Seconds :meth:`ZenohSession.aclose` waits for the pumps, all together."""
+HEARTBEAT_PERIOD: Final = 0.5
+"""Seconds between a reliable cached publisher's sporadic heartbeats (sent
+only when it published since the last): rmw_zenoh's 500 ms."""
 
 
 def load_zenoh() -> Any:
@@ -557,6 +560,71 @@ class ZenohSession:
             selector, self._reply_handler(query_id), timeout=max(timeout, 0.001)
         )
         return query_id
+
+    # -- kept history (transient-local topics: adapters/_zenoh_latched.py) ------------
+    def query_history(self, selector: str, *, timeout: float) -> int:
+        """Ask the publishers' caches that ``selector`` reaches for what they
+        keep: every matching queryable answers (target ALL), every reply is
+        kept (no consolidation: several publishers' samples share one key)
+        and replies on any key are taken (a cache answers with the data key,
+        not the query's). Replies and the end come as for :meth:`query`."""
+        z = load_zenoh()
+        self._queries += 1
+        query_id = self._queries
+        self._session.get(
+            selector,
+            self._reply_handler(query_id),
+            target=z.QueryTarget.ALL,
+            consolidation=z.ConsolidationMode.NONE,
+            accept_replies=z.ReplyKeyExpr.ANY,
+            timeout=max(timeout, 0.001),
+        )
+        return query_id
+
+    def declare_cached_publisher(self, key_expr: str, *, depth: int, reliable: bool) -> Any:
+        """A zenoh-ext advanced publisher on ``key_expr`` that keeps its last
+        ``depth`` samples for late joiners, detectable through liveliness,
+        and (``reliable``) announcing its last sequence number with a
+        sporadic heartbeat of :data:`HEARTBEAT_PERIOD` s, so a subscriber can
+        recover a lost last sample (as rmw_zenoh's transient-local
+        publishers are made). Undeclared with the session."""
+        z = load_zenoh()
+        import zenoh.ext as zext
+
+        publisher = zext.declare_advanced_publisher(
+            self._session,
+            key_expr,
+            congestion_control=(
+                z.CongestionControl.BLOCK if reliable else z.CongestionControl.DROP
+            ),
+            reliability=z.Reliability.RELIABLE if reliable else z.Reliability.BEST_EFFORT,
+            cache=zext.CacheConfig(depth),
+            publisher_detection=True,
+            sample_miss_detection=(
+                zext.MissDetectionConfig(heartbeat=None, sporadic_heartbeat=HEARTBEAT_PERIOD)
+                if reliable
+                else None
+            ),
+        )
+        self._keep(publisher)
+        return publisher
+
+    def declare_cache_queryable(
+        self, key_expr: str, kept: Callable[[], list[tuple[str, bytes, bytes]]]
+    ) -> int:
+        """A complete queryable on ``key_expr`` answering each query, in
+        zenoh's thread, with the samples ``kept()`` returns (key, payload,
+        attachment), oldest first: a publication cache as zenoh-ext's
+        ``PublicationCache`` answers. Returns a handle for :meth:`undeclare`."""
+
+        def on_query(query: Any) -> None:
+            with contextlib.suppress(Exception):  # a closed session: nothing to answer
+                for key, payload, attachment in kept():
+                    query.reply(key, payload, attachment=attachment)
+            with contextlib.suppress(Exception):
+                query.drop()
+
+        return self._keep(self._session.declare_queryable(key_expr, on_query, complete=True))
 
     # -- writes --------------------------------------------------------------------
     def declare_publisher(self, key_expr: str, *, reliable: bool, express: bool) -> Any:
