@@ -103,9 +103,7 @@ class RmwPublisher:
         self._encode = CodecRegistry().encoder(type_name, "cdr")
         self._form = form
         qos = qos_part(reliable=reliable, transient_local=transient_local, depth=depth)
-        self.token_key = (
-            f"@ros2_lv/{domain}/{self.zid}/0/10/MP/%/%/{node}/{rz.mangle(topic)}/{dds}/{hash_}/{qos}"
-        )
+        self.token_key = f"@ros2_lv/{domain}/{self.zid}/0/10/MP/%/%/{node}/{rz.mangle(topic)}/{dds}/{hash_}/{qos}"
         self.gid = rz.entity_gid(self.token_key)
         self._seq = 0
         self._kept: collections.deque[tuple[bytes, bytes]] = collections.deque(maxlen=depth)

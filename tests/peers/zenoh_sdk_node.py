@@ -952,6 +952,8 @@ class SdkNode:
             if line.startswith("HASH "):
                 _, type_name, hash_ = line.split()
                 self.hashes[type_name] = hash_
+            elif line.startswith("{"):  # a transient-local listener's history, as it starts
+                self._received.append(json.loads(line))
 
     def _read(self) -> None:
         assert self._proc.stdout is not None

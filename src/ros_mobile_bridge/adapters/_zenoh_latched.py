@@ -43,10 +43,11 @@ What this part does:
 * **Subscribing.** A subscription asks history only of the publishers
   whose token says TRANSIENT_LOCAL: for each such token, when the
   subscription starts or when the token appears (again, after a reconnect),
-  two queries go out, one per form, each reaching only that publisher's
-  session: ``<domain>/<topic>/*/*/@adv/pub/<zid>/**?_max=<depth>`` and
-  ``<zid>/<domain>/<topic>/*/*`` (target ALL, consolidation NONE, replies on
-  any key, :data:`HISTORY_TIMEOUT`). Each reply is a sample of the topic
+  the current form is asked, ``<domain>/<topic>/*/*/@adv/pub/<zid>/**?_max=<depth>``,
+  and when that brings nothing, the publication cache's,
+  ``<zid>/<domain>/<topic>/*/*``; each reaches only that publisher's
+  session (target ALL, consolidation NONE, replies on any key,
+  :data:`HISTORY_TIMEOUT`). Each reply is a sample of the topic
   (``_zenoh_samples`` checks its key and attachment as any other).
 * **No duplicates.** Once a topic has a transient-local publisher, every
   sample of its subscription, live or replayed, is checked against the
@@ -165,7 +166,9 @@ class ZenohLatched:
         self._subs = subscriptions
         self.memory = memory if memory is not None else LatchedMemory()
         self._asked: set[str] = set()  # publisher token keys whose history was asked
-        self._queries: dict[int, Subscription] = {}  # history query id -> for whom
+        # history query id -> (for whom, the publisher's zid, the replies so far;
+        # None once the publication cache's form was asked too)
+        self._queries: dict[int, list[Any]] = {}
 
     # -- subscribing -------------------------------------------------------------------------
     def watch(self, sub: Subscription) -> None:
@@ -201,23 +204,35 @@ class ZenohLatched:
             sub.seen = self.memory.of(sub.topic)
         data = self._node.data_selector(sub.topic)
         newest = f"?_max={qos.depth}" if qos.depth > 0 else ""  # 0: keep-all
-        session = self._node.session
-        for selector in (f"{data}/@adv/pub/{token.zid}/**{newest}", f"{token.zid}/{data}"):
-            query_id = session.query_history(selector, timeout=HISTORY_TIMEOUT)
-            self._queries[query_id] = sub
+        selector = f"{data}/@adv/pub/{token.zid}/**{newest}"
+        query_id = self._node.session.query_history(selector, timeout=HISTORY_TIMEOUT)
+        self._queries[query_id] = [sub, token.zid, 0]
 
     def on_reply(self, item: rz.Reply) -> bool:
         """A reply to a history query: the sample goes to its subscription
         (unless it was unsubscribed since). False for another query's."""
-        sub = self._queries.get(item.query_id)
-        if sub is None:
+        asked = self._queries.get(item.query_id)
+        if asked is None:
             return False
+        sub = asked[0]
         if item.ok and item.key is not None and self._subs.get(sub.topic) is sub:
+            if asked[2] is not None:
+                asked[2] += 1
             self._samples.on_kept(sub, item.key, item.payload, item.attachment)
         return True
 
     def on_done(self, query_id: int) -> bool:
-        return self._queries.pop(query_id, None) is not None
+        """A history query ended (False for another query's): when the
+        current form brought nothing, the publication cache's is asked."""
+        asked = self._queries.pop(query_id, None)
+        if asked is None:
+            return False
+        sub, zid, replies = asked
+        if replies == 0 and self._subs.get(sub.topic) is sub and not self._node.session.closed:
+            selector = f"{zid}/{self._node.data_selector(sub.topic)}"
+            query_id = self._node.session.query_history(selector, timeout=HISTORY_TIMEOUT)
+            self._queries[query_id] = [sub, zid, None]
+        return True
 
     # -- publishing --------------------------------------------------------------------------
     def publisher(self, key: str, qos: rz.Qos) -> Any:
