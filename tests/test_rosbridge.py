@@ -526,6 +526,19 @@ async def test_latched_advertisement_reaches_a_late_subscriber(peer: RosPeer) ->
     assert msg.data.to_dict() == {"data": "kept"}
 
 
+async def test_best_effort_publishing_is_refused_and_queue_size_accepted(peer: RosPeer) -> None:
+    topic = unique("/rmb_queued")
+    async with rmb.connect(peer.url, protocol="rosbridge", options=options()) as robot:
+        with pytest.raises(rmb.NotSupportedError, match="no best-effort publishing"):
+            await robot.advertise(topic, "std_msgs/msg/String", best_effort=True)
+        await robot.advertise(topic, "std_msgs/msg/String", latch=True, queue_size=5)
+        await robot.publish(topic, "std_msgs/msg/String", {"data": "kept"})
+        async with rmb.connect(peer.url, protocol="rosbridge", options=options()) as late:
+            async with late.subscribe(topic, schema="std_msgs/msg/String") as sub:
+                (msg,) = await take(sub, 1)
+    assert msg.data.to_dict() == {"data": "kept"}
+
+
 async def test_advertising_an_unknown_type_is_a_clear_error(peer: RosPeer) -> None:
     async with rmb.connect(peer.url, protocol="rosbridge", options=options()) as robot:
         with pytest.raises(rmb.SchemaError, match="refused"):

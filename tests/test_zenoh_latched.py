@@ -294,3 +294,58 @@ async def test_best_effort_publishing_says_so_in_its_token_and_arrives(
                 await anyio.sleep(0.05)
         assert set(got.data) == {"hi"}
         tg.cancel_scope.cancel()
+
+
+async def test_a_reconnect_restores_the_latched_publisher_with_its_qos(zenoh_domain: int) -> None:
+    from peers.zenoh_router import ZenohRouter
+
+    opts = options(
+        zenoh_domain,
+        connect_timeout=2.0,
+        keepalive_interval=0.2,
+        keepalive_timeout=0.6,
+        reconnect=rmb.ReconnectPolicy(initial_delay=0.1, max_delay=0.3),
+    )
+    router = ZenohRouter().start()
+    try:
+        async with rmb.connect(router.locator, options=opts) as client:
+            await client.advertise("/map", STRING, latch=True, queue_size=3)
+            router.stop()
+            await wait_until(
+                lambda: client.status == "reconnecting", timeout=10.0, what="reconnecting"
+            )
+            router = ZenohRouter(port=router.port).start()
+            await wait_until(lambda: client.status == "connected", timeout=20, what="reconnected")
+            await client.publish("/map", STRING, {"data": "after"})
+            with RmwSubscriber(router.locator, zenoh_domain, "/map", depth=3) as sub:
+                await wait_until(lambda: sub.received, timeout=10.0, what="the kept message")
+                assert [m.data for m in sub.messages()] == ["after"]
+                replies = sub.session.liveliness().get(
+                    rz.liveliness_selector(zenoh_domain), timeout=5.0
+                )
+                tokens = [rz.parse_token(str(r.ok.key_expr)) for r in replies if r.ok]
+                (token,) = [t for t in tokens if t.kind is rz.EntityKind.PUBLISHER]
+                assert token.qos == rz.Qos(transient_local=True, depth=3)
+    finally:
+        router.stop()
+
+
+async def test_publisher_options_are_checked_at_once(zenoh_router: Any, zenoh_domain: int) -> None:
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        with pytest.raises(ValueError, match="queue_size must be between 1 and 10000, got 0"):
+            await client.advertise("/a", STRING, queue_size=0)
+        with pytest.raises(TypeError, match="queue_size must be an int or None, not bool"):
+            await client.advertise("/a", STRING, queue_size=True)
+        with pytest.raises(TypeError, match="best_effort must be a bool"):
+            await client.advertise("/a", STRING, best_effort="yes")  # type: ignore[arg-type]
+        with pytest.raises(TypeError, match="latch must be a bool"):
+            await client.advertise("/a", STRING, latch=1)  # type: ignore[arg-type]
+        assert client.topics == []  # nothing was advertised
+
+
+async def test_foxglove_refuses_best_effort_and_latched_publishing(server: Any) -> None:
+    async with rmb.connect(f"ws://127.0.0.1:{server.port}", protocol="foxglove-ws") as client:
+        with pytest.raises(rmb.NotSupportedError, match="no best-effort publishing"):
+            await client.advertise("/a", STRING, best_effort=True)
+        with pytest.raises(rmb.NotSupportedError, match="no latched publishing"):
+            await client.advertise("/a", STRING, latch=True)

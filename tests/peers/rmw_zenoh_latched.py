@@ -194,7 +194,7 @@ class RmwSubscriber:
         import zenoh
         import zenoh.ext as zext
 
-        self._session = session = _session(locator)
+        self.session = session = _session(locator)
         self.key, _dds, _hash = _names(domain, topic, type_name)
         self.received: list[tuple[bytes, bytes | None]] = []
         self._lock = threading.Lock()
@@ -234,7 +234,7 @@ class RmwSubscriber:
 
     def close(self) -> None:
         self._sub.undeclare()
-        self._session.close()
+        self.session.close()
 
     def __enter__(self) -> RmwSubscriber:
         return self
