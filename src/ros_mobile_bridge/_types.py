@@ -169,7 +169,9 @@ class SubscriptionStats:
     ``dropped_overflow`` (the consumer fell behind; oldest dropped),
     ``dropped_breaker`` (the circuit breaker was tripped), or is still
     queued, or ``dropped_replay`` (``save_bandwidth`` on Foxglove: the server
-    replayed, on resubscription, the message delivered last). ``decode_failures``
+    replayed, on resubscription, the message delivered last; over Zenoh, a
+    transient-local publisher's message delivered already, live or from its
+    history). ``decode_failures``
     counts delivered messages whose payload could not be decoded (delivered
     raw). ``effective_interval_ms`` is the larger of the ``max_hz`` cap and
     the adaptive throttle's interval; ``bucket`` names the throttle bucket
