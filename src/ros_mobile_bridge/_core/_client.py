@@ -43,12 +43,7 @@ from ..codec._classes import remember
 from ..flow import Watcher
 from ..interfaces._base import RosGoal, RosMessage, RosRequest, RosService
 from ._action import ActionGoal
-from ._arguments import (
-    advertise_arguments,
-    goal_arguments,
-    publish_arguments,
-    subscribe_arguments,
-)
+from ._arguments import advertise_arguments, goal_arguments, publish_arguments, subscribe_arguments
 from ._connection import Connection, SubscriptionContext, is_velocity_type, zero_twist
 from ._published_types import PublishTypes
 from ._serve import DEFAULT_SERVE_BUFFER, DEFAULT_SERVE_TIMEOUT, ServiceRequests

@@ -80,6 +80,7 @@ from __future__ import annotations
 import collections
 import threading
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any, Final
 
 from ..wire import rmw_zenoh as rz
@@ -110,6 +111,16 @@ class LatchedMemory:
 
     def forget(self, topic: str) -> None:
         self._topics.pop(topic, None)
+
+
+@dataclass(slots=True)
+class _Asked:
+    """One history query: for whom, the publisher session's zid, and the
+    replies so far (None: the publication cache's form, asked last)."""
+
+    sub: Subscription
+    zid: str
+    replies: int | None
 
 
 class _CachedPublisher:
@@ -166,9 +177,7 @@ class ZenohLatched:
         self._subs = subscriptions
         self.memory = memory if memory is not None else LatchedMemory()
         self._asked: set[str] = set()  # publisher token keys whose history was asked
-        # history query id -> (for whom, the publisher's zid, the replies so far;
-        # None once the publication cache's form was asked too)
-        self._queries: dict[int, list[Any]] = {}
+        self._queries: dict[int, _Asked] = {}  # history query id -> what it asks
 
     # -- subscribing -------------------------------------------------------------------------
     def watch(self, sub: Subscription) -> None:
@@ -206,7 +215,7 @@ class ZenohLatched:
         newest = f"?_max={qos.depth}" if qos.depth > 0 else ""  # 0: keep-all
         selector = f"{data}/@adv/pub/{token.zid}/**{newest}"
         query_id = self._node.session.query_history(selector, timeout=HISTORY_TIMEOUT)
-        self._queries[query_id] = [sub, token.zid, 0]
+        self._queries[query_id] = _Asked(sub, token.zid, 0)
 
     def on_reply(self, item: rz.Reply) -> bool:
         """A reply to a history query: the sample goes to its subscription
@@ -214,10 +223,10 @@ class ZenohLatched:
         asked = self._queries.get(item.query_id)
         if asked is None:
             return False
-        sub = asked[0]
+        sub = asked.sub
         if item.ok and item.key is not None and self._subs.get(sub.topic) is sub:
-            if asked[2] is not None:
-                asked[2] += 1
+            if asked.replies is not None:
+                asked.replies += 1
             self._samples.on_kept(sub, item.key, item.payload, item.attachment)
         return True
 
@@ -227,11 +236,15 @@ class ZenohLatched:
         asked = self._queries.pop(query_id, None)
         if asked is None:
             return False
-        sub, zid, replies = asked
-        if replies == 0 and self._subs.get(sub.topic) is sub and not self._node.session.closed:
-            selector = f"{zid}/{self._node.data_selector(sub.topic)}"
+        sub = asked.sub
+        if (
+            asked.replies == 0
+            and self._subs.get(sub.topic) is sub
+            and not self._node.session.closed
+        ):
+            selector = f"{asked.zid}/{self._node.data_selector(sub.topic)}"
             query_id = self._node.session.query_history(selector, timeout=HISTORY_TIMEOUT)
-            self._queries[query_id] = [sub, zid, None]
+            self._queries[query_id] = _Asked(sub, asked.zid, None)
         return True
 
     # -- publishing --------------------------------------------------------------------------
