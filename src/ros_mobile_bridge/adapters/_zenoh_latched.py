@@ -23,10 +23,12 @@ of its release repository (the facts, not the code):
   (a liveliness token ``<data key>/@adv/pub/<zid>/<eid>/_``) and a cache of
   ``depth`` samples whose queryable is that same key; RELIABLE +
   TRANSIENT_LOCAL adds sample-miss detection with a sporadic heartbeat every
-  500 ms (Jazzy 0.2.4 and later; best-effort publishers are put BEST_EFFORT).
+  500 ms (Jazzy 0.2.4 and later, Kilted, Rolling 0.6.0 and later; from
+  then on best-effort publishers are put BEST_EFFORT).
   A transient-local subscription is an ``AdvancedSubscriber`` with
   ``subscriber_detection``, history (``detect_late_publishers``,
-  ``max_samples`` = its depth) and, when RELIABLE, recovery by heartbeat:
+  ``max_samples`` = its depth) and, when RELIABLE, recovery by heartbeat
+  (the releases with the heartbeat):
   it queries ``<data key>/@adv/pub/**`` with ``_max=<depth>`` (and replies
   on any key), and the key of each publisher token that appears later. The
   cache answers the newest ``_max`` samples, oldest first, each with the
@@ -68,12 +70,15 @@ What this part does:
   answering from the same kept samples, as the publication cache of the
   earlier releases did; its token says TRANSIENT_LOCAL with that depth.
 
-Limits: several local subscriptions to one topic share one zenoh
-subscriber, so one that starts while another is already subscribed does
-not get the history again; a publisher whose first sample arrives before its
-token (whose samples were delivered before the topic had a transient-local
-publisher) may be delivered once more from its cache; a kept message older
-than one already delivered from the same publisher is never delivered."""
+Limits: a sample lost on the way is not fetched again (rmw_zenoh's
+reliable transient-local subscriptions recover a lost last sample from the
+heartbeat; the link to the router is TCP, which loses none unless a
+congested publisher drops); several local subscriptions to one topic share
+one zenoh subscriber, so one that starts while another is already subscribed
+does not get the history again; a publisher whose first sample arrives
+before its token (whose samples were delivered before the topic had a
+transient-local publisher) may be delivered once more from its cache; a
+kept message older than one already delivered from the same publisher is never delivered."""
 
 from __future__ import annotations
 
