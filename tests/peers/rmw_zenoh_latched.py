@@ -1,6 +1,7 @@
-"""Transient-local (latched) publishers and subscribers in the forms released
-``rmw_zenoh_cpp`` versions give them, built from raw eclipse-zenoh: the
-stand-ins for ROS 2 nodes on rmw_zenoh in the latched-topic tests.
+"""Transient-local (latched) publishers in the forms released ``rmw_zenoh_cpp``
+versions give them, and a subscriber of the current form, built from raw
+eclipse-zenoh: the stand-ins for ROS 2 nodes on rmw_zenoh in the
+latched-topic tests.
 
 No ``rmw_zenoh_cpp`` build is reachable here, and zenoh-ros2-sdk's
 publishers keep no history (its ``ROS2Publisher`` is a plain zenoh publisher
@@ -173,13 +174,11 @@ class RmwPublisher:
 
 
 class RmwSubscriber:
-    """One rmw_zenoh transient-local subscription (see the module
-    docstring): ``form="advanced"`` is zenoh-ext's advanced subscriber with
-    history (late publishers detected, ``depth`` samples each) and, when
-    reliable, recovery by heartbeat; ``form="publication_cache"`` is a
-    plain subscriber and the ``QueryingSubscriber``'s first query
-    ``*/<data key>`` (target ALL, no consolidation, replies on any key).
-    ``received`` lists (payload, attachment) in arrival order."""
+    """An rmw_zenoh transient-local subscription of the current releases:
+    zenoh-ext's advanced subscriber with history (late publishers detected,
+    ``depth`` samples each) and recovery by heartbeat, as a RELIABLE +
+    TRANSIENT_LOCAL one is made. ``received`` lists (payload, attachment) in
+    arrival order; ``session`` is its zenoh session."""
 
     def __init__(
         self,
@@ -189,35 +188,21 @@ class RmwSubscriber:
         type_name: str = "std_msgs/msg/String",
         *,
         depth: int = 1,
-        form: str = "advanced",
     ) -> None:
-        import zenoh
         import zenoh.ext as zext
 
         self.session = session = _session(locator)
         self.key, _dds, _hash = _names(domain, topic, type_name)
         self.received: list[tuple[bytes, bytes | None]] = []
         self._lock = threading.Lock()
-        if form == "advanced":
-            self._sub = zext.declare_advanced_subscriber(
-                session,
-                self.key,
-                self._on_sample,
-                history=zext.HistoryConfig(detect_late_publishers=True, max_samples=depth),
-                recovery=zext.RecoveryConfig(periodic_queries=None, heartbeat=True),
-                subscriber_detection=True,
-            )
-        else:
-            self._sub = session.declare_subscriber(self.key, self._on_sample)
-            for reply in session.get(
-                f"*/{self.key}",
-                target=zenoh.QueryTarget.ALL,
-                consolidation=zenoh.ConsolidationMode.NONE,
-                accept_replies=zenoh.ReplyKeyExpr.ANY,
-                timeout=10.0,
-            ):
-                if reply.ok is not None:
-                    self._on_sample(reply.ok)
+        self._sub = zext.declare_advanced_subscriber(
+            session,
+            self.key,
+            self._on_sample,
+            history=zext.HistoryConfig(detect_late_publishers=True, max_samples=depth),
+            recovery=zext.RecoveryConfig(periodic_queries=None, heartbeat=True),
+            subscriber_detection=True,
+        )
 
     def _on_sample(self, sample: Any) -> None:
         attachment = sample.attachment

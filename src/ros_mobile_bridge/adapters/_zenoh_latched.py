@@ -66,9 +66,11 @@ What this part does:
 * **Publishing latched.** ``advertise(topic, type, latch=True)`` declares
   an advanced publisher with a cache of ``queue_size`` samples (1 by
   default), publisher detection and, when reliable, the heartbeat, as the
-  current releases do, and a complete queryable ``<zid>/<data key>``
-  answering from the same kept samples, as the publication cache of the
-  earlier releases did; its token says TRANSIENT_LOCAL with that depth.
+  current releases do; its token says TRANSIENT_LOCAL with that depth. No
+  publication cache is declared: the releases that query one (and Jazzy
+  0.2.2 and 0.2.3, Rolling 0.4.0 and 0.5.0) read only the keyed attachment
+  form, which this library does not write, so they drop our samples, live
+  or kept, whatever answered them.
 
 Limits: a sample lost on the way is not fetched again (rmw_zenoh's
 reliable transient-local subscriptions recover a lost last sample from the
@@ -82,8 +84,6 @@ kept message older than one already delivered from the same publisher is never d
 
 from __future__ import annotations
 
-import collections
-import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Final
@@ -126,39 +126,6 @@ class _Asked:
     sub: Subscription
     zid: str
     replies: int | None
-
-
-class _CachedPublisher:
-    """A latched publisher: zenoh-ext's advanced publisher (its own cache)
-    and the older releases' publication-cache queryable, answered from the
-    same last ``depth`` samples kept here. ``put`` and ``undeclare`` as a
-    zenoh publisher's."""
-
-    def __init__(self, node: ZenohNode, key: str, qos: rz.Qos) -> None:
-        session = node.session
-        self._session = session
-        self._key = key
-        self._kept: collections.deque[tuple[str, bytes, bytes]] = collections.deque(
-            maxlen=max(qos.depth, 1)
-        )
-        self._lock = threading.Lock()  # put in the loop, read in zenoh's thread
-        self._advanced = session.declare_cached_publisher(
-            key, depth=max(qos.depth, 1), reliable=qos.reliable
-        )
-        self._queryable = session.declare_cache_queryable(f"{session.zid}/{key}", self._snapshot)
-
-    def _snapshot(self) -> list[tuple[str, bytes, bytes]]:
-        with self._lock:
-            return list(self._kept)
-
-    def put(self, payload: bytes, *, attachment: bytes) -> None:
-        self._advanced.put(payload, attachment=attachment)
-        with self._lock:
-            self._kept.append((self._key, payload, attachment))
-
-    def undeclare(self) -> None:
-        self._session.undeclare(self._queryable)
-        self._advanced.undeclare()
 
 
 class ZenohLatched:
@@ -255,5 +222,8 @@ class ZenohLatched:
     # -- publishing --------------------------------------------------------------------------
     def publisher(self, key: str, qos: rz.Qos) -> Any:
         """A publisher on ``key`` keeping its last ``qos.depth`` samples for
-        late joiners, in both forms (see the module docstring)."""
-        return _CachedPublisher(self._node, key, qos)
+        late joiners, as the current releases' (see the module docstring);
+        ``put`` and ``undeclare`` as a zenoh publisher's."""
+        return self._node.session.declare_cached_publisher(
+            key, depth=max(qos.depth, 1), reliable=qos.reliable
+        )

@@ -609,23 +609,6 @@ class ZenohSession:
         self._keep(publisher)
         return publisher
 
-    def declare_cache_queryable(
-        self, key_expr: str, kept: Callable[[], list[tuple[str, bytes, bytes]]]
-    ) -> int:
-        """A complete queryable on ``key_expr`` answering each query, in
-        zenoh's thread, with the samples ``kept()`` returns (key, payload,
-        attachment), oldest first: a publication cache as zenoh-ext's
-        ``PublicationCache`` answers. Returns a handle for :meth:`undeclare`."""
-
-        def on_query(query: Any) -> None:
-            with contextlib.suppress(Exception):  # a closed session: nothing to answer
-                for key, payload, attachment in kept():
-                    query.reply(key, payload, attachment=attachment)
-            with contextlib.suppress(Exception):
-                query.drop()
-
-        return self._keep(self._session.declare_queryable(key_expr, on_query, complete=True))
-
     # -- writes --------------------------------------------------------------------
     def declare_publisher(self, key_expr: str, *, reliable: bool, express: bool) -> Any:
         """A zenoh publisher for ``key_expr``: congestion control BLOCK when
