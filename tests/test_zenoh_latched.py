@@ -348,3 +348,23 @@ async def test_foxglove_refuses_best_effort_and_latched_publishing(server: Any) 
             await client.advertise("/a", STRING, best_effort=True)
         with pytest.raises(rmb.NotSupportedError, match="no latched publishing"):
             await client.advertise("/a", STRING, latch=True)
+
+
+async def test_a_subscription_to_our_own_latched_topic_gets_it_once(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    async with (
+        rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
+        anyio.create_task_group() as tg,
+    ):
+        await client.advertise("/own", STRING, latch=True)
+        await client.publish("/own", STRING, {"data": "mine"})
+        await wait_until(lambda: kept(raw, zenoh_domain, "/own") == ["mine"], 10.0, "kept")
+        async with client.subscribe("/own", schema=STRING) as sub:
+            got = Collector(sub)
+            tg.start_soon(got.run)
+            await wait_until(lambda: got.data, timeout=10.0, what="our kept message")
+            await client.publish("/own", STRING, {"data": "next"})
+            await wait_until(lambda: len(got.data) == 2, timeout=10.0, what="the next one")
+            assert got.data == ["mine", "next"]
+        tg.cancel_scope.cancel()
