@@ -368,3 +368,47 @@ async def test_a_subscription_to_our_own_latched_topic_gets_it_once(
             await wait_until(lambda: len(got.data) == 2, timeout=10.0, what="the next one")
             assert got.data == ["mine", "next"]
         tg.cancel_scope.cancel()
+
+
+async def test_a_cache_that_answers_more_than_its_depth_is_cut_and_counted(
+    zenoh_router: Any, zenoh_domain: int, raw: Any
+) -> None:
+    """Hostile input: a session whose token says transient local, depth 1, and
+    whose cache answers three samples: one is taken, two are counted."""
+    zid = str(raw.zid())
+    hash_ = type_hash(CodecRegistry(), STRING)
+    key = rz.format_key(rz.TopicKey(zenoh_domain, "/flood", STRING, hash_))
+    encode = CodecRegistry().encoder(STRING, "cdr")
+
+    def answer(query: Any) -> None:
+        for seq in (1, 2, 3):
+            payload = bytes(encode({"data": f"s{seq}"}))
+            query.reply(key, payload, attachment=rz.encode_attachment(seq, 1, bytes(16)))
+        query.drop()
+
+    token = rz.Token(
+        zenoh_domain, zid, 0, 1, rz.EntityKind.PUBLISHER, "/", "/", "flooder",
+        "/flood", STRING, hash_, rz.Qos(transient_local=True, depth=1),
+    )  # fmt: skip
+    queryable = raw.declare_queryable(f"{key}/@adv/pub/{zid}/1/_", answer, complete=True)
+    live = raw.liveliness().declare_token(rz.format_token(token))
+    try:
+        async with (
+            rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client,
+            anyio.create_task_group() as tg,
+        ):
+            await seen_publisher(client, "/flood")
+            async with client.subscribe("/flood", schema=STRING) as sub:
+                got = Collector(sub)
+                tg.start_soon(got.run)
+                await wait_until(
+                    lambda: client.rejections.get("history_overflow") == 2,
+                    timeout=10.0,
+                    what=lambda: f"two counted: {client.rejections}",
+                )
+                await wait_until(lambda: got.data, timeout=10.0, what="the one taken")
+                assert got.data == ["s1"]
+            tg.cancel_scope.cancel()
+    finally:
+        live.undeclare()
+        queryable.undeclare()

@@ -50,7 +50,9 @@ What this part does:
   ``<zid>/<domain>/<topic>/*/*``; each reaches only that publisher's
   session (target ALL, consolidation NONE, replies on any key,
   :data:`HISTORY_TIMEOUT`). Each reply is a sample of the topic
-  (``_zenoh_samples`` checks its key and attachment as any other).
+  (``_zenoh_samples`` checks its key and attachment as any other); past the
+  depths that session's transient-local publishers of the topic announce,
+  replies are counted (``history_overflow``) and dropped.
 * **No duplicates.** Once a topic has a transient-local publisher, every
   sample of its subscription, live or replayed, is checked against the
   highest sequence number delivered from its gid (the attachment's): one at
@@ -93,8 +95,10 @@ from ._zenoh_node import ZenohNode
 from ._zenoh_samples import ZenohSamples
 from ._zenoh_values import Subscription
 
-__all__ = ["HISTORY_TIMEOUT", "LatchedMemory", "ZenohLatched"]
+__all__ = ["HISTORY_TIMEOUT", "KEEP_ALL_LIMIT", "LatchedMemory", "ZenohLatched"]
 
+KEEP_ALL_LIMIT: Final = 10_000
+"""The most samples taken from a keep-all (depth 0) publisher's history."""
 HISTORY_TIMEOUT: Final = 10.0
 """Seconds a history query waits for the caches' replies (they come at once;
 the query ends when every cache it reached has answered)."""
@@ -120,12 +124,16 @@ class LatchedMemory:
 
 @dataclass(slots=True)
 class _Asked:
-    """One history query: for whom, the publisher session's zid, and the
-    replies so far (None: the publication cache's form, asked last)."""
+    """One history query: for whom, the publisher session's zid, the most
+    samples taken from it (the depths of that session's transient-local
+    publishers of the topic), whether it is the publication cache's form
+    (asked last), and the replies so far."""
 
     sub: Subscription
     zid: str
-    replies: int | None
+    limit: int
+    cache_form: bool = False
+    replies: int = 0
 
 
 class ZenohLatched:
@@ -168,7 +176,7 @@ class ZenohLatched:
         """Tokens came or went: ask each new transient-local publisher of a
         subscribed topic (one whose token went and came back is new)."""
         tokens = self._node.graph.tokens
-        self._asked &= tokens.keys()
+        self._asked.intersection_update(tokens)
         for key, token in tokens.items():
             if key not in self._asked and token.name in self._subs:
                 self._consider(key, token)
@@ -187,7 +195,21 @@ class ZenohLatched:
         newest = f"?_max={qos.depth}" if qos.depth > 0 else ""  # 0: keep-all
         selector = f"{data}/@adv/pub/{token.zid}/**{newest}"
         query_id = self._node.session.query_history(selector, timeout=HISTORY_TIMEOUT)
-        self._queries[query_id] = _Asked(sub, token.zid, 0)
+        self._queries[query_id] = _Asked(sub, token.zid, self._kept_by(sub.topic, token.zid))
+
+    def _kept_by(self, topic: str, zid: str) -> int:
+        """The most samples the session ``zid`` keeps for ``topic``: the
+        depths of its transient-local publishers of it (a keep-all one counts
+        :data:`KEEP_ALL_LIMIT`)."""
+        return sum(
+            (t.qos.depth or KEEP_ALL_LIMIT)
+            for t in self._node.graph.tokens.values()
+            if t.kind is rz.EntityKind.PUBLISHER
+            and t.name == topic
+            and t.zid == zid
+            and t.qos is not None
+            and t.qos.transient_local
+        )
 
     def on_reply(self, item: rz.Reply) -> bool:
         """A reply to a history query: the sample goes to its subscription
@@ -197,8 +219,14 @@ class ZenohLatched:
             return False
         sub = asked.sub
         if item.ok and item.key is not None and self._subs.get(sub.topic) is sub:
-            if asked.replies is not None:
-                asked.replies += 1
+            asked.replies += 1
+            if asked.replies > asked.limit:
+                self._node.events.reject(
+                    "history_overflow",
+                    f"{sub.topic}: session {asked.zid} answered more samples than the"
+                    f" {asked.limit} its transient-local publishers keep",
+                )
+                return True
             self._samples.on_kept(sub, item.key, item.payload, item.attachment)
         return True
 
@@ -211,12 +239,13 @@ class ZenohLatched:
         sub = asked.sub
         if (
             asked.replies == 0
+            and not asked.cache_form
             and self._subs.get(sub.topic) is sub
             and not self._node.session.closed
         ):
             selector = f"{asked.zid}/{self._node.data_selector(sub.topic)}"
             query_id = self._node.session.query_history(selector, timeout=HISTORY_TIMEOUT)
-            self._queries[query_id] = _Asked(sub, asked.zid, None)
+            self._queries[query_id] = _Asked(sub, asked.zid, asked.limit, cache_form=True)
         return True
 
     # -- publishing --------------------------------------------------------------------------
