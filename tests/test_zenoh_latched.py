@@ -60,6 +60,19 @@ def kept(raw: Any, domain: int, topic: str) -> list[str]:
     return [decode(memoryview(r.ok.payload.to_bytes())).data for r in replies if r.ok]
 
 
+async def publisher_token(session: Any, domain: int) -> rz.Token:
+    """The one publisher token of ``domain``, as a raw zenoh ``session`` reads
+    it, once the router has it."""
+
+    def publishers() -> list[rz.Token]:
+        replies = session.liveliness().get(rz.liveliness_selector(domain), timeout=5.0)
+        tokens = [rz.parse_token(str(r.ok.key_expr)) for r in replies if r.ok is not None]
+        return [t for t in tokens if t.kind is rz.EntityKind.PUBLISHER]
+
+    (token,) = await wait_until(publishers, timeout=10.0, what="the publisher token")
+    return token
+
+
 async def seen_publisher(client: rmb.Client, topic: str, count: int = 1) -> None:
     await wait_until(
         lambda: sum(1 for q in client._conn.adapter.offered_qos(topic)) >= count,  # type: ignore[attr-defined]
@@ -219,9 +232,7 @@ async def test_our_latched_topic_is_kept_for_a_client_that_joins_later(
             what="the two kept",
         )
         # its token says TRANSIENT_LOCAL with the depth, as rmw_zenoh's would
-        replies = raw.liveliness().get(rz.liveliness_selector(zenoh_domain), timeout=5.0)
-        tokens = [rz.parse_token(str(r.ok.key_expr)) for r in replies if r.ok is not None]
-        (token,) = [t for t in tokens if t.kind is rz.EntityKind.PUBLISHER]
+        token = await publisher_token(raw, zenoh_domain)
         assert token.qos == rz.Qos(reliable=True, transient_local=True, depth=2)
         async with (
             rmb.connect(zenoh_router.locator, options=opts) as late,
@@ -281,9 +292,7 @@ async def test_best_effort_publishing_says_so_in_its_token_and_arrives(
         anyio.create_task_group() as tg,
     ):
         await a.advertise("/scan_note", STRING, best_effort=True, queue_size=5)
-        replies = raw.liveliness().get(rz.liveliness_selector(zenoh_domain), timeout=5.0)
-        tokens = [rz.parse_token(str(r.ok.key_expr)) for r in replies if r.ok is not None]
-        (token,) = [t for t in tokens if t.kind is rz.EntityKind.PUBLISHER]
+        token = await publisher_token(raw, zenoh_domain)
         assert token.qos == rz.Qos(reliable=False, transient_local=False, depth=5)
         got = Collector(sub)
         tg.start_soon(got.run)
@@ -319,11 +328,7 @@ async def test_a_reconnect_restores_the_latched_publisher_with_its_qos(zenoh_dom
             with RmwSubscriber(router.locator, zenoh_domain, "/map", depth=3) as sub:
                 await wait_until(lambda: sub.received, timeout=10.0, what="the kept message")
                 assert [m.data for m in sub.messages()] == ["after"]
-                replies = sub.session.liveliness().get(
-                    rz.liveliness_selector(zenoh_domain), timeout=5.0
-                )
-                tokens = [rz.parse_token(str(r.ok.key_expr)) for r in replies if r.ok]
-                (token,) = [t for t in tokens if t.kind is rz.EntityKind.PUBLISHER]
+                token = await publisher_token(sub.session, zenoh_domain)
                 assert token.qos == rz.Qos(transient_local=True, depth=3)
     finally:
         router.stop()
