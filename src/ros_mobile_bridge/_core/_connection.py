@@ -81,10 +81,10 @@ class Connection:
         self.router = Router(adapter, options, presets, self.status, self.outbound)
         self.served = ServedServices(options.teardown_timeout, options.logger)
         self.velocity: dict[str, str] = {}
+        """Velocity topic -> the type this client published there."""
         # topic -> the publisher options advertise was given (latch, queue_size,
         # best_effort), for the restore after a reconnect
         self._publisher_options: dict[str, dict[str, Any]] = {}
-        """Velocity topic -> the type this client published there."""
         self._task_scopes: dict[str, anyio.CancelScope] = {}
         self._traffic_before = (0, 0)  # bytes and messages of the connections lost
         self._closing = False
