@@ -11,6 +11,7 @@ from typing import Any
 
 __all__ = [
     "ActionGoalError",
+    "AssetError",
     "ConnectError",
     "DecodeError",
     "MessageError",
@@ -79,6 +80,16 @@ class ServiceTimeout(ServiceError, TimeoutError):
         self.timeout = timeout
         text = f"no response within {timeout:g} s"
         super().__init__(service, f"{text} ({detail})" if detail else text)
+
+
+class AssetError(RosBridgeError):
+    """The server could not give the asset ``uri``; ``reason`` carries the
+    server's own text."""
+
+    def __init__(self, uri: str, reason: str) -> None:
+        self.uri = uri
+        self.reason = reason
+        super().__init__(f"asset {uri!r} could not be fetched: {reason}")
 
 
 class ActionGoalError(RosBridgeError):

@@ -17,14 +17,21 @@ __all__ = [
     "Dispatch",
     "GoalState",
     "Message",
+    "PlaybackRequest",
+    "PlaybackState",
+    "PlaybackStatus",
     "Priority",
     "Protocol",
     "SaveBandwidth",
     "ServerInfo",
+    "ServerStatus",
     "ServiceInfo",
     "Status",
+    "StatusLevel",
+    "StatusRemoved",
     "SubscriptionState",
     "SubscriptionStats",
+    "TopicEndpoints",
     "TopicInfo",
 ]
 
@@ -36,6 +43,8 @@ SubscriptionState = Literal["pending", "active"]
 Compression = Literal["cbor", "cbor-raw"]
 SaveBandwidth = bool | Literal["adaptive"]
 GoalState = Literal["pending", "active", "succeeded", "canceled", "aborted", "failed"]
+StatusLevel = Literal["info", "warning", "error"]
+PlaybackStatus = Literal["playing", "paused", "buffering", "ended"]
 
 if sys.version_info >= (3, 13):
     from typing import TypeVar
@@ -217,3 +226,62 @@ class ActionOutcome(Generic[ResultT]):
 
     status: Literal["succeeded", "canceled"]
     result: ResultT
+
+
+@dataclass(frozen=True, slots=True)
+class TopicEndpoints:
+    """Who publishes and who subscribes to one topic, as the robot's graph
+    says now (``Client.topic_endpoints``): node names (rosbridge, Zenoh) or
+    the ids the Foxglove server gives them (foxglove_bridge: node names),
+    sorted. ``publishers`` / ``subscribers`` are empty for a topic the
+    graph does not know."""
+
+    topic: str
+    publishers: tuple[str, ...]
+    subscribers: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ServerStatus:
+    """A status message the Foxglove server sent (``Client.watch_server_status``):
+    ``level`` and ``message`` as the server gave them; ``id`` names it when
+    the server may withdraw it later (a :class:`StatusRemoved`)."""
+
+    level: StatusLevel
+    message: str
+    id: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class StatusRemoved:
+    """The Foxglove server withdrew the status messages with these ``ids``."""
+
+    ids: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class PlaybackState:
+    """How a Foxglove server playing a recording plays it now
+    (``Client.playback_state``): ``status``, the playback time
+    ``current_time_ns`` (nanoseconds, the recording's clock), ``speed`` (a
+    factor of real time), ``did_seek`` (this state follows a jump in time)
+    and ``request_id``: the id of the :class:`PlaybackRequest` it answers,
+    or None when the server changed playback on its own."""
+
+    status: PlaybackStatus
+    current_time_ns: int
+    speed: float
+    did_seek: bool
+    request_id: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class PlaybackRequest:
+    """A request to a Foxglove server playing a recording
+    (``Client.control_playback``): ``play`` (True) or pause (False), at
+    ``speed`` (a factor of real time, > 0), jumping first to ``seek_ns``
+    (nanoseconds, the recording's clock) unless None."""
+
+    play: bool
+    speed: float = 1.0
+    seek_ns: int | None = None

@@ -97,6 +97,8 @@ class Recorder:
     subscribed: list[str] = field(default_factory=list)
     unsubscribed: list[str] = field(default_factory=list)
     param_subscribed: list[str] = field(default_factory=list)
+    graph_subscriptions: list[bool] = field(default_factory=list)
+    """True per first subscription to the connection graph, False per last unsubscription."""
     channels: dict[tuple[int, int], tuple[str, str, str]] = field(default_factory=dict)
 
 
@@ -161,10 +163,12 @@ class _Listener:
         pass
 
     def on_connection_graph_subscribe(self) -> None:
-        pass
+        with self.r.lock:
+            self.r.graph_subscriptions.append(True)
 
     def on_connection_graph_unsubscribe(self) -> None:
-        pass
+        with self.r.lock:
+            self.r.graph_subscriptions.append(False)
 
 
 class SdkServer:
@@ -181,9 +185,14 @@ class SdkServer:
         parameters: dict[str, Any] | None = None,
         tls: tuple[bytes, bytes] | None = None,
         listener: type[_Listener] | None = None,
+        asset_handler: Callable[[str], bytes | None] | None = None,
+        playback_time_range: tuple[int, int] | None = None,
     ) -> None:
         """``tls``: ``(certificate_pem, key_pem)`` to serve ``wss://``;
-        ``listener``: a subclass of the recording listener to use instead."""
+        ``listener``: a subclass of the recording listener to use instead;
+        ``asset_handler``: serve assets (the server then lists ``assets``);
+        ``playback_time_range``: a recording's (start, end) in ns (the
+        server then lists ``playbackControl``)."""
         self.recorder = Recorder()
         self.param_lock = threading.Lock()
         self.parameters: dict[str, Any] = dict(parameters or {})
@@ -200,6 +209,8 @@ class SdkServer:
             if supported_encodings is None
             else supported_encodings,
             services=services or [],
+            asset_handler=asset_handler,
+            playback_time_range=playback_time_range,
             tls_cert=tls[0] if tls else None,
             tls_key=tls[1] if tls else None,
         )
@@ -233,6 +244,10 @@ class SdkServer:
     def unsubscribed(self) -> list[str]:
         with self.recorder.lock:
             return list(self.recorder.unsubscribed)
+
+    def graph_subscriptions(self) -> list[bool]:
+        with self.recorder.lock:
+            return list(self.recorder.graph_subscriptions)
 
     def publish_parameters(self, values: dict[str, Any]) -> None:
         with self.param_lock:

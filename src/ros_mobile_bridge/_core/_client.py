@@ -16,7 +16,14 @@ from typing import TYPE_CHECKING, Any, TypeVar, overload
 
 import anyio
 
-from .._checks import check_name, check_save_bandwidth, check_schema, check_timeout, nearest_hint
+from .._checks import (
+    check_name,
+    check_save_bandwidth,
+    check_schema,
+    check_timeout,
+    check_uri,
+    nearest_hint,
+)
 from .._errors import (
     ConnectError,
     MessageError,
@@ -33,14 +40,17 @@ from .._types import (
     Priority,
     SaveBandwidth,
     ServerInfo,
+    ServerStatus,
     ServiceInfo,
     Status,
+    StatusRemoved,
+    TopicEndpoints,
     TopicInfo,
 )
-from ..adapters import ParameterAccess, require
+from ..adapters import NodeLister, ParameterAccess, require
 from ..codec import FieldDef, same_type_name
 from ..codec._classes import remember
-from ..flow import Watcher
+from ..flow import FeedWatcher, Present, Watcher
 from ..interfaces._base import RosGoal, RosMessage, RosRequest, RosService
 from ._action import ActionGoal
 from ._arguments import goal_arguments, publish_arguments, subscribe_arguments
@@ -62,7 +72,6 @@ M = TypeVar("M", bound=RosMessage)
 R = TypeVar("R", bound=RosMessage)
 _Res = TypeVar("_Res", bound=RosMessage)
 _Fb = TypeVar("_Fb", bound=RosMessage)
-_Info = TypeVar("_Info", TopicInfo, ServiceInfo)
 
 
 class Client:
@@ -152,12 +161,20 @@ class Client:
         """The ROS nodes of the robot's graph now: full names, sorted, this
         client's own node left out. Zenoh: the nodes' liveliness tokens;
         rosbridge: ``/rosapi/nodes`` (``ServiceError`` when the bridge has
-        no rosapi); Foxglove: the protocol has no nodes, so
-        ``NotSupportedError``. There is no node watch: the graph command
-        (``rmb graph --watch``) polls this."""
+        no rosapi); Foxglove: the ids in the server's connection graph
+        (``NotSupportedError`` without its ``connectionGraph``). There is no
+        node watch: the graph command (``rmb graph --watch``) polls this."""
+        return await self._graph().nodes()
+
+    async def topic_endpoints(self, topic: str) -> TopicEndpoints:
+        """Who publishes and subscribes to ``topic`` now, from the source
+        :meth:`nodes` reads (rosbridge: ``/rosapi/publishers`` and ``/subscribers``)."""
+        check_name("topic", topic)
+        return await self._graph().topic_endpoints(topic)
+
+    def _graph(self) -> NodeLister:
         self._conn.require_connected()
-        adapter = self._conn.adapter
-        return await require(adapter.node_list, "node_list", adapter.protocol).nodes()
+        return require(self._conn.adapter.node_list, "node_list", self._conn.adapter.protocol)
 
     async def wait_for_topic(self, topic: str, *, timeout: float | None = None) -> TopicInfo:
         """The topic's :class:`~ros_mobile_bridge.TopicInfo` once the robot
@@ -167,61 +184,39 @@ class Client:
         connection is lost for good (or closes) first. While the connection
         is being re-established it keeps waiting."""
         check_name("topic", topic)
-        return await self._wait_for("topic", topic, self._router.topics.watch, timeout)
+        return await self._conn.wait_listed("topic", topic, self._router.topics.watch, timeout)
 
     async def wait_for_service(self, name: str, *, timeout: float | None = None) -> ServiceInfo:
         """The service's :class:`~ros_mobile_bridge.ServiceInfo` once the
         robot offers ``name``; as :meth:`wait_for_topic`, for services."""
         check_name("service name", name)
-        return await self._wait_for("service", name, self._router.services.watch, timeout)
+        return await self._conn.wait_listed("service", name, self._router.services.watch, timeout)
 
-    async def _wait_for(
-        self,
-        kind: str,
-        name: str,
-        watch: Callable[[], Watcher[list[_Info]]],
-        timeout: float | None,
-    ) -> _Info:
-        """Watch the list and the status together, in the call's own task
-        group (both end with the call): the first of the name listed, the
-        connection ended, or the deadline."""
-        limit = check_timeout(timeout)
-        if self._conn.status.value != "reconnecting":
-            self._conn.require_connected()
-        found: list[_Info] = []
-        known: list[str] = []
-        ended: list[Status] = []
+    # -- what a Foxglove server offers beside the graph (docs/transports) -----
+    async def fetch_asset(self, uri: str, *, timeout: float | None = None) -> bytes:
+        """The file the server offers as ``uri`` (``assets``: meshes, ``package://``
+        URIs); ``AssetError`` with the server's reason, ``NotSupportedError``
+        without assets, ``ServiceTimeout`` past ``timeout``."""
+        check_uri(uri)
 
-        async def look(scope: anyio.CancelScope) -> None:
-            async for listed in watch():
-                match = [info for info in listed if info.name == name]
-                if match:
-                    found.append(match[0])
-                    scope.cancel()
-                    return
-                known[:] = [info.name for info in listed]
+        def fetch(_limit: float) -> Awaitable[bytes]:  # (once connected: the adapter is current)
+            return require(self._conn.adapter.assets, "assets", self.protocol).fetch_asset(uri)
 
-        async def status(scope: anyio.CancelScope) -> None:
-            async for now in self._conn.status.watch():
-                if now in ("error", "closed"):
-                    ended.append(now)
-                    scope.cancel()
-                    return
+        return await self._request(f"fetchAsset {uri}", fetch, timeout)
 
-        with anyio.move_on_after(limit if limit is not None else float("inf")):
-            async with anyio.create_task_group() as tg:
-                tg.start_soon(look, tg.cancel_scope)
-                tg.start_soon(status, tg.cancel_scope)
-        if found:
-            return found[0]
-        if ended:
-            reason = f": {self._conn.last_error}" if self._conn.last_error else ""
-            how = "was lost for good" if ended[0] == "error" else "closed"
-            raise NotConnected(f"the connection {how} before {kind} {name} appeared{reason}")
-        assert limit is not None
-        raise TimeoutError(
-            f"the robot did not offer {kind} {name} within {limit:g} s{nearest_hint(name, known)}"
-        )
+    @property
+    def server_time(self) -> int | None:
+        """The server's clock in ns as last sent (``time``: a simulator's), or None."""
+        return self._router.server_time.value
+
+    def watch_server_time(self) -> Present[int]:
+        """Async iterator: :attr:`server_time` at once when known, then the newest."""
+        return Present(self._router.server_time)
+
+    def watch_server_status(self) -> FeedWatcher[ServerStatus | StatusRemoved]:
+        """Async iterator: each status the server sends or withdraws from now on
+        (each also logged at its level); a reader 256 behind loses the oldest."""
+        return self._router.server_status.watch()
 
     # -- subscriptions ------------------------------------------------------
     @overload

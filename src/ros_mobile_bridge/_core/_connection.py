@@ -16,13 +16,14 @@ from typing import Any, Final, Generic, TypeVar
 import anyio
 import anyio.abc
 
+from .._checks import check_timeout, nearest_hint
 from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError
 from .._loop._wakeup import serve_timers
 from .._options import ClientOptions
-from .._types import Status
+from .._types import ServiceInfo, Status, TopicInfo
 from ..adapters import Adapter, ServiceHost
 from ..codec import same_type_name
-from ..flow import Bucket, Subscription, ThrottleMode, Watchable, participate
+from ..flow import Bucket, Subscription, ThrottleMode, Watchable, Watcher, participate
 from ..interfaces._base import RosMessage
 from ._outbound import Outbound
 from ._router import Route, Router
@@ -39,6 +40,7 @@ __all__ = [
 ]
 
 _M = TypeVar("_M", bound=RosMessage)
+_Info = TypeVar("_Info", TopicInfo, ServiceInfo)
 
 TWIST: Final = "geometry_msgs/msg/Twist"
 TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
@@ -106,6 +108,56 @@ class Connection:
     def current_host(self) -> ServiceHost | None:
         """The adapter's serving part while connected, else None."""
         return self.adapter.serving if self.connected else None
+
+    async def wait_listed(
+        self,
+        kind: str,
+        name: str,
+        watch: Callable[[], Watcher[list[_Info]]],
+        timeout: float | None,
+    ) -> _Info:
+        """(``Client.wait_for_topic`` / ``wait_for_service``:) the entry of
+        ``name`` once ``watch()``'s list has it. Watches the list and the
+        status together, in the call's own task group (both end with the
+        call): the first of the name listed, the connection ended, or the
+        deadline."""
+        limit = check_timeout(timeout)
+        if self.status.value != "reconnecting":
+            self.require_connected()
+        found: list[_Info] = []
+        known: list[str] = []
+        ended: list[Status] = []
+
+        async def look(scope: anyio.CancelScope) -> None:
+            async for listed in watch():
+                match = [info for info in listed if info.name == name]
+                if match:
+                    found.append(match[0])
+                    scope.cancel()
+                    return
+                known[:] = [info.name for info in listed]
+
+        async def status(scope: anyio.CancelScope) -> None:
+            async for now in self.status.watch():
+                if now in ("error", "closed"):
+                    ended.append(now)
+                    scope.cancel()
+                    return
+
+        with anyio.move_on_after(limit if limit is not None else float("inf")):
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(look, tg.cancel_scope)
+                tg.start_soon(status, tg.cancel_scope)
+        if found:
+            return found[0]
+        if ended:
+            reason = f": {self.last_error}" if self.last_error else ""
+            how = "was lost for good" if ended[0] == "error" else "closed"
+            raise NotConnected(f"the connection {how} before {kind} {name} appeared{reason}")
+        assert limit is not None
+        raise TimeoutError(
+            f"the robot did not offer {kind} {name} within {limit:g} s{nearest_hint(name, known)}"
+        )
 
     # -- tasks -----------------------------------------------------------------
     def start(self, tg: anyio.abc.TaskGroup) -> None:

@@ -40,6 +40,7 @@ from .._types import (
     ServerInfo,
     ServiceInfo,
     Status,
+    TopicEndpoints,
     TopicInfo,
 )
 from ..codec import FieldDef
@@ -306,6 +307,12 @@ class SyncClient:
 
     @property
     @_mirrors
+    def server_time(self) -> int | None:
+        """:attr:`Client.server_time`."""
+        return self._client.server_time
+
+    @property
+    @_mirrors
     def topics(self) -> list[TopicInfo]:
         """:attr:`Client.topics`, as a list of its own (a snapshot)."""
         return list(self._client.topics)
@@ -473,6 +480,16 @@ class SyncClient:
     def nodes(self) -> list[str]:
         """:meth:`Client.nodes`, blocking."""
         return self._call(_nodes, self._client, timeout=None, what="nodes")
+
+    @_mirrors
+    def topic_endpoints(self, topic: str) -> TopicEndpoints:
+        """:meth:`Client.topic_endpoints`, blocking."""
+        return self._call(self._client.topic_endpoints, topic, timeout=None, what="topic_endpoints")
+
+    @_mirrors
+    def fetch_asset(self, uri: str, *, timeout: float | None = None) -> bytes:
+        """:meth:`Client.fetch_asset`, blocking; ``timeout`` is the request's own."""
+        return self._call(_fetch_asset, self._client, uri, timeout, timeout=None, what=uri)
 
     @_mirrors
     def get_parameters(
@@ -688,6 +705,10 @@ async def _call_service(
 
 async def _nodes(client: Client) -> list[str]:
     return await client.nodes()
+
+
+async def _fetch_asset(client: Client, uri: str, timeout: float | None) -> bytes:
+    return await client.fetch_asset(uri, timeout=timeout)
 
 
 async def _get_parameters(
