@@ -6,6 +6,7 @@ runs on asyncio and trio."""
 from __future__ import annotations
 
 import logging
+import re
 
 import anyio
 import foxglove
@@ -18,6 +19,7 @@ from _util import wait_until
 from peers.foxglove_sdk import ALL_CAPABILITIES, SdkServer
 from ros_mobile_bridge.adapters import FoxgloveAdapter, RosbridgeAdapter, require
 from ros_mobile_bridge.adapters._zenoh import ZenohAdapter
+from ros_mobile_bridge.demo import DemoRobot
 
 LOGGER = "ros_mobile_bridge"
 MESH = b"solid demo\nendsolid demo\n"
@@ -208,3 +210,21 @@ async def test_status_messages_are_watched_and_logged_at_their_level(
     # the watcher ended with the client
     with anyio.fail_after(5):
         assert [e async for e in events] == []
+
+
+# -- the demo robot serves both ---------------------------------------------------------------
+
+
+async def test_demo_robot_serves_its_description_mesh_and_graph(robot: DemoRobot) -> None:
+    async with rmb.connect(robot.url, options=options()) as client:
+        urdf = (await client.fetch_asset("package://rmb_demo/urdf/rmb_demo.urdf")).decode()
+        mesh_uri = re.search(r'<mesh filename="([^"]+)"', urdf)
+        assert mesh_uri is not None
+        mesh = await client.fetch_asset(mesh_uri[1])
+        assert mesh.startswith(b"solid ") and mesh.count(b"facet normal") == 12
+        with pytest.raises(rmb.AssetError, match="serves no package://rmb_demo/nothing"):
+            await client.fetch_asset("package://rmb_demo/nothing")
+        assert await client.nodes() == ["/rmb_demo_robot"]
+        odom = await client.topic_endpoints("/odom")
+        assert odom == rmb.TopicEndpoints("/odom", ("/rmb_demo_robot",), ())
+        assert (await client.topic_endpoints("/cmd_vel")).subscribers == ("/rmb_demo_robot",)
