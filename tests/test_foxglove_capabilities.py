@@ -11,7 +11,7 @@ import re
 import anyio
 import foxglove
 import pytest
-from foxglove.websocket import Capability
+from foxglove.websocket import Capability, PlaybackState, PlaybackStatus
 
 import ros_mobile_bridge as rmb
 from _util import fast_options as options
@@ -228,3 +228,72 @@ async def test_demo_robot_serves_its_description_mesh_and_graph(robot: DemoRobot
         odom = await client.topic_endpoints("/odom")
         assert odom == rmb.TopicEndpoints("/odom", ("/rmb_demo_robot",), ())
         assert (await client.topic_endpoints("/cmd_vel")).subscribers == ("/rmb_demo_robot",)
+
+
+# -- playback control -----------------------------------------------------------------------
+
+START, END = 1_000_000_000, 9_000_000_000
+
+
+async def test_playback_is_controlled_and_its_state_followed() -> None:
+    with SdkServer(playback_time_range=(START, END)) as server:
+        async with rmb.connect(server.url, options=options()) as robot:
+            assert "playbackControl" in robot.server_info.capabilities
+            assert robot.playback_state is None
+            playing = await robot.control_playback(rmb.PlaybackRequest(play=True, speed=2.0))
+            assert (playing.status, playing.current_time_ns, playing.speed) == (
+                "playing",
+                START,
+                2.0,
+            )
+            assert not playing.did_seek and playing.request_id is not None
+            seek = rmb.PlaybackRequest(play=False, speed=0.5, seek_ns=4_000_000_000)
+            paused = await robot.control_playback(seek)
+            assert paused == rmb.PlaybackState(
+                "paused", 4_000_000_000, 0.5, True, paused.request_id
+            )
+            assert paused.request_id != playing.request_id
+            # what the server received, field by field
+            assert server.playback_requests() == [
+                (True, 2.0, None, playing.request_id),
+                (False, 0.5, 4_000_000_000, paused.request_id),
+            ]
+            assert robot.playback_state == paused
+            # a state the server sends on its own: the recording ended
+            states = robot.watch_playback()
+            with anyio.fail_after(5):
+                assert await states.__anext__() == paused
+                server.server.broadcast_playback_state(
+                    PlaybackState(PlaybackStatus.Ended, END, 0.5, False, None)
+                )
+                ended = await states.__anext__()
+            assert ended == rmb.PlaybackState("ended", END, 0.5, False, None)
+            assert robot.playback_state == ended
+
+
+async def test_playback_control_without_the_capability_names_it() -> None:
+    with SdkServer() as server:
+        async with rmb.connect(server.url, options=options()) as robot:
+            with pytest.raises(rmb.NotSupportedError, match="'playbackControl' capability"):
+                await robot.control_playback(rmb.PlaybackRequest(play=True))
+            with pytest.raises(TypeError, match="PlaybackRequest"):
+                await robot.control_playback({"play": True})  # type: ignore[arg-type]
+    assert server.playback_requests() == []
+
+
+@pytest.mark.parametrize(
+    ("fields", "error"),
+    [
+        ({"play": "yes"}, TypeError),
+        ({"play": True, "speed": 0}, ValueError),
+        ({"play": True, "speed": float("inf")}, ValueError),
+        ({"play": True, "speed": "2"}, TypeError),
+        ({"play": True, "seek_ns": -1}, ValueError),
+        ({"play": True, "seek_ns": 1.5}, ValueError),
+    ],
+)
+def test_a_bad_playback_request_is_refused_when_made(
+    fields: dict[str, object], error: type[Exception]
+) -> None:
+    with pytest.raises(error):
+        rmb.PlaybackRequest(**fields)  # type: ignore[arg-type]

@@ -285,3 +285,14 @@ class PlaybackRequest:
     play: bool
     speed: float = 1.0
     seek_ns: int | None = None
+
+    def __post_init__(self) -> None:
+        """Bad values raise ``TypeError`` / ``ValueError`` here, before anything is sent."""
+        if not isinstance(self.play, bool):
+            raise TypeError(f"play must be a bool, got {type(self.play).__name__}")
+        if isinstance(self.speed, bool) or not isinstance(self.speed, int | float):
+            raise TypeError(f"speed must be a number, got {type(self.speed).__name__}")
+        if not 0 < self.speed < float("inf"):
+            raise ValueError(f"speed must be a positive factor of real time, got {self.speed!r}")
+        if self.seek_ns is not None and (type(self.seek_ns) is not int or self.seek_ns < 0):
+            raise ValueError(f"seek_ns must be None or an int >= 0 (ns), got {self.seek_ns!r}")

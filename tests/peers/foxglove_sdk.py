@@ -16,7 +16,13 @@ from typing import Any
 import foxglove
 import numpy as np
 from foxglove import Channel, MessageSchema, Parameter, Schema, Service, ServiceSchema
-from foxglove.websocket import Capability
+from foxglove.websocket import (
+    Capability,
+    PlaybackCommand,
+    PlaybackControlRequest,
+    PlaybackState,
+    PlaybackStatus,
+)
 from rosbags.typesys import Stores, get_typestore
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -97,6 +103,8 @@ class Recorder:
     subscribed: list[str] = field(default_factory=list)
     unsubscribed: list[str] = field(default_factory=list)
     param_subscribed: list[str] = field(default_factory=list)
+    playback_requests: list[tuple[bool, float, int | None, str]] = field(default_factory=list)
+    """(play, speed, seek time, request id) per playback control request."""
     graph_subscriptions: list[bool] = field(default_factory=list)
     """True per first subscription to the connection graph, False per last unsubscription."""
     channels: dict[tuple[int, int], tuple[str, str, str]] = field(default_factory=dict)
@@ -162,6 +170,23 @@ class _Listener:
     def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
         pass
 
+    def on_playback_control_request(self, request: PlaybackControlRequest) -> PlaybackState:
+        """A player of the recording: it plays or pauses at the speed asked,
+        from the time asked (else from the start of its range)."""
+        play = request.playback_command == PlaybackCommand.Play
+        with self.r.lock:
+            self.r.playback_requests.append(
+                (play, request.playback_speed, request.seek_time, request.request_id)
+            )
+        seek = request.seek_time
+        return PlaybackState(
+            PlaybackStatus.Playing if play else PlaybackStatus.Paused,
+            seek if seek is not None else self.s.playback_start,
+            request.playback_speed,
+            seek is not None,
+            request.request_id,
+        )
+
     def on_connection_graph_subscribe(self) -> None:
         with self.r.lock:
             self.r.graph_subscriptions.append(True)
@@ -194,6 +219,7 @@ class SdkServer:
         ``playback_time_range``: a recording's (start, end) in ns (the
         server then lists ``playbackControl``)."""
         self.recorder = Recorder()
+        self.playback_start = playback_time_range[0] if playback_time_range else 0
         self.param_lock = threading.Lock()
         self.parameters: dict[str, Any] = dict(parameters or {})
         self.context = foxglove.Context()
@@ -244,6 +270,10 @@ class SdkServer:
     def unsubscribed(self) -> list[str]:
         with self.recorder.lock:
             return list(self.recorder.unsubscribed)
+
+    def playback_requests(self) -> list[tuple[bool, float, int | None, str]]:
+        with self.recorder.lock:
+            return list(self.recorder.playback_requests)
 
     def graph_subscriptions(self) -> list[bool]:
         with self.recorder.lock:

@@ -37,6 +37,8 @@ from .._types import (
     Compression,
     ConnectionStats,
     Dispatch,
+    PlaybackRequest,
+    PlaybackState,
     Priority,
     SaveBandwidth,
     ServerInfo,
@@ -47,7 +49,7 @@ from .._types import (
     TopicEndpoints,
     TopicInfo,
 )
-from ..adapters import NodeLister, ParameterAccess, require
+from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
 from ..codec._classes import remember
 from ..flow import FeedWatcher, Present, Watcher
@@ -164,17 +166,13 @@ class Client:
         no rosapi); Foxglove: the ids in the server's connection graph
         (``NotSupportedError`` without its ``connectionGraph``). There is no
         node watch: the graph command (``rmb graph --watch``) polls this."""
-        return await self._graph().nodes()
+        return await self._conn.offered("node_list").nodes()
 
     async def topic_endpoints(self, topic: str) -> TopicEndpoints:
         """Who publishes and subscribes to ``topic`` now, from the source
         :meth:`nodes` reads (rosbridge: ``/rosapi/publishers`` and ``/subscribers``)."""
         check_name("topic", topic)
-        return await self._graph().topic_endpoints(topic)
-
-    def _graph(self) -> NodeLister:
-        self._conn.require_connected()
-        return require(self._conn.adapter.node_list, "node_list", self._conn.adapter.protocol)
+        return await self._conn.offered("node_list").topic_endpoints(topic)
 
     async def wait_for_topic(self, topic: str, *, timeout: float | None = None) -> TopicInfo:
         """The topic's :class:`~ros_mobile_bridge.TopicInfo` once the robot
@@ -198,11 +196,9 @@ class Client:
         URIs); ``AssetError`` with the server's reason, ``NotSupportedError``
         without assets, ``ServiceTimeout`` past ``timeout``."""
         check_uri(uri)
-
-        def fetch(_limit: float) -> Awaitable[bytes]:  # (once connected: the adapter is current)
-            return require(self._conn.adapter.assets, "assets", self.protocol).fetch_asset(uri)
-
-        return await self._request(f"fetchAsset {uri}", fetch, timeout)
+        return await self._request(
+            f"fetchAsset {uri}", lambda _: self._conn.offered("assets").fetch_asset(uri), timeout
+        )
 
     @property
     def server_time(self) -> int | None:
@@ -217,6 +213,25 @@ class Client:
         """Async iterator: each status the server sends or withdraws from now on
         (each also logged at its level); a reader 256 behind loses the oldest."""
         return self._router.server_status.watch()
+
+    @property
+    def playback_state(self) -> PlaybackState | None:
+        """How the server plays its recording as it last said (``playbackControl``), or None."""
+        return self._router.playback.value
+
+    def watch_playback(self) -> Present[PlaybackState]:
+        """Async iterator: :attr:`playback_state` at once when known, then the newest."""
+        return Present(self._router.playback)
+
+    async def control_playback(
+        self, request: PlaybackRequest, *, timeout: float | None = None
+    ) -> PlaybackState:
+        """Play, pause, seek or change the speed of the recording the server
+        plays; the state answering it (``playbackControl``, else ``NotSupportedError``)."""
+        if not isinstance(request, PlaybackRequest):
+            raise TypeError(f"request must be a PlaybackRequest, not {type(request).__name__}")
+        playback = lambda _: self._conn.offered("playback").control_playback(request)  # noqa: E731
+        return await self._request("playbackControlRequest", playback, timeout)
 
     # -- subscriptions ------------------------------------------------------
     @overload

@@ -11,7 +11,7 @@ import logging
 import random
 import time
 from collections.abc import Awaitable, Callable, Mapping
-from typing import Any, Final, Generic, TypeVar
+from typing import Any, Final, Generic, Literal, TypeVar, overload
 
 import anyio
 import anyio.abc
@@ -21,7 +21,15 @@ from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError
 from .._loop._wakeup import serve_timers
 from .._options import ClientOptions
 from .._types import ServiceInfo, Status, TopicInfo
-from ..adapters import Adapter, ServiceHost
+from ..adapters import (
+    Adapter,
+    AssetFetcher,
+    NodeLister,
+    PlaybackControl,
+    ServiceHost,
+    require,
+)
+from ..adapters._seam import Part
 from ..codec import same_type_name
 from ..flow import Bucket, Subscription, ThrottleMode, Watchable, Watcher, participate
 from ..interfaces._base import RosMessage
@@ -100,6 +108,22 @@ class Connection:
                 f"the connection is {self.status.value}"
                 + (f": {self.last_error}" if self.last_error else "")
             )
+
+    @overload
+    def offered(self, name: Literal["node_list"]) -> NodeLister: ...
+
+    @overload
+    def offered(self, name: Literal["assets"]) -> AssetFetcher: ...
+
+    @overload
+    def offered(self, name: Literal["playback"]) -> PlaybackControl: ...
+
+    def offered(self, name: Part) -> Any:
+        """The connected adapter's optional part ``name`` (``NotConnected``
+        when there is none connected; the one ``NotSupportedError`` of
+        :func:`~..adapters.require` when it lacks the part)."""
+        self.require_connected()
+        return require(getattr(self.adapter, name), name, self.adapter.protocol)
 
     def current(self) -> Adapter | None:
         """The adapter while connected, else None."""

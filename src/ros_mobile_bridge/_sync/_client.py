@@ -35,6 +35,8 @@ from .._types import (
     Compression,
     ConnectionStats,
     Dispatch,
+    PlaybackRequest,
+    PlaybackState,
     Priority,
     SaveBandwidth,
     ServerInfo,
@@ -307,6 +309,12 @@ class SyncClient:
 
     @property
     @_mirrors
+    def playback_state(self) -> PlaybackState | None:
+        """:attr:`Client.playback_state`."""
+        return self._client.playback_state
+
+    @property
+    @_mirrors
     def server_time(self) -> int | None:
         """:attr:`Client.server_time`."""
         return self._client.server_time
@@ -485,6 +493,15 @@ class SyncClient:
     def topic_endpoints(self, topic: str) -> TopicEndpoints:
         """:meth:`Client.topic_endpoints`, blocking."""
         return self._call(self._client.topic_endpoints, topic, timeout=None, what="topic_endpoints")
+
+    @_mirrors
+    def control_playback(
+        self, request: PlaybackRequest, *, timeout: float | None = None
+    ) -> PlaybackState:
+        """:meth:`Client.control_playback`, blocking; ``timeout`` is the request's own."""
+        return self._call(
+            _control_playback, self._client, request, timeout, timeout=None, what="playback"
+        )
 
     @_mirrors
     def fetch_asset(self, uri: str, *, timeout: float | None = None) -> bytes:
@@ -705,6 +722,12 @@ async def _call_service(
 
 async def _nodes(client: Client) -> list[str]:
     return await client.nodes()
+
+
+async def _control_playback(
+    client: Client, request: PlaybackRequest, timeout: float | None
+) -> PlaybackState:
+    return await client.control_playback(request, timeout=timeout)
 
 
 async def _fetch_asset(client: Client, uri: str, timeout: float | None) -> bytes:

@@ -32,7 +32,7 @@ from ..interfaces._base import RosMessage
 from ..transport import WebSocket
 from ..wire import foxglove as fx
 from ..wire._limits import truncate_for_log
-from ._foxglove_graph import FoxgloveAssets, FoxgloveGraph
+from ._foxglove_offers import FoxgloveAssets, FoxgloveGraph, FoxglovePlayback
 from ._foxglove_parameters import FoxgloveParameters
 from ._pauses import PauseSchedule
 from ._seam import (
@@ -142,14 +142,13 @@ def _greeted(engine: fx.FoxgloveEngine) -> bool:
 class FoxgloveAdapter:
     """One Foxglove WebSocket connection (see :class:`~.Adapter`). Its
     optional parts: :attr:`parameters`, when the server offers them;
-    :attr:`assets` and :attr:`node_list` (the connection graph), which
-    check the server's capability per call. The protocol has no actions,
+    :attr:`assets`, :attr:`node_list` (the connection graph) and
+    :attr:`playback`, which check the server's capability per call. The protocol has no actions,
     no type descriptions, and a client cannot serve a service over it."""
 
     protocol = "foxglove-ws"
     wire_timeout_slack = 0.0  # the protocol carries no timeout
     actions: None = None
-    playback: None = None
     serving: None = None
     descriptions: None = None
 
@@ -199,6 +198,9 @@ class FoxgloveAdapter:
         capabilities = self._capabilities
         self.assets = FoxgloveAssets(engine, self._send_request, self._check_pending, capabilities)
         self.node_list = FoxgloveGraph(engine, self._send_request, capabilities, options)
+        self.playback = FoxglovePlayback(
+            engine, self._send_request, self._check_pending, capabilities
+        )
         self._statuses: dict[str, tuple[str, int]] = {}  # status id -> (message, log level)
         self.parameters: FoxgloveParameters | None = None
         self._offer_parameters()
@@ -383,6 +385,7 @@ class FoxgloveAdapter:
             or self._calls
             or self._params
             or self.assets.requests
+            or self.playback.requests
             or self._pauses.rates
         ):
             return 0.0
@@ -537,6 +540,12 @@ class FoxgloveAdapter:
                 self._log.warning("fetchAsset answer for unknown request %d", event.request_id)
         elif isinstance(event, fx.ConnectionGraphUpdate):
             self.node_list.on_update(event)
+        elif isinstance(event, fx.PlaybackState):
+            state = self.playback.on_state(event)
+            if state is None:
+                self._events.reject("malformed", f"playback state of unknown status {event.status}")
+            else:
+                self._events.emit(state)
         elif isinstance(event, fx.ServerInfo):
             # A later serverInfo resets the server's tables; the engine has
             # already reported the old channels and services as unadvertised.
@@ -744,7 +753,8 @@ class FoxgloveAdapter:
     def _check_pending(self, what: str) -> None:
         """``ServiceError`` at once when ``max_pending_requests`` requests
         already wait for an answer on this connection."""
-        waiting = len(self._calls) + len(self._params) + len(self.assets.requests)
+        waiting = len(self._calls) + len(self._params)
+        waiting += len(self.assets.requests) + len(self.playback.requests)
         check_pending(self._options, waiting, what)
 
     # -- lifecycle ----------------------------------------------------------
@@ -760,6 +770,7 @@ class FoxgloveAdapter:
         self._calls.fail_all(error)
         self._params.fail_all(error)
         self.assets.requests.fail_all(error)
+        self.playback.requests.fail_all(error)
 
     async def keepalive(self) -> None:
         interval = self._options.keepalive_interval

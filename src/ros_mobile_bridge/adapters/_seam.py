@@ -231,13 +231,14 @@ class AssetFetcher(Protocol):
 
 class PlaybackControl(Protocol):
     """Controlling a server that plays a recording (Foxglove's
-    ``playbackControl``). The server's answer arrives as a
-    :class:`~ros_mobile_bridge.PlaybackState` event."""
+    ``playbackControl``). Every state the server sends is also handed up as
+    a :class:`~ros_mobile_bridge.PlaybackState` event."""
 
-    async def control_playback(self, request: PlaybackRequest, request_id: str) -> None:
-        """Send ``request``, tagged ``request_id`` (the state answering it
-        carries it). ``NotSupportedError`` naming the capability when the
-        server offers no playback control."""
+    async def control_playback(self, request: PlaybackRequest) -> PlaybackState:
+        """Send ``request``; the state the server answers it with.
+        ``NotSupportedError`` naming the capability when the server offers
+        no playback control."""
+        ...
 
 
 class ParameterAccess(Protocol):

@@ -1,8 +1,10 @@
 """What a Foxglove server offers beside topics, services and parameters:
-its assets (``assets``: files by URI) and its connection graph
-(``connectionGraph``: who publishes, subscribes to and provides what). Parts
-of :class:`~._foxglove.FoxgloveAdapter`: :class:`FoxgloveAssets` is its
-``assets`` part, :class:`FoxgloveGraph` its ``node_list``."""
+its assets (``assets``: files by URI), its connection graph
+(``connectionGraph``: who publishes, subscribes to and provides what) and
+the control of a recording it plays (``playbackControl``). Parts of
+:class:`~._foxglove.FoxgloveAdapter`: :class:`FoxgloveAssets` is its
+``assets`` part, :class:`FoxgloveGraph` its ``node_list``,
+:class:`FoxglovePlayback` its ``playback``."""
 
 from __future__ import annotations
 
@@ -14,13 +16,19 @@ import anyio
 
 from .._errors import AssetError, ConnectError, NotSupportedError, ServiceTimeout
 from .._options import ClientOptions
-from .._types import TopicEndpoints
+from .._types import PlaybackRequest, PlaybackState, PlaybackStatus, TopicEndpoints
 from ..flow import PendingRequests
 from ..wire import foxglove as fx
 
-__all__ = ["FoxgloveAssets", "FoxgloveGraph"]
+__all__ = ["FoxgloveAssets", "FoxgloveGraph", "FoxglovePlayback"]
 
 _U32 = 0xFFFF_FFFF
+_PLAYBACK_STATUS: dict[int, PlaybackStatus] = {
+    0: "playing",
+    1: "paused",
+    2: "buffering",
+    3: "ended",
+}
 
 
 def _require(capabilities: tuple[str, ...], capability: str, what: str) -> None:
@@ -165,3 +173,47 @@ class FoxgloveGraph:
             pubs = self._published.get(topic, ())
             subs = self._subscribed.get(topic, ())
         return TopicEndpoints(topic, pubs, subs)
+
+
+class FoxglovePlayback:
+    """Playback control requests and the states answering them (a
+    :class:`~._seam.PlaybackControl`)."""
+
+    def __init__(
+        self,
+        engine: fx.FoxgloveEngine,
+        send_request: Callable[[bytes], Awaitable[None]],
+        check_pending: Callable[[str], None],
+        capabilities: Callable[[], tuple[str, ...]],
+    ) -> None:
+        self._engine = engine
+        self._send_request = send_request
+        self._check_pending = check_pending
+        self._capabilities = capabilities
+        self._ids = itertools.count(1)
+        self.requests: PendingRequests[PlaybackState] = PendingRequests()
+
+    async def control_playback(self, request: PlaybackRequest) -> PlaybackState:
+        """Send ``request``; the state the server answers it with (the one
+        carrying its request id). ``NotSupportedError`` without the
+        ``playbackControl`` capability."""
+        _require(self._capabilities(), "playbackControl", "playback control")
+        self._check_pending("playbackControlRequest")
+        request_id = f"rmb-{next(self._ids)}"
+        frame = self._engine.playback_control(
+            request.play, request.speed, request.seek_ns, request_id
+        )
+        return await self.requests.request(request_id, lambda: self._send_request(frame))
+
+    def on_state(self, event: fx.PlaybackState) -> PlaybackState | None:
+        """The public form of a state the server sent, handed to the request
+        it answers; None for a status this client does not know."""
+        status = _PLAYBACK_STATUS.get(event.status)
+        if status is None:
+            return None
+        state = PlaybackState(
+            status, event.current_time_ns, event.speed, event.did_seek, event.request_id or None
+        )
+        if event.request_id:
+            self.requests.resolve(event.request_id, state)
+        return state
