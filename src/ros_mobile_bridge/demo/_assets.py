@@ -31,7 +31,7 @@ def serve_asset(uri: str) -> bytes:
     name = ASSETS.get(uri)
     if name is None:
         raise FileNotFoundError(f"the demo robot serves no {uri} (it serves {', '.join(ASSETS)})")
-    return resources.files(__package__).joinpath("assets", name).read_bytes()
+    return (resources.files(__package__) / "assets" / name).read_bytes()
 
 
 def connection_graph(
