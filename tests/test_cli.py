@@ -125,7 +125,7 @@ def test_backend_trio_without_trio_is_one_line() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT
     )
     assert result.returncode == 2
-    assert "needs trio" in one_line(result.stderr)
+    assert "needs trio: pip install 'ros-mobile-bridge[trio]'" in one_line(result.stderr)
 
 
 def test_a_refused_connection_is_a_runtime_failure() -> None:

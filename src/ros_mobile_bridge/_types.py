@@ -60,6 +60,11 @@ ResultT = TypeVar("ResultT", default=Any)
 an instance of its ``Goal`` class, else ``Any``."""
 FeedbackT = TypeVar("FeedbackT", default=Any)
 """An action goal's feedback: the action's ``Feedback`` class, else ``Any``."""
+RequestT = TypeVar("RequestT", default=Any)
+"""A served call's request: the service's ``Request`` class when ``serve()``
+names the service's class, else ``Any``."""
+ResponseT = TypeVar("ResponseT", default=Any)
+"""A served call's response: the service's ``Response`` class, else ``Any``."""
 
 DEFAULT_PORTS: Mapping[str, int] = {"foxglove-ws": 8765, "rosbridge": 9090, "zenoh": 7447}
 """The port each protocol's bridge listens on unless told otherwise."""

@@ -72,6 +72,7 @@ _BUNDLED = "ros_mobile_bridge.interfaces."
 T = TypeVar("T")
 M = TypeVar("M", bound=RosMessage)
 R = TypeVar("R", bound=RosMessage)
+_Req = TypeVar("_Req", bound=RosMessage)
 _Res = TypeVar("_Res", bound=RosMessage)
 _Fb = TypeVar("_Fb", bound=RosMessage)
 
@@ -624,14 +625,27 @@ class Client:
         except MessageError as exc:
             raise exc.in_call(f"call_service {name}") from None
 
+    @overload
     def serve(
         self,
         name: str,
-        service_type: str | type[RosService],
+        service_type: type[RosService[_Req, R]],
+        *,
+        timeout: float = ...,
+        buffer: int = ...,
+    ) -> AbstractAsyncContextManager[ServiceRequests[_Req, R]]: ...
+    @overload
+    def serve(
+        self, name: str, service_type: str, *, timeout: float = ..., buffer: int = ...
+    ) -> AbstractAsyncContextManager[ServiceRequests]: ...
+    def serve(
+        self,
+        name: str,
+        service_type: str | type[RosService[Any, Any]],
         *,
         timeout: float = DEFAULT_SERVE_TIMEOUT,
         buffer: int = DEFAULT_SERVE_BUFFER,
-    ) -> AbstractAsyncContextManager[ServiceRequests]:
+    ) -> AbstractAsyncContextManager[ServiceRequests[Any, Any]]:
         """Offer service ``name`` of type ``service_type`` (the service's
         class, ``AddTwoInts``, or its name, ``"pkg/srv/Name"``) to the ROS
         graph through the bridge; an async context manager yielding

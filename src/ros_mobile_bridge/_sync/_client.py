@@ -30,6 +30,7 @@ from .._checks import check_timeout as _check_timeout
 from .._connect import ProtocolArg, connect
 from .._core._client import Client
 from .._errors import NotConnected
+from .._loop._backends import Backend, run_args
 from .._options import CLOSE_SLACK_S, ClientOptions
 from .._types import (
     Compression,
@@ -49,7 +50,7 @@ from ..codec import FieldDef
 from ..flow import Subscription
 from ..interfaces._base import RosGoal, RosMessage, RosRequest
 from ._blocks import SyncActionGoal, SyncSubscription
-from ._worker import JOIN_S, Children, Held, Parent, SyncBackend, Worker
+from ._worker import JOIN_S, Children, Held, Parent, Worker
 
 if TYPE_CHECKING:
     pass
@@ -101,7 +102,7 @@ def connect_sync(
     port: int | None = None,
     secure: bool | None = None,
     options: ClientOptions | None = None,
-    backend: SyncBackend = "asyncio",
+    backend: Backend = "asyncio",
     backend_options: Mapping[str, Any] | None = None,
 ) -> SyncClient:
     """Connect from code that is not async (scripts, notebooks, test
@@ -115,9 +116,10 @@ def connect_sync(
         # the block's end sent the zero Twist and stopped the worker thread
 
     ``target``, ``protocol``, ``port``, ``secure`` and ``options`` are
-    :func:`~ros_mobile_bridge.connect`'s, plus ``backend`` (``"asyncio"`` or
-    ``"trio"``) and ``backend_options`` (:func:`anyio.run`'s) for the event
-    loop of the worker thread the client runs in. It raises what
+    :func:`~ros_mobile_bridge.connect`'s, plus ``backend`` (``"asyncio"``,
+    ``"trio"``, or ``"uvloop"``: asyncio on uvloop, the ``[uvloop]`` extra)
+    and ``backend_options`` (:func:`anyio.run`'s) for the event loop of the
+    worker thread the client runs in. It raises what
     ``connect()`` raises (``ValueError``, ``ConnectError``, ...), with the
     worker already stopped.
 
@@ -126,23 +128,15 @@ def connect_sync(
     to) and join the thread. A ``KeyboardInterrupt`` in a blocking call
     cancels that call; leaving the ``with`` block then closes as usual. A
     client still open at interpreter exit is closed by an ``atexit`` hook."""
-    if backend not in ("asyncio", "trio"):
-        raise ValueError(f"backend must be 'asyncio' or 'trio', got {backend!r}")
-    if backend == "trio":
-        try:
-            import trio  # noqa: F401  (the worker's loop needs it; say so before starting one)
-        except ImportError:
-            raise ImportError(
-                "connect_sync(backend='trio') needs trio: pip install trio "
-                "(or ros-mobile-bridge's [trio] extra)"
-            ) from None
     if backend_options is not None and not isinstance(backend_options, Mapping):
         raise TypeError("backend_options must be a mapping or None")
+    # the loop's package is asked for before a loop starts
+    loop, loop_options = run_args(backend, backend_options, f"connect_sync(backend={backend!r})")
     if options is not None and not isinstance(options, ClientOptions):
         raise TypeError("options must be a ClientOptions")
     cm = connect(target, protocol=protocol, port=port, secure=secure, options=options)
     opts = options or ClientOptions()
-    worker = Worker(backend, backend_options, f"rmb-sync-{backend}", opts.logger)
+    worker = Worker(loop, loop_options, f"rmb-sync-{backend}", opts.logger)
     held = Held(worker, cm, "the connection")
     try:
         client = held.enter()
