@@ -9,7 +9,6 @@ holds no wire format and starts no task of its own."""
 from __future__ import annotations
 
 import contextlib
-import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from typing import TYPE_CHECKING, Any, TypeVar, overload
@@ -30,7 +29,6 @@ from .._errors import (
     NotConnected,
     ParameterError,
     RosBridgeError,
-    ServiceTimeout,
 )
 from .._options import ClientOptions
 from .._types import (
@@ -700,27 +698,10 @@ class Client:
             yield served
 
     async def _request(
-        self,
-        what: str,
-        call: Callable[[float], Awaitable[T]],
-        timeout: float | None,
-        *,
-        slack: float = 0.0,
+        self, what: str, call: Callable[[float], Awaitable[T]], timeout: float | None, **kw: float
     ) -> T:
-        """Run one correlated request under its deadline (``timeout`` or
-        ``options.service_timeout``) and report its round trip to
-        ``on_latency``. ``call`` gets the limit (an adapter may forward it);
-        the local deadline is ``slack`` later, so the server's own timeout
-        answer arrives first. ``ServiceTimeout`` names ``what``."""
-        limit = check_timeout(timeout) or self._options.service_timeout
-        self._conn.require_connected()
-        start = time.perf_counter()
-        with anyio.move_on_after(limit + slack) as scope:
-            result = await call(limit)
-        if scope.cancelled_caught:
-            raise ServiceTimeout(what, limit)
-        self._options.report_latency((time.perf_counter() - start) * 1000.0)
-        return result
+        """One correlated request under its deadline: :meth:`Connection.request`."""
+        return await self._conn.request(what, call, timeout, **kw)
 
     # -- parameters ---------------------------------------------------------
     def _parameters(self) -> ParameterAccess:

@@ -17,7 +17,7 @@ import anyio
 import anyio.abc
 
 from .._checks import check_timeout, nearest_hint
-from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError
+from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError, ServiceTimeout
 from .._loop._wakeup import serve_timers
 from .._options import ClientOptions
 from .._types import ServiceInfo, Status, TopicInfo
@@ -49,6 +49,7 @@ __all__ = [
 
 _M = TypeVar("_M", bound=RosMessage)
 _Info = TypeVar("_Info", TopicInfo, ServiceInfo)
+_T = TypeVar("_T")
 
 TWIST: Final = "geometry_msgs/msg/Twist"
 TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
@@ -108,6 +109,29 @@ class Connection:
                 f"the connection is {self.status.value}"
                 + (f": {self.last_error}" if self.last_error else "")
             )
+
+    async def request(
+        self,
+        what: str,
+        call: Callable[[float], Awaitable[_T]],
+        timeout: float | None,
+        *,
+        slack: float = 0.0,
+    ) -> _T:
+        """Run one correlated request under its deadline (``timeout`` or
+        ``options.service_timeout``) and report its round trip to
+        ``on_latency``. ``call`` gets the limit (an adapter may forward it);
+        the local deadline is ``slack`` later, so the server's own timeout
+        answer arrives first. ``ServiceTimeout`` names ``what``."""
+        limit = check_timeout(timeout) or self._options.service_timeout
+        self.require_connected()
+        start = time.perf_counter()
+        with anyio.move_on_after(limit + slack) as scope:
+            result = await call(limit)
+        if scope.cancelled_caught:
+            raise ServiceTimeout(what, limit)
+        self._options.report_latency((time.perf_counter() - start) * 1000.0)
+        return result
 
     @overload
     def offered(self, name: Literal["node_list"]) -> NodeLister: ...
