@@ -63,6 +63,8 @@ _LEVELS: Final[dict[int, tuple[StatusLevel, int]]] = {
     2: ("error", logging.ERROR),
 }
 """A status ``level`` -> its name and log level (an unknown level is an error)."""
+_STATUS_IDS_KEPT: Final = 1024
+"""Status ids whose message is kept for the log line of their withdrawal."""
 """A CDR encapsulation header (little endian) with no body: an empty request."""
 
 
@@ -527,7 +529,10 @@ class FoxgloveAdapter:
             name, level = _LEVELS.get(event.level, _LEVELS[2])
             self._log.log(level, "server status: %s", truncate_for_log(event.message))
             if event.id is not None:
+                self._statuses.pop(event.id, None)  # (re-inserted last: the newest)
                 self._statuses[event.id] = (event.message, level)
+                if len(self._statuses) > _STATUS_IDS_KEPT:  # the oldest goes
+                    del self._statuses[next(iter(self._statuses))]
             self._events.emit(ServerStatus(name, event.message, event.id))
         elif isinstance(event, fx.RemoveStatus):
             for status_id in event.ids:
@@ -771,6 +776,7 @@ class FoxgloveAdapter:
         self._params.fail_all(error)
         self.assets.requests.fail_all(error)
         self.playback.requests.fail_all(error)
+        self.node_list.fail(error)
 
     async def keepalive(self) -> None:
         interval = self._options.keepalive_interval

@@ -14,7 +14,13 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 
 import anyio
 
-from .._errors import AssetError, ConnectError, NotSupportedError, ServiceTimeout
+from .._errors import (
+    AssetError,
+    ConnectError,
+    NotSupportedError,
+    RosBridgeError,
+    ServiceTimeout,
+)
 from .._options import ClientOptions
 from .._types import PlaybackRequest, PlaybackState, PlaybackStatus, TopicEndpoints
 from ..flow import PendingRequests
@@ -100,6 +106,7 @@ class FoxgloveGraph:
         self._users = 0
         self._current = False  # the first update since subscribing arrived
         self._updated = anyio.Event()
+        self._failed: RosBridgeError | None = None  # the connection is gone
         self._published: dict[str, tuple[str, ...]] = {}
         self._subscribed: dict[str, tuple[str, ...]] = {}
         self._provided: dict[str, tuple[str, ...]] = {}
@@ -127,6 +134,11 @@ class FoxgloveGraph:
         self._updated.set()
         self._updated = anyio.Event()
 
+    def fail(self, error: RosBridgeError) -> None:
+        """The connection is gone: every call waiting for the graph raises ``error``."""
+        self._failed = error
+        self._updated.set()
+
     @contextlib.asynccontextmanager
     async def _held(self) -> AsyncIterator[None]:
         """The graph subscription, held for the block, once the server's
@@ -143,8 +155,10 @@ class FoxgloveGraph:
                 await self._send_request(self._engine.subscribe_connection_graph())
             limit = self._options.service_timeout
             with anyio.move_on_after(limit):
-                while not self._current:
+                while not self._current and self._failed is None:
                     await self._updated.wait()
+            if self._failed is not None:
+                raise self._failed
             if not self._current:
                 raise ServiceTimeout("subscribeConnectionGraph", limit)
             yield
