@@ -807,3 +807,39 @@ async def wait_for_removal(events: Any) -> rmb.StatusRemoved:
         if isinstance(event, rmb.StatusRemoved):
             return event
     raise AssertionError("no removeStatus")
+
+
+async def test_a_connection_graph_is_bounded_and_its_malformed_entries_counted() -> None:
+    info = (
+        '{"op":"serverInfo","name":"scripted","capabilities":["connectionGraph"],'
+        '"supportedEncodings":["cdr"],"metadata":{}}'
+    )
+    published = [{"name": f"/t{i}", "publisherIds": [f"/n{i}"]} for i in range(3)]
+    update = {
+        "op": "connectionGraphUpdate",
+        "publishedTopics": [*published, {"publisherIds": ["/nameless"]}, {"name": "/no_ids"}],
+        "subscribedTopics": [],
+        "advertisedServices": [],
+        "removedTopics": [],
+        "removedServices": [],
+    }
+    asked: list[str | bytes] = []
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(info)
+        asked.append(await peer.recv())
+        await peer.send_text(json.dumps(update))
+        asked.append(await peer.recv())
+        await peer.drain()
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options(max_channels=2)) as robot:
+                assert await robot.nodes() == ["/n0", "/n1"]
+                await wait_until(lambda: robot.rejections.get("malformed") == 2)
+                assert robot.rejections["channel_limit"] == 1
+                await wait_until(lambda: len(asked) == 2)
+    assert [json.loads(m)["op"] for m in asked] == [
+        "subscribeConnectionGraph",
+        "unsubscribeConnectionGraph",
+    ]

@@ -168,8 +168,8 @@ class Client:
         return await self._conn.offered("node_list").nodes()
 
     async def topic_endpoints(self, topic: str) -> TopicEndpoints:
-        """Who publishes and subscribes to ``topic`` now, from the source
-        :meth:`nodes` reads (rosbridge: ``/rosapi/publishers`` and ``/subscribers``)."""
+        """Who publishes and subscribes to ``topic`` now, from the source :meth:`nodes`
+        reads (rosbridge: ``/rosapi/publishers`` and ``/subscribers``); empty when unknown."""
         check_name("topic", topic)
         return await self._conn.offered("node_list").topic_endpoints(topic)
 
@@ -201,7 +201,8 @@ class Client:
 
     @property
     def server_time(self) -> int | None:
-        """The server's clock in ns as last sent (``time``: a simulator's), or None."""
+        """The server's clock (ns) as it last sent it (Foxglove ``time``: a simulator's
+        or a recording's clock); None before that, and over rosbridge and Zenoh."""
         return self._router.server_time.value
 
     def watch_server_time(self) -> Present[int]:
@@ -210,12 +211,14 @@ class Client:
 
     def watch_server_status(self) -> FeedWatcher[ServerStatus | StatusRemoved]:
         """Async iterator: each status the server sends or withdraws from now on
-        (each also logged at its level); a reader 256 behind loses the oldest."""
+        (each also logged at its level); a reader 256 behind loses the oldest.
+        Foxglove only: nothing arrives over rosbridge and Zenoh."""
         return self._router.server_status.watch()
 
     @property
     def playback_state(self) -> PlaybackState | None:
-        """How the server plays its recording as it last said (``playbackControl``), or None."""
+        """How the server plays its recording, as it last said (Foxglove
+        ``playbackControl``); None before that, and over rosbridge and Zenoh."""
         return self._router.playback.value
 
     def watch_playback(self) -> Present[PlaybackState]:
@@ -226,11 +229,15 @@ class Client:
         self, request: PlaybackRequest, *, timeout: float | None = None
     ) -> PlaybackState:
         """Play, pause, seek or change the speed of the recording the server
-        plays; the state answering it (``playbackControl``, else ``NotSupportedError``)."""
+        plays; the state answering it. ``NotSupportedError`` without Foxglove's
+        ``playbackControl``; ``ServiceTimeout`` when no answer came within ``timeout``."""
         if not isinstance(request, PlaybackRequest):
             raise TypeError(f"request must be a PlaybackRequest, not {type(request).__name__}")
-        playback = lambda _: self._conn.offered("playback").control_playback(request)  # noqa: E731
-        return await self._request("playbackControlRequest", playback, timeout)
+        return await self._request(
+            "playbackControlRequest",
+            lambda _: self._conn.offered("playback").control_playback(request),
+            timeout,
+        )
 
     # -- subscriptions ------------------------------------------------------
     @overload

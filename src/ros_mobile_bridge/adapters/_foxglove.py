@@ -199,7 +199,9 @@ class FoxgloveAdapter:
         self._params = self._parameters.requests
         capabilities = self._capabilities
         self.assets = FoxgloveAssets(engine, self._send_request, self._check_pending, capabilities)
-        self.node_list = FoxgloveGraph(engine, self._send_request, capabilities, options)
+        self.node_list = FoxgloveGraph(
+            engine, self._send_request, capabilities, options, self._events.reject
+        )
         self.playback = FoxglovePlayback(
             engine, self._send_request, self._check_pending, capabilities
         )

@@ -98,11 +98,16 @@ class FoxgloveGraph:
         send_request: Callable[[str], Awaitable[None]],
         capabilities: Callable[[], tuple[str, ...]],
         options: ClientOptions,
+        reject: Callable[[str, str, int], None],
     ) -> None:
+        """``reject(reason, detail, count)`` reports the parts of an update
+        skipped: malformed entries, and names past ``options.max_channels``
+        per table (published, subscribed, services)."""
         self._engine = engine
         self._send_request = send_request
         self._capabilities = capabilities
         self._options = options
+        self._reject = reject
         self._users = 0
         self._current = False  # the first update since subscribing arrived
         self._updated = anyio.Event()
@@ -121,6 +126,8 @@ class FoxgloveGraph:
             self._subscribed.pop(topic, None)
         for service in event.removed_services:
             self._provided.pop(service, None)
+        malformed = refused = 0
+        limit = self._options.max_channels
         for entries, key, table in (
             (event.published_topics, "publisherIds", self._published),
             (event.subscribed_topics, "subscriberIds", self._subscribed),
@@ -128,8 +135,18 @@ class FoxgloveGraph:
         ):
             for entry in entries:
                 name, ids = entry.get("name"), entry.get(key)
-                if isinstance(name, str) and isinstance(ids, list):
+                if not isinstance(name, str) or not isinstance(ids, list):
+                    malformed += 1
+                elif name not in table and len(table) >= limit:
+                    refused += 1
+                else:
                     table[name] = tuple(sorted({str(i) for i in ids if isinstance(i, str | int)}))
+        if malformed:
+            what = f"connectionGraphUpdate: {malformed} entries without a name or id list skipped"
+            self._reject("malformed", what, malformed)
+        if refused:
+            what = f"connectionGraphUpdate: {refused} names past the {limit} kept skipped"
+            self._reject("channel_limit", what, refused)
         self._current = True
         self._updated.set()
         self._updated = anyio.Event()
