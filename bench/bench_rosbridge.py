@@ -26,11 +26,13 @@ Clients (the consumer work per message is the same function for all of them,
 see :func:`make_take`): the library on asyncio and on trio, with JSON and, for
 images, ``compression="cbor"`` and ``"cbor-raw"``; for Strings also the
 library on asyncio with ``read_coalesce=0`` (every frame read and handed over
-as it arrives, as before issue 10); roslibpy (its default
-twisted transport; it has no CBOR: it refuses any ``compression`` but ``png``
-and ``none``, and raises on binary frames); a raw ``websockets`` asyncio loop
-that sends the ``subscribe`` op and ``json.loads`` every frame (the floor),
-and the same loop on this library's own WebSocket (``transport.connect_websocket``).
+as it arrives, as before issue 10) and on asyncio with uvloop's loop;
+roslibpy (its default twisted transport; it has no CBOR: it refuses any
+``compression`` but ``png`` and ``none``, and raises on binary frames); a raw
+``websockets`` asyncio loop that sends the ``subscribe`` op and
+``json.loads`` every frame (the floor; for Strings on uvloop too, the
+library on uvloop's baseline), and the same loop on this library's own
+WebSocket (``transport.connect_websocket``).
 
 In each client process, after the first message and a warm-up, a window of
 ``--seconds`` is measured: messages received, ``getrusage(RUSAGE_SELF)`` (user
@@ -74,7 +76,7 @@ from typing import Any, Final
 HERE: Final = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 sys.path.insert(0, str(HERE))
-from _common import DROP_REASONS, check_fates, subscription_counts  # noqa: E402
+from _common import DROP_REASONS, check_fates, run_on, subscription_counts  # noqa: E402
 from _common import versions as common_versions  # noqa: E402
 
 STRING_TYPE: Final = "std_msgs/msg/String"
@@ -256,10 +258,10 @@ def child_library(
                 report_window(a, b, got)
                 tg.cancel_scope.cancel()
 
-    anyio.run(main, backend=backend)
+    run_on(backend, main)
 
 
-def child_raw(args: argparse.Namespace) -> None:
+def child_raw(args: argparse.Namespace, *, uvloop: bool = False) -> None:
     import asyncio
 
     from websockets.asyncio.client import connect
@@ -296,7 +298,12 @@ def child_raw(args: argparse.Namespace) -> None:
             with suppress(asyncio.CancelledError):
                 await task
 
-    asyncio.run(main())
+    if uvloop:  # asyncio on uvloop's loop
+        import uvloop as uv
+
+        uv.run(main())
+    else:
+        asyncio.run(main())
 
 
 def child_transport(args: argparse.Namespace) -> None:
@@ -375,8 +382,8 @@ def child_main(args: argparse.Namespace) -> None:
     name = args.client
     if name == "roslibpy":
         child_roslibpy(args)
-    elif name == "websockets raw":
-        child_raw(args)
+    elif name in ("websockets raw", "websockets raw uvloop"):
+        child_raw(args, uvloop=name.endswith("uvloop"))
     elif name == "rmb transport raw":
         child_transport(args)
     else:
@@ -405,9 +412,11 @@ class Case:
 SMALL_CLIENTS: Final = (
     "library asyncio",
     "library trio",
+    "library uvloop",
     "library asyncio uncoalesced",
     "roslibpy",
     "websockets raw",
+    "websockets raw uvloop",
     "rmb transport raw",
 )
 IMAGE_CLIENTS: Final = (
@@ -859,6 +868,15 @@ def report(case: Case, samples: dict[str, list[Sample]]) -> dict[str, dict[str, 
         ratio = table[name]["cpu_us_per_msg"] / base
         verdict = "met" if ratio <= TARGET else "MISSED"
         print(f"  target (<= 0.5x roslibpy's CPU per message): {name}: {ratio:.2f}x -> {verdict}")
+    pairs = (
+        ("library uvloop", "websockets raw uvloop", "a raw websockets client on the same uvloop"),
+        ("library uvloop", "library asyncio", "the library on plain asyncio"),
+        ("websockets raw uvloop", "websockets raw", "raw websockets on plain asyncio"),
+    )
+    for a, b, what in pairs:
+        if a in table and b in table:
+            x, y = table[a]["cpu_us_per_msg"], table[b]["cpu_us_per_msg"]
+            print(f"  {a} / {what}: {x / y:.2f}x CPU per message")
     return table
 
 
