@@ -115,7 +115,8 @@ def make_take(got: Got, kind: str, b64: bool) -> Callable[[dict[str, Any]], None
     field (``b64``), or ``len()`` of the ``bytes`` (CBOR) or numpy array
     (cbor-raw) the decoder already made; keep ``header.frame_id``. A
     String's delay from its publish to here is noted too (the publisher
-    wrote its send time into the text)."""
+    wrote its send time into the text). The raw clients' messages are
+    dicts; the library's are instances: see :func:`make_take_instance`."""
     if kind == "string":
         delays = got.delays
         now_ns = time.monotonic_ns
@@ -142,6 +143,32 @@ def make_take(got: Got, kind: str, b64: bool) -> Callable[[dict[str, Any]], None
             n = got.n + 1
             got.n = n
             got.last = (n, data["header"]["frame_id"])
+
+    return take
+
+
+def make_take_instance(got: Got, kind: str) -> Callable[[Any], None]:
+    """:func:`make_take` for the library's messages, instances of the
+    message's class: the same work, by attribute (an image's pixels are
+    already a numpy array, decoded from base64 or CBOR by the library)."""
+    if kind == "string":
+        delays = got.delays
+        now_ns = time.monotonic_ns
+
+        def take(data: Any) -> None:
+            n = got.n + 1
+            got.n = n
+            text = data.data
+            got.last = (n, text)
+            delays.append(now_ns() - int(text[11:30]))
+
+    else:
+
+        def take(data: Any) -> None:
+            got.bytes += len(data.data)
+            n = got.n + 1
+            got.n = n
+            got.last = (n, data.header.frame_id)
 
     return take
 
@@ -226,7 +253,7 @@ def child_library(
 
     async def main() -> None:
         got = Got()
-        take = make_take(got, args.kind, b64=compression is None)
+        take = make_take_instance(got, args.kind)
         options = rmb.ClientOptions(reconnect=None, latency_probe_interval=0)
         if read_coalesce is not None:
             options = replace(options, read_coalesce=read_coalesce)
