@@ -107,13 +107,12 @@ class Got:
         self.delays: list[int] = []  # ns from publish to the consumer, Strings only
 
 
-def make_take(got: Got, kind: str, b64: bool) -> Callable[[dict[str, Any]], None]:
+def make_take(got: Got, kind: str) -> Callable[[dict[str, Any]], None]:
     """The consumer work per message, the same for every client.
 
     String: keep a reference to ``data`` (the string). Image: get the pixels
     as a real consumer needs them, ``base64.b64decode`` of the JSON ``data``
-    field (``b64``), or ``len()`` of the ``bytes`` (CBOR) or numpy array
-    (cbor-raw) the decoder already made; keep ``header.frame_id``. A
+    field; keep ``header.frame_id``. A
     String's delay from its publish to here is noted too (the publisher
     wrote its send time into the text). The raw clients' messages are
     dicts; the library's are instances: see :func:`make_take_instance`."""
@@ -128,18 +127,10 @@ def make_take(got: Got, kind: str, b64: bool) -> Callable[[dict[str, Any]], None
             got.last = (n, text)
             delays.append(now_ns() - int(text[11:30]))
 
-    elif b64:
-
-        def take(data: dict[str, Any]) -> None:
-            got.bytes += len(base64.b64decode(data["data"]))
-            n = got.n + 1
-            got.n = n
-            got.last = (n, data["header"]["frame_id"])
-
     else:
 
         def take(data: dict[str, Any]) -> None:
-            got.bytes += len(data["data"])
+            got.bytes += len(base64.b64decode(data["data"]))
             n = got.n + 1
             got.n = n
             got.last = (n, data["header"]["frame_id"])
@@ -295,7 +286,7 @@ def child_raw(args: argparse.Namespace, *, uvloop: bool = False) -> None:
 
     async def main() -> None:
         got = Got()
-        take = make_take(got, args.kind, b64=True)
+        take = make_take(got, args.kind)
         typename = STRING_TYPE if args.kind == "string" else IMAGE_TYPE
         async with connect(
             args.url, compression=None, max_size=None, ping_interval=None, proxy=None
@@ -342,7 +333,7 @@ def child_transport(args: argparse.Namespace) -> None:
 
     async def main() -> None:
         got = Got()
-        take = make_take(got, args.kind, b64=True)
+        take = make_take(got, args.kind)
         typename = STRING_TYPE if args.kind == "string" else IMAGE_TYPE
         ws = await connect_websocket(args.url, max_size=None)
         try:
@@ -381,7 +372,7 @@ def child_roslibpy(args: argparse.Namespace) -> None:
 
     host, port = args.url.removeprefix("ws://").rsplit(":", 1)
     got = Got()
-    take = make_take(got, args.kind, b64=True)
+    take = make_take(got, args.kind)
     ros = roslibpy.Ros(host=host, port=int(port))
     ros.run()
     typename = STRING_TYPE if args.kind == "string" else IMAGE_TYPE
