@@ -4,16 +4,20 @@ from __future__ import annotations
 
 import importlib.metadata
 import platform
-from collections.abc import Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from contextlib import suppress
-from typing import Any
+from typing import Any, TypeVar
+
+import anyio
 
 import ros_mobile_bridge as rmb
 
 __all__ = [
     "DROP_REASONS",
+    "LOOPS",
     "check_fates",
     "client_internals",
+    "run_on",
     "subscription_counts",
     "versions",
 ]
@@ -27,6 +31,19 @@ DROP_REASONS = (
 )
 """Every way a received frame can leave a subscription without being delivered
 (a version without one of them counts 0 for it)."""
+
+
+T = TypeVar("T")
+
+LOOPS = ("asyncio", "trio", "uvloop")
+"""The event loops a benchmark runs on: ``uvloop`` is asyncio on uvloop."""
+
+
+def run_on(loop: str, fn: Callable[..., Awaitable[T]], *args: Any) -> T:
+    """``anyio.run(fn, *args)`` on ``loop`` (one of :data:`LOOPS`)."""
+    if loop == "uvloop":
+        return anyio.run(fn, *args, backend="asyncio", backend_options={"use_uvloop": True})
+    return anyio.run(fn, *args, backend=loop)
 
 
 def versions(names: Sequence[str]) -> str:

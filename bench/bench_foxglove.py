@@ -1,6 +1,6 @@
 """End-to-end receive benchmark against the official Foxglove SDK server (stand-alone script).
 
-    .venv/bin/python bench/bench_foxglove.py [--backend asyncio|trio|both] [--seconds 1]
+    .venv/bin/python bench/bench_foxglove.py [--backend asyncio|trio|uvloop|both|all] [--seconds 1]
         [--reps 5] [--json PATH] [--malloc default|steady] [--profile]
 
 The server (``foxglove-sdk``) runs in a subprocess, ``bench/_peer.py``, so its
@@ -31,7 +31,13 @@ Clients:
 * ``transport``: the library's own WebSocket (``transport.connect_websocket``)
   in a raw loop counting binary frames (no Foxglove parsing, no decoding);
 * ``websockets``: ``websockets.asyncio.client`` in the same raw loop (asyncio
-  only; websockets has no trio client, so on trio ``transport`` is the baseline).
+  and uvloop; websockets has no trio client, so on trio ``transport`` is the
+  baseline).
+
+Loops: ``asyncio``, ``trio`` and ``uvloop`` (asyncio on uvloop: the
+``websockets`` client then runs on the same uvloop); ``both`` is asyncio and
+trio, ``all`` the three, and a run with asyncio and uvloop also prints the
+library on uvloop against the library on asyncio.
 
 A calibration drain sizes each drain case so that one library drain lasts
 about ``--seconds`` (a paced run lasts twice that); every client gets the same
@@ -69,11 +75,11 @@ import ros_mobile_bridge as rmb
 from ros_mobile_bridge.transport import connect_websocket
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import DROP_REASONS, check_fates, subscription_counts
+from _common import DROP_REASONS, check_fates, run_on, subscription_counts
 from _common import versions as common_versions
 from _peer import IMAGE_TOPIC, STRING_TOPIC, payloads
 
-Backend = Literal["asyncio", "trio"]
+Backend = Literal["asyncio", "trio", "uvloop"]
 SUBPROTOCOL: Final = "foxglove.sdk.v1.1"
 PEER: Final = Path(__file__).resolve().parent / "_peer.py"
 TICK: Final = 0.005
@@ -385,7 +391,7 @@ class Case:
 
 def cases(backend: Backend) -> list[Case]:
     raw: dict[str, ClientFactory] = {"transport": transport}
-    if backend == "asyncio":
+    if backend != "trio":  # (on uvloop too: websockets' asyncio client on uvloop's loop)
         raw["websockets"] = websockets_asyncio
     capped = {"library max_hz=10": library(max_hz=10)}
     return [
@@ -583,7 +589,7 @@ def report(backend: Backend, result: Result) -> dict[str, dict[str, dict[str, fl
             f" {x['cpu_us_per_frame'] / y['cpu_us_per_frame']:.2f}x CPU/frame"
         )
 
-    base = "websockets" if backend == "asyncio" else "transport"
+    base = "websockets" if backend != "trio" else "transport"
     print(f"  ratios (medians), library / {base}:")
     for key in ("string", "image"):
         line = f"    {key:<7} {ratio(key, 'library', base)}"
@@ -628,7 +634,9 @@ def steady_malloc() -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--backend", choices=["asyncio", "trio", "both"], default="both")
+    parser.add_argument(
+        "--backend", choices=["asyncio", "trio", "uvloop", "both", "all"], default="both"
+    )
     parser.add_argument(
         "--seconds", type=float, default=1.0, help="target length of one library run"
     )
@@ -644,7 +652,10 @@ def main() -> None:
         "--profile", action="store_true", help="also profile library String and Image drains"
     )
     args = parser.parse_args()
-    backends: list[Backend] = ["asyncio", "trio"] if args.backend == "both" else [args.backend]
+    backends: list[Backend] = {
+        "both": ["asyncio", "trio"],
+        "all": ["asyncio", "trio", "uvloop"],
+    }.get(args.backend, [args.backend])
     if args.malloc == "steady":
         steady_malloc()
 
@@ -657,7 +668,7 @@ def main() -> None:
     out: dict[str, Any] = {"versions": versions(), "args": {**vars(args), "json": str(args.json)}}
     try:
         for backend in backends:
-            result = anyio.run(run_backend, peer, backend, args.seconds, args.reps, backend=backend)
+            result = run_on(backend, run_backend, peer, backend, args.seconds, args.reps)
             out[backend] = {
                 "counts": result.counts,
                 "summary": report(backend, result),
@@ -670,9 +681,20 @@ def main() -> None:
             if args.profile:
                 for topic in (STRING_TOPIC, IMAGE_TOPIC):
                     count = result.counts[topic]
-                    anyio.run(profile_library, peer, topic, count, backend, backend=backend)
+                    run_on(backend, profile_library, peer, topic, count, backend)
     finally:
         peer.close()
+    if "asyncio" in out and "uvloop" in out:
+        print("\nthe library on uvloop / on asyncio (medians; CPU per frame: lower is better):")
+        for key in ("string", "image", "paced"):
+            a, u = (
+                out["asyncio"]["summary"][key]["library"],
+                out["uvloop"]["summary"][key]["library"],
+            )
+            print(
+                f"  {key:<7} {u['frames_per_s'] / a['frames_per_s']:.2f}x frames/s,"
+                f" {u['cpu_us_per_frame'] / a['cpu_us_per_frame']:.2f}x CPU/frame"
+            )
     problems = [p for backend in backends for p in out[backend]["problems"]]
     out["problems"] = problems
     if args.json:

@@ -26,11 +26,13 @@ Clients (the consumer work per message is the same function for all of them,
 see :func:`make_take`): the library on asyncio and on trio, with JSON and, for
 images, ``compression="cbor"`` and ``"cbor-raw"``; for Strings also the
 library on asyncio with ``read_coalesce=0`` (every frame read and handed over
-as it arrives, as before issue 10); roslibpy (its default
-twisted transport; it has no CBOR: it refuses any ``compression`` but ``png``
-and ``none``, and raises on binary frames); a raw ``websockets`` asyncio loop
-that sends the ``subscribe`` op and ``json.loads`` every frame (the floor),
-and the same loop on this library's own WebSocket (``transport.connect_websocket``).
+as it arrives, as before issue 10) and on asyncio with uvloop's loop;
+roslibpy (its default twisted transport; it has no CBOR: it refuses any
+``compression`` but ``png`` and ``none``, and raises on binary frames); a raw
+``websockets`` asyncio loop that sends the ``subscribe`` op and
+``json.loads`` every frame (the floor; for Strings on uvloop too, the
+library on uvloop's baseline), and the same loop on this library's own
+WebSocket (``transport.connect_websocket``).
 
 In each client process, after the first message and a warm-up, a window of
 ``--seconds`` is measured: messages received, ``getrusage(RUSAGE_SELF)`` (user
@@ -74,7 +76,7 @@ from typing import Any, Final
 HERE: Final = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 sys.path.insert(0, str(HERE))
-from _common import DROP_REASONS, check_fates, subscription_counts  # noqa: E402
+from _common import DROP_REASONS, check_fates, run_on, subscription_counts  # noqa: E402
 from _common import versions as common_versions  # noqa: E402
 
 STRING_TYPE: Final = "std_msgs/msg/String"
@@ -105,15 +107,15 @@ class Got:
         self.delays: list[int] = []  # ns from publish to the consumer, Strings only
 
 
-def make_take(got: Got, kind: str, b64: bool) -> Callable[[dict[str, Any]], None]:
+def make_take(got: Got, kind: str) -> Callable[[dict[str, Any]], None]:
     """The consumer work per message, the same for every client.
 
     String: keep a reference to ``data`` (the string). Image: get the pixels
     as a real consumer needs them, ``base64.b64decode`` of the JSON ``data``
-    field (``b64``), or ``len()`` of the ``bytes`` (CBOR) or numpy array
-    (cbor-raw) the decoder already made; keep ``header.frame_id``. A
+    field; keep ``header.frame_id``. A
     String's delay from its publish to here is noted too (the publisher
-    wrote its send time into the text)."""
+    wrote its send time into the text). The raw clients' messages are
+    dicts; the library's are instances: see :func:`make_take_instance`."""
     if kind == "string":
         delays = got.delays
         now_ns = time.monotonic_ns
@@ -125,7 +127,7 @@ def make_take(got: Got, kind: str, b64: bool) -> Callable[[dict[str, Any]], None
             got.last = (n, text)
             delays.append(now_ns() - int(text[11:30]))
 
-    elif b64:
+    else:
 
         def take(data: dict[str, Any]) -> None:
             got.bytes += len(base64.b64decode(data["data"]))
@@ -133,13 +135,31 @@ def make_take(got: Got, kind: str, b64: bool) -> Callable[[dict[str, Any]], None
             got.n = n
             got.last = (n, data["header"]["frame_id"])
 
-    else:
+    return take
 
-        def take(data: dict[str, Any]) -> None:
-            got.bytes += len(data["data"])
+
+def make_take_instance(got: Got, kind: str) -> Callable[[Any], None]:
+    """:func:`make_take` for the library's messages, instances of the
+    message's class: the same work, by attribute (an image's pixels are
+    already a numpy array, decoded from base64 or CBOR by the library)."""
+    if kind == "string":
+        delays = got.delays
+        now_ns = time.monotonic_ns
+
+        def take(data: Any) -> None:
             n = got.n + 1
             got.n = n
-            got.last = (n, data["header"]["frame_id"])
+            text = data.data
+            got.last = (n, text)
+            delays.append(now_ns() - int(text[11:30]))
+
+    else:
+
+        def take(data: Any) -> None:
+            got.bytes += len(data.data)
+            n = got.n + 1
+            got.n = n
+            got.last = (n, data.header.frame_id)
 
     return take
 
@@ -224,7 +244,7 @@ def child_library(
 
     async def main() -> None:
         got = Got()
-        take = make_take(got, args.kind, b64=compression is None)
+        take = make_take_instance(got, args.kind)
         options = rmb.ClientOptions(reconnect=None, latency_probe_interval=0)
         if read_coalesce is not None:
             options = replace(options, read_coalesce=read_coalesce)
@@ -256,17 +276,17 @@ def child_library(
                 report_window(a, b, got)
                 tg.cancel_scope.cancel()
 
-    anyio.run(main, backend=backend)
+    run_on(backend, main)
 
 
-def child_raw(args: argparse.Namespace) -> None:
+def child_raw(args: argparse.Namespace, *, uvloop: bool = False) -> None:
     import asyncio
 
     from websockets.asyncio.client import connect
 
     async def main() -> None:
         got = Got()
-        take = make_take(got, args.kind, b64=True)
+        take = make_take(got, args.kind)
         typename = STRING_TYPE if args.kind == "string" else IMAGE_TYPE
         async with connect(
             args.url, compression=None, max_size=None, ping_interval=None, proxy=None
@@ -296,7 +316,12 @@ def child_raw(args: argparse.Namespace) -> None:
             with suppress(asyncio.CancelledError):
                 await task
 
-    asyncio.run(main())
+    if uvloop:  # asyncio on uvloop's loop
+        import uvloop as uv
+
+        uv.run(main())
+    else:
+        asyncio.run(main())
 
 
 def child_transport(args: argparse.Namespace) -> None:
@@ -308,7 +333,7 @@ def child_transport(args: argparse.Namespace) -> None:
 
     async def main() -> None:
         got = Got()
-        take = make_take(got, args.kind, b64=True)
+        take = make_take(got, args.kind)
         typename = STRING_TYPE if args.kind == "string" else IMAGE_TYPE
         ws = await connect_websocket(args.url, max_size=None)
         try:
@@ -347,7 +372,7 @@ def child_roslibpy(args: argparse.Namespace) -> None:
 
     host, port = args.url.removeprefix("ws://").rsplit(":", 1)
     got = Got()
-    take = make_take(got, args.kind, b64=True)
+    take = make_take(got, args.kind)
     ros = roslibpy.Ros(host=host, port=int(port))
     ros.run()
     typename = STRING_TYPE if args.kind == "string" else IMAGE_TYPE
@@ -375,8 +400,8 @@ def child_main(args: argparse.Namespace) -> None:
     name = args.client
     if name == "roslibpy":
         child_roslibpy(args)
-    elif name == "websockets raw":
-        child_raw(args)
+    elif name in ("websockets raw", "websockets raw uvloop"):
+        child_raw(args, uvloop=name.endswith("uvloop"))
     elif name == "rmb transport raw":
         child_transport(args)
     else:
@@ -405,9 +430,11 @@ class Case:
 SMALL_CLIENTS: Final = (
     "library asyncio",
     "library trio",
+    "library uvloop",
     "library asyncio uncoalesced",
     "roslibpy",
     "websockets raw",
+    "websockets raw uvloop",
     "rmb transport raw",
 )
 IMAGE_CLIENTS: Final = (
@@ -859,6 +886,15 @@ def report(case: Case, samples: dict[str, list[Sample]]) -> dict[str, dict[str, 
         ratio = table[name]["cpu_us_per_msg"] / base
         verdict = "met" if ratio <= TARGET else "MISSED"
         print(f"  target (<= 0.5x roslibpy's CPU per message): {name}: {ratio:.2f}x -> {verdict}")
+    pairs = (
+        ("library uvloop", "websockets raw uvloop", "a raw websockets client on the same uvloop"),
+        ("library uvloop", "library asyncio", "the library on plain asyncio"),
+        ("websockets raw uvloop", "websockets raw", "raw websockets on plain asyncio"),
+    )
+    for a, b, what in pairs:
+        if a in table and b in table:
+            x, y = table[a]["cpu_us_per_msg"], table[b]["cpu_us_per_msg"]
+            print(f"  {a} / {what}: {x / y:.2f}x CPU per message")
     return table
 
 

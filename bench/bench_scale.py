@@ -1,7 +1,7 @@
 """Many connections in one process: connect time, idle cost, and a throttled
 subscription each (stand-alone script).
 
-    .venv/bin/python bench/bench_scale.py [--backend asyncio|trio|both]
+    .venv/bin/python bench/bench_scale.py [--backend asyncio|trio|uvloop|both|all]
         [--sizes 10,100,1000] [--seconds 5] [--rate 20] [--max-hz 5] [--json PATH]
         [--strict] [--no-bare] [--profile] [--save-bandwidth]
 
@@ -33,7 +33,8 @@ other than the cap's means the adaptive throttle tightened on the event
 loop's lag.
 
 5. **bare baseline** (unless ``--no-bare``): after the library's sizes, in
-   the same process, on asyncio, N bare ``websockets.asyncio.client``
+   the same process, on asyncio (on uvloop for the ``uvloop`` run), N bare
+   ``websockets.asyncio.client``
    connections to the same server, each subscribing to ``/scale/tick`` with
    the Foxglove ws-protocol's JSON ``subscribe`` op and counting the binary
    frames it reads (every frame: no throttle, no decoding). Its CPU over a
@@ -48,8 +49,10 @@ unsubscribes after every message it takes and subscribes again when the
 next is due, so the server sends about MAX_HZ frames a second per client
 instead of RATE (the bare baseline still reads every frame).
 
-With ``--backend both`` each backend runs in its own process (memory one
-run freed stays in the process and would hide the next one's growth).
+Loops: ``asyncio``, ``trio``, ``uvloop`` (asyncio on uvloop); ``both`` is
+asyncio and trio, ``all`` the three. With ``both`` or ``all`` each loop runs
+in its own process (memory one run freed stays in the process and would hide
+the next one's growth).
 
 Targets (issue 10), checked at the largest size: all connected within 5 s;
 idle <= 1% of a core in total; subscribed >= 95% of the allowed rate
@@ -81,10 +84,10 @@ import ros_mobile_bridge as rmb
 from ros_mobile_bridge.wire.foxglove import SUBPROTOCOLS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import DROP_REASONS, check_fates, subscription_counts, versions
+from _common import DROP_REASONS, check_fates, run_on, subscription_counts, versions
 from _peer import SCALE_TOPIC
 
-Backend = Literal["asyncio", "trio"]
+Backend = Literal["asyncio", "trio", "uvloop"]
 PEER: Final = Path(__file__).resolve().parent / "_peer.py"
 PAGE: Final = os.sysconf("SC_PAGE_SIZE")
 CONNECT_LIMIT_S: Final = 5.0
@@ -412,20 +415,24 @@ async def run_backend(args: argparse.Namespace) -> list[dict[str, Any]]:
         peer.close()
 
 
-def bare_baseline(args: argparse.Namespace, n: int) -> dict[str, Any]:
-    """:func:`run_bare` on a fresh scale server, in this process."""
+def bare_baseline(args: argparse.Namespace, n: int, backend: Backend) -> dict[str, Any]:
+    """:func:`run_bare` on a fresh scale server, in this process, on asyncio
+    (on uvloop for the ``uvloop`` run: the same loop as the library's)."""
     peer = Peer(args.rate)
     try:
-        return asyncio.run(run_bare(peer.url, n, args.seconds))
+        return run_on(
+            "uvloop" if backend == "uvloop" else "asyncio", run_bare, peer.url, n, args.seconds
+        )
     finally:
         peer.close()
 
 
 def run_each_backend(args: argparse.Namespace) -> int:
-    """``--backend both``: this script once per backend, in a subprocess."""
+    """``--backend both`` / ``all``: this script once per loop, in a subprocess."""
     codes = []
     out: dict[str, Any] = {}
-    for backend in ("asyncio", "trio"):
+    loops = ("asyncio", "trio", "uvloop") if args.backend == "all" else ("asyncio", "trio")
+    for backend in loops:
         argv = [
             sys.executable,
             __file__,
@@ -465,7 +472,9 @@ def run_each_backend(args: argparse.Namespace) -> int:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--backend", choices=["asyncio", "trio", "both"], default="both")
+    parser.add_argument(
+        "--backend", choices=["asyncio", "trio", "uvloop", "both", "all"], default="both"
+    )
     parser.add_argument("--sizes", default="10,100,1000", help="connection counts, comma-separated")
     parser.add_argument("--seconds", type=float, default=5.0, help="length of each measured window")
     parser.add_argument("--rate", type=float, default=20.0, help="the topic's rate (Hz)")
@@ -485,7 +494,7 @@ def main() -> int:
     need = 2 * max(args.sizes) + 256
     if soft < need:
         resource.setrlimit(resource.RLIMIT_NOFILE, (min(need, hard), hard))
-    if args.backend == "both":
+    if args.backend in ("both", "all"):
         # each backend in a fresh process: memory freed by one run stays in the
         # process (RSS does not shrink), which would hide the next one's growth
         return run_each_backend(args)
@@ -499,7 +508,7 @@ def main() -> int:
     failed: list[str] = []
     missed: list[str] = []
     for backend in backends:
-        results = anyio.run(run_backend, args, backend=backend)
+        results = run_on(backend, run_backend, args)
         profiles = [r.pop("profile") for r in results if "profile" in r]
         out[backend] = results
         print(f"\n{backend}:")
@@ -541,10 +550,11 @@ def main() -> int:
                 if not ok:
                     missed.append(f"{backend}: {text}")
             if not args.no_bare:
-                bare = bare_baseline(args, last["n"])
+                bare = bare_baseline(args, last["n"], backend)
                 last["bare"] = bare
+                loop = "uvloop" if backend == "uvloop" else "asyncio"
                 print(
-                    f"  bare websockets (asyncio), {bare['n']:,} connections reading every frame:"
+                    f"  bare websockets ({loop}), {bare['n']:,} connections reading every frame:"
                     f" {bare['core']:.1%} of a core, {bare['frames_per_s']:,.0f} frames/s;"
                     f" library/bare CPU {last['sub_core'] / bare['core']:.2f}"
                     f" (the library read {last['received_per_s']:,.0f} frames/s)"

@@ -75,6 +75,52 @@ runs about half its tests on each loop. ``RMB_BOTH_LOOPS=1`` runs them on
 both."""
 
 
+UVLOOP_TOO = frozenset(
+    {
+        "test_lag",
+        "test_read_coalesce",
+        "test_read_hold",
+        "test_reconnect",
+        "test_signals",
+        "test_throttle_real",
+        "test_transport",
+        "test_transport_faults",
+        "test_wakeup",
+        "test_websocket_inline",
+        "test_zenoh",
+    }
+)
+"""Test modules of the loop-specific paths whose async tests run on asyncio
+on uvloop too (the ``uvloop`` parameter of ``anyio_backend``): the
+transports and their read pacing, the wake-ups and timers, the lag monitor,
+reconnection, the Zenoh session's hand-over to the loop. uvloop's transports,
+timers and thread-safe calls are its own code, not asyncio's. Modules with
+a loop parameter of their own add uvloop there (test_asyncio_stream, the
+sync worker's in test_sync, the ``rmb`` processes' in test_signals,
+test_uvloop); the others run on asyncio and trio."""
+
+_UVLOOP = pytest.param(("asyncio", {"use_uvloop": True}), id="uvloop")
+
+
+def _loops_of_its_own(item: pytest.Item) -> bool:
+    """The test parametrizes ``anyio_backend`` itself (``ASYNCIO_LOOPS``)."""
+    for mark in item.iter_markers("parametrize"):
+        names = mark.args[0] if mark.args else mark.kwargs.get("argnames", ())
+        if isinstance(names, str):
+            names = [n.strip() for n in names.split(",")]
+        if "anyio_backend" in names:
+            return True
+    return False
+
+
+def _has_uvloop() -> bool:
+    try:
+        import uvloop  # noqa: F401
+    except ImportError:  # (no Windows build)
+        return False
+    return True
+
+
 # The properties that set no example count of their own take hypothesis's
 # default (100) on the main Python and a short search on the others
 # (tests/_util.py's SHORT_SEARCHES says why); those that set one use
@@ -131,6 +177,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     ``ros`` ones on one xdist worker, and run each loop-neutral test on its
     one loop."""
     both = os.environ.get("RMB_BOTH_LOOPS", "") not in ("", "0")
+    uvloop = _has_uvloop()
     kept: list[pytest.Item] = []
     dropped: list[pytest.Item] = []
     for item in items:
@@ -142,6 +189,13 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if _PEER_FIXTURES & fixtures or (module is not None and _starts_servers(module)):
             item.add_marker(pytest.mark.peer)
         backend = getattr(getattr(item, "callspec", None), "params", {}).get("anyio_backend")
+        if (
+            backend == _UVLOOP.values[0]
+            and not _loops_of_its_own(item)
+            and (module is None or module.__name__ not in UVLOOP_TOO or not uvloop)
+        ):
+            dropped.append(item)
+            continue
         if (
             not both
             and isinstance(backend, str)
@@ -157,9 +211,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         items[:] = kept
 
 
-@pytest.fixture(params=["asyncio", "trio"])
-def anyio_backend(request: pytest.FixtureRequest) -> str:
-    return str(request.param)
+@pytest.fixture(params=["asyncio", "trio", _UVLOOP])
+def anyio_backend(request: pytest.FixtureRequest) -> object:
+    """asyncio and trio; asyncio on uvloop too in the modules of
+    :data:`UVLOOP_TOO` (collection drops the others' ``uvloop`` items)."""
+    return request.param
 
 
 @pytest.fixture(scope="session")

@@ -117,9 +117,11 @@ def test_param_dump_prints_ros2_s_yaml(robot: DemoRobot) -> None:
 def test_topics_verbose_count_and_json(robot: DemoRobot) -> None:
     verbose = ok(rmb("topics", "-v", url=robot.url)).splitlines()
     assert verbose[0] == "Published topics:"
-    assert " * /odom [nav_msgs/msg/Odometry]" in verbose
     assert "Subscribed topics:" in verbose
-    assert " (not reported over foxglove-ws)" in verbose
+    # counted in the robot's connection graph: one publisher each, and no
+    # subscriber of the robot's own topics
+    assert " * /odom [nav_msgs/msg/Odometry] 1 publisher" in verbose
+    assert verbose[verbose.index("Subscribed topics:") + 1] == ""
     assert ok(rmb("topic", "list", "-c", url=robot.url)) == f"{len(TOPICS)}\n"
     records = json_lines(ok(rmb("topics", "--json", url=robot.url)))
     assert {r["name"] for r in records} == TOPICS
@@ -127,7 +129,7 @@ def test_topics_verbose_count_and_json(robot: DemoRobot) -> None:
     counted = json_lines(ok(rmb("topics", "-c", "--json", url=robot.url)))
     assert counted == [{"count": len(TOPICS)}]
     with_counts = json_lines(ok(rmb("topics", "-v", "--json", url=robot.url)))
-    assert {(r["publishers"], r["subscribers"]) for r in with_counts} == {(None, None)}
+    assert {(r["publishers"], r["subscribers"]) for r in with_counts} == {(1, 0)}
 
 
 def test_verbosity_before_the_verb_and_the_listing_after_it(robot: DemoRobot) -> None:

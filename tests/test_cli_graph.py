@@ -14,12 +14,14 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import foxglove
 import pytest
+from foxglove.websocket import Capability
 
 from _cli_run import cli_env
 from _cli_run import rmb as run_rmb
 from _cli_run import rmb_proc as start_rmb
-from peers.foxglove_sdk import SdkServer
+from peers.foxglove_sdk import ALL_CAPABILITIES, SdkServer
 from peers.rosbridge import RosBridge, RosGraph
 from peers.zenoh_sdk_node import SdkNode
 from ros_mobile_bridge._cli._graph import changes, graph_entries
@@ -152,11 +154,23 @@ def test_foxglove_graph_watch_follows_advertise_and_unadvertise(
     assert code == 130
 
 
-def test_foxglove_node_list_is_one_error_line(server: SdkServer) -> None:
+def test_foxglove_node_list_reads_the_connection_graph(server: SdkServer) -> None:
+    graph = foxglove.ConnectionGraph()
+    graph.set_published_topic("/odom", ["/base_driver"])
+    graph.set_subscribed_topic("/odom", ["/nav2"])
+    server.server.publish_connection_graph(graph)
     result = rmb("node", "list", "-u", server.url)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == ["/base_driver", "/nav2"]
+
+
+def test_foxglove_node_list_without_a_connection_graph_is_one_error_line() -> None:
+    caps = [c for c in ALL_CAPABILITIES if c != Capability.ConnectionGraph]
+    with SdkServer(capabilities=caps) as server:
+        result = rmb("node", "list", "-u", server.url)
     assert result.returncode == 1
     lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and "offers no list of ROS nodes" in lines[0], result.stderr
+    assert len(lines) == 1 and "'connectionGraph' capability" in lines[0], result.stderr
 
 
 # -- Zenoh -------------------------------------------------------------------------------------

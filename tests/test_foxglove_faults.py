@@ -729,3 +729,117 @@ async def test_call_beyond_max_pending_requests_raises_at_once() -> None:
                         with pytest.raises(rmb.ServiceError, match="max_pending_requests"):
                             await robot.call_service("/set_flag", {"data": False})
                     tg.cancel_scope.cancel()
+
+
+async def test_a_lost_connection_fails_the_graph_asset_and_playback_waits() -> None:
+    """A server that takes the requests and closes before any answer: each
+    waiting call ends with the lost connection, not at its 30 s deadline."""
+    info = (
+        '{"op":"serverInfo","name":"scripted","capabilities":["connectionGraph","assets",'
+        '"playbackControl"],"supportedEncodings":["json","cdr"],"metadata":{}}'
+    )
+    asked: list[str | bytes] = []
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(info)
+        while len(asked) < 3:  # subscribeConnectionGraph, fetchAsset, the playback request
+            asked.append(await peer.recv())
+        # closing without an answer: the script ends
+
+    errors: dict[str, BaseException] = {}
+
+    async def fail(name: str, call: Any) -> None:
+        try:
+            await call()
+        except rmb.RosBridgeError as exc:
+            errors[name] = exc
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            opts = options(service_timeout=30.0, reconnect=None)
+            async with rmb.connect(url, options=opts) as robot:
+                async with anyio.create_task_group() as tg:
+                    tg.start_soon(fail, "nodes", robot.nodes)
+                    tg.start_soon(fail, "asset", partial(robot.fetch_asset, "package://a/b"))
+                    request = rmb.PlaybackRequest(play=True)
+                    tg.start_soon(fail, "playback", partial(robot.control_playback, request))
+    assert sorted(errors) == ["asset", "nodes", "playback"]
+    assert all(isinstance(e, rmb.NotConnected) for e in errors.values()), errors
+    assert sum(isinstance(m, bytes) for m in asked) == 1  # the playback request is binary
+
+
+async def test_status_ids_kept_are_bounded_and_an_unknown_playback_status_is_refused(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A server sending statuses with ever new ids costs a bounded table: a
+    withdrawal of one forgotten is logged without its message; a playback
+    state of a status the protocol does not define is counted and skipped."""
+    caplog.set_level(logging.INFO, logger=LOGGER)
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(SERVER_INFO)
+        asked = json.loads(await peer.recv())  # the client watches from now on
+        await peer.send_text(
+            json.dumps({"op": "parameterValues", "parameters": [], "id": asked["id"]})
+        )
+        for i in range(1500):
+            await peer.send_text(f'{{"op":"status","level":1,"message":"m{i}","id":"s{i}"}}')
+        await peer.send_text('{"op":"removeStatus","statusIds":["s0","s1499"]}')
+        await peer.send_binary(b"\x05\x09" + struct.pack("<QfBI", 1, 1.0, 0, 0))
+        await peer.drain()
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options()) as robot:
+                events = robot.watch_server_status()
+                assert await robot.list_parameters() == {}
+                removed = await wait_for_removal(events)
+                await wait_until(lambda: robot.rejections.get("malformed") == 1)
+                assert robot.playback_state is None
+    assert removed == rmb.StatusRemoved(("s0", "s1499"))
+    records = [(r.levelno, r.getMessage()) for r in caplog.records if r.name == LOGGER]
+    assert (logging.INFO, "server status s0 withdrawn") in records
+    assert (logging.WARNING, "server status s1499 withdrawn: m1499") in records
+
+
+async def wait_for_removal(events: Any) -> rmb.StatusRemoved:
+    async for event in events:
+        if isinstance(event, rmb.StatusRemoved):
+            return event
+    raise AssertionError("no removeStatus")
+
+
+async def test_a_connection_graph_is_bounded_and_its_malformed_entries_counted() -> None:
+    info = (
+        '{"op":"serverInfo","name":"scripted","capabilities":["connectionGraph"],'
+        '"supportedEncodings":["cdr"],"metadata":{}}'
+    )
+    published = [{"name": f"/t{i}", "publisherIds": [f"/n{i}"]} for i in range(3)]
+    update = {
+        "op": "connectionGraphUpdate",
+        "publishedTopics": [*published, {"publisherIds": ["/nameless"]}, {"name": "/no_ids"}],
+        "subscribedTopics": [],
+        "advertisedServices": [],
+        "removedTopics": [],
+        "removedServices": [],
+    }
+    asked: list[str | bytes] = []
+
+    async def script(peer: Peer) -> None:
+        await peer.send_text(info)
+        asked.append(await peer.recv())
+        await peer.send_text(json.dumps(update))
+        asked.append(await peer.recv())
+        await peer.drain()
+
+    async with scripted_server(script) as url:
+        with anyio.fail_after(10):
+            async with rmb.connect(url, options=options(max_channels=2)) as robot:
+                assert await robot.nodes() == ["/n0", "/n1"]
+                await wait_until(lambda: robot.rejections.get("malformed") == 2)
+                assert robot.rejections["channel_limit"] == 1
+                await wait_until(lambda: len(asked) == 2)
+    assert [json.loads(m)["op"] for m in asked] == [
+        "subscribeConnectionGraph",
+        "unsubscribeConnectionGraph",
+    ]

@@ -524,6 +524,8 @@ def test_from_dict_builds_nested_messages_and_names_the_field_it_refuses() -> No
     assert info.value.field == "pose.pose.positon"
     assert info.value.type_name == "nav_msgs/msg/Odometry"
     assert "unknown field (geometry_msgs/msg/Pose has: position, orientation)" in str(info.value)
+    # built, not sent: the text says the value is invalid, not that encoding failed
+    assert str(info.value).startswith("invalid nav_msgs/msg/Odometry: field 'pose.pose.positon'")
     with pytest.raises(MessageError) as info:
         MarkerArray.from_dict({"markers": [{}, {"pose": {"position": {"x": 1.0, "w": 2.0}}}]})
     assert info.value.field == "markers[1].pose.position.w"

@@ -27,7 +27,7 @@ pytest_plugins = ["peers.ros_fixtures"]
 
 ROOT = Path(__file__).resolve().parent.parent
 SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
-BACKENDS = ["asyncio", "trio"]
+BACKENDS = ["asyncio", "trio", "uvloop"]  # rmb --backend; uvloop: asyncio on uvloop
 TWIST_03 = '{"linear": {"x": 0.3}}'
 
 
@@ -139,7 +139,9 @@ async def main():
                 await anyio.sleep(60)  # a teardown stuck on a dead network
     return stop.exit_code
 
-sys.exit(anyio.run(main, backend=sys.argv[1]))
+loop = sys.argv[1]
+uvloop = {"use_uvloop": True} if loop == "uvloop" else None
+sys.exit(anyio.run(main, backend="asyncio" if uvloop else loop, backend_options=uvloop))
 """
 
 

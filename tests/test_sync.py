@@ -43,8 +43,9 @@ def robot() -> Iterator[DemoRobot]:
         yield bot
 
 
-@pytest.fixture(params=["asyncio", "trio"])
+@pytest.fixture(params=["asyncio", "trio", "uvloop"])
 def backend(request: pytest.FixtureRequest) -> str:
+    """The worker thread's loop (``uvloop``: asyncio on uvloop)."""
     return str(request.param)
 
 
@@ -376,11 +377,27 @@ def test_connect_errors_and_bad_arguments_raise_at_once_and_leave_no_thread(
     assert sync_threads() == []
 
 
-def test_a_trio_worker_without_trio_installed_says_so(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(sys.modules, "trio", None)  # import trio now fails
-    with pytest.raises(ImportError, match="pip install trio"):
-        rmb.connect_sync("127.0.0.1", backend="trio")
+@pytest.mark.parametrize("loop", ["trio", "uvloop"])
+def test_a_worker_without_its_loop_installed_says_which_extra(
+    monkeypatch: pytest.MonkeyPatch, loop: str
+) -> None:
+    monkeypatch.setitem(sys.modules, loop, None)  # importing it now fails
+    with pytest.raises(ImportError, match=rf"pip install 'ros-mobile-bridge\[{loop}\]'"):
+        rmb.connect_sync("127.0.0.1", backend=loop)  # type: ignore[arg-type]
     assert sync_threads() == []
+
+
+def test_a_uvloop_worker_runs_on_uvloop(robot: DemoRobot) -> None:
+    """``backend="uvloop"`` is asyncio on uvloop, not asyncio's own loop."""
+    pytest.importorskip("uvloop")
+
+    async def loop_class(_client: rmb.Client) -> str:
+        import asyncio
+
+        return type(asyncio.get_running_loop()).__module__
+
+    with rmb.connect_sync(robot.url, backend="uvloop", options=options()) as client:
+        assert client.run(loop_class).startswith("uvloop")
 
 
 def test_bad_arguments_to_methods_raise_at_once(robot: DemoRobot, backend: str) -> None:

@@ -24,6 +24,9 @@ NOT_MIRRORED: dict[str, str] = {
     "watch_services": "an async iterator of changes: `wait_for_service()` is its blocking use, "
     "`services` the snapshot, `run()` the rest",
     "watch_parameters": "an async context manager yielding an async iterator: `run()`",
+    "watch_server_time": "an async iterator of changes: read `server_time` instead, or `run()`",
+    "watch_server_status": "an async iterator of events (each also logged): `run()`",
+    "watch_playback": "an async iterator of changes: read `playback_state` instead, or `run()`",
     "record": "an async context manager that records while the caller's async code runs: `run()`",
     "serve": "an async context manager whose requests an async task answers: `run()`",
 }

@@ -1,7 +1,8 @@
 """A user's program written against the message classes passes ``mypy
 --strict``; the same program with a ROS developer's typical slips (a
 misspelt keyword, a misspelt field of a received message, a ``str`` for a
-``float64``, the wrong answer class) makes mypy report each one, on the line
+``float64``, the wrong answer class, a served request's misspelt field
+and the wrong reply class) makes mypy report each one, on the line
 where it is made.
 
 One mypy run checks both files (about 10 s: it reads the package's typed
@@ -54,6 +55,13 @@ async def drive(robot: rmb.Client) -> float:
     return x + total + last + float(image.data.sum())
 
 
+async def add(robot: rmb.Client) -> None:
+    async with robot.serve("/add", AddTwoInts) as requests:
+        async for req in requests:
+            await req.reply(AddTwoInts.Response(sum=req.args.a + req.args.b))
+            await req.reply({"sum": 3})  # a dict stays accepted
+
+
 def blocking(robot: rmb.SyncClient) -> int:
     with robot.subscribe("/odom", Odometry, timeout=5) as sub:
         y: float = sub.get().data.pose.pose.position.y
@@ -68,6 +76,8 @@ BAD = {
     'Vector3(x="0.2")': r'Argument "x" to "Vector3" has incompatible type "str"; expected "float"',
     "reply.total": r'"Response" has no attribute "total"',
     "outcome.result.sequnce": r'"Result" has no attribute "sequnce"',
+    "req.args.c": r'"Request" has no attribute "c"',
+    "SetBool.Response(success=True)": r'Argument 1 to "reply" of "ServiceRequest" has incompatible type',
 }
 
 BAD_PROGRAM = """
@@ -78,6 +88,7 @@ from ros_mobile_bridge.interfaces.example_interfaces.action import Fibonacci
 from ros_mobile_bridge.interfaces.example_interfaces.srv import AddTwoInts
 from ros_mobile_bridge.interfaces.geometry_msgs.msg import Twist, Vector3
 from ros_mobile_bridge.interfaces.nav_msgs.msg import Odometry
+from ros_mobile_bridge.interfaces.std_srvs.srv import SetBool
 
 
 async def drive(robot: rmb.Client) -> None:
@@ -91,6 +102,10 @@ async def drive(robot: rmb.Client) -> None:
     async with robot.send_action_goal("/fibonacci", Fibonacci.Goal(order=5)) as goal:
         outcome = await goal.result()
         print(outcome.result.sequnce)
+    async with robot.serve("/add", AddTwoInts) as requests:
+        async for req in requests:
+            print(req.args.c)
+            await req.reply(SetBool.Response(success=True))
 """
 
 

@@ -834,9 +834,46 @@ def test_fetch_asset_response_bad_status() -> None:
     assert "unknown status 7" in reason
 
 
-def test_playback_state_kept_raw() -> None:
-    assert one(engine().receive_binary(b"\x05\x01\x02\x03")) == PlaybackState(b"\x01\x02\x03")
-    assert one(engine().receive_binary(b"\x05")) == PlaybackState(b"")
+def test_playback_state_is_read() -> None:
+    # as the Foxglove SDK server sends it: playing at 1.5x, 500 ns in, answering "r1"
+    frame = b"\x05\x00" + struct.pack("<QfBI", 500, 1.5, 0, 2) + b"r1"
+    assert one(engine().receive_binary(frame)) == PlaybackState(0, 500, 1.5, False, "r1")
+    ended = b"\x05\x03" + struct.pack("<QfBI", 2**64 - 1, 0.5, 1, 0)
+    assert one(engine().receive_binary(ended)) == PlaybackState(3, 2**64 - 1, 0.5, True, "")
+
+
+def test_playback_state_truncated_or_garbled_is_a_violation() -> None:
+    assert "truncated playback state" in only_violation(engine().receive_binary(b"\x05\x01"))
+    long_id = b"\x05\x00" + struct.pack("<QfBI", 1, 1.0, 0, 9) + b"r1"
+    assert "needs 28" in only_violation(engine().receive_binary(long_id))
+    bad = b"\x05\x00" + struct.pack("<QfBI", 1, 1.0, 0, 2) + b"\xff\xfe"
+    assert "not valid UTF-8" in only_violation(engine().receive_binary(bad))
+
+
+def test_playback_control_request_frame() -> None:
+    frame = engine().playback_control(True, 2.0, None, "a")
+    assert frame == struct.pack("<BBfBQI", 3, 0, 2.0, 0, 0, 1) + b"a"
+    seek = engine().playback_control(False, 0.5, 7_000_000_000, "req-2")
+    assert seek == struct.pack("<BBfBQI", 3, 1, 0.5, 1, 7_000_000_000, 5) + b"req-2"
+
+
+@pytest.mark.parametrize(
+    ("args", "error"),
+    [
+        ((1, 1.0, None, "a"), TypeError),
+        ((True, 0.0, None, "a"), ValueError),
+        ((True, float("nan"), None, "a"), ValueError),
+        ((True, "1", None, "a"), TypeError),
+        ((True, 1.0, -1, "a"), ValueError),
+        ((True, 1.0, 1.5, "a"), ValueError),
+        ((True, 1.0, None, ""), ValueError),
+    ],
+)
+def test_playback_control_request_refuses_bad_arguments(
+    args: tuple[Any, ...], error: type[Exception]
+) -> None:
+    with pytest.raises(error):
+        engine().playback_control(*args)
 
 
 # --------------------------------------------------------------------------

@@ -28,6 +28,7 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._core._serve import ServiceRequest as ServiceRequest
     from ._core._serve import ServiceRequests as ServiceRequests
     from ._errors import ActionGoalError as ActionGoalError
+    from ._errors import AssetError as AssetError
     from ._errors import ConnectError as ConnectError
     from ._errors import DecodeError as DecodeError
     from ._errors import MessageError as MessageError
@@ -58,13 +59,20 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._types import Dispatch as Dispatch
     from ._types import GoalState as GoalState
     from ._types import Message as Message
+    from ._types import PlaybackRequest as PlaybackRequest
+    from ._types import PlaybackState as PlaybackState
+    from ._types import PlaybackStatus as PlaybackStatus
     from ._types import Priority as Priority
     from ._types import SaveBandwidth as SaveBandwidth
     from ._types import ServerInfo as ServerInfo
+    from ._types import ServerStatus as ServerStatus
     from ._types import ServiceInfo as ServiceInfo
     from ._types import Status as Status
+    from ._types import StatusLevel as StatusLevel
+    from ._types import StatusRemoved as StatusRemoved
     from ._types import SubscriptionState as SubscriptionState
     from ._types import SubscriptionStats as SubscriptionStats
+    from ._types import TopicEndpoints as TopicEndpoints
     from ._types import TopicInfo as TopicInfo
     from .codec import FieldDef as FieldDef
     from .codec._jsonable import jsonable as jsonable
@@ -85,6 +93,7 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "connect": ("._connect", "connect"),
     "parse_target": ("._connect", "parse_target"),
     "ActionGoalError": ("._errors", "ActionGoalError"),
+    "AssetError": ("._errors", "AssetError"),
     "ConnectError": ("._errors", "ConnectError"),
     "DecodeError": ("._errors", "DecodeError"),
     "MessageError": ("._errors", "MessageError"),
@@ -108,13 +117,20 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "Dispatch": ("._types", "Dispatch"),
     "GoalState": ("._types", "GoalState"),
     "Message": ("._types", "Message"),
+    "PlaybackRequest": ("._types", "PlaybackRequest"),
+    "PlaybackState": ("._types", "PlaybackState"),
+    "PlaybackStatus": ("._types", "PlaybackStatus"),
     "Priority": ("._types", "Priority"),
     "SaveBandwidth": ("._types", "SaveBandwidth"),
     "ServerInfo": ("._types", "ServerInfo"),
+    "ServerStatus": ("._types", "ServerStatus"),
     "ServiceInfo": ("._types", "ServiceInfo"),
     "Status": ("._types", "Status"),
+    "StatusLevel": ("._types", "StatusLevel"),
+    "StatusRemoved": ("._types", "StatusRemoved"),
     "SubscriptionState": ("._types", "SubscriptionState"),
     "SubscriptionStats": ("._types", "SubscriptionStats"),
+    "TopicEndpoints": ("._types", "TopicEndpoints"),
     "TopicInfo": ("._types", "TopicInfo"),
     "FieldDef": (".codec", "FieldDef"),
     "Batches": (".flow", "Batches"),
@@ -169,6 +185,7 @@ __all__ = [
     "ActionGoal",
     "ActionGoalError",
     "ActionOutcome",
+    "AssetError",
     "Batches",
     "BreakerPolicy",
     "BreakerState",
@@ -191,6 +208,9 @@ __all__ = [
     "NotConnected",
     "NotSupportedError",
     "ParameterError",
+    "PlaybackRequest",
+    "PlaybackState",
+    "PlaybackStatus",
     "Priority",
     "ProtocolMismatchError",
     "ReconnectPolicy",
@@ -202,6 +222,7 @@ __all__ = [
     "SchemaError",
     "ServeStats",
     "ServerInfo",
+    "ServerStatus",
     "ServiceError",
     "ServiceInfo",
     "ServiceRequest",
@@ -209,6 +230,8 @@ __all__ = [
     "ServiceTimeout",
     "SignalScope",
     "Status",
+    "StatusLevel",
+    "StatusRemoved",
     "Subscription",
     "SubscriptionState",
     "SubscriptionStats",
@@ -216,6 +239,7 @@ __all__ = [
     "SyncClient",
     "SyncSubscription",
     "ThrottleMode",
+    "TopicEndpoints",
     "TopicInfo",
     "__version__",
     "cancel_on_signals",

@@ -15,6 +15,7 @@ __all__ = [
     "check_save_bandwidth",
     "check_schema",
     "check_timeout",
+    "check_uri",
     "nearest",
     "nearest_hint",
 ]
@@ -28,6 +29,16 @@ def check_name(kind: str, name: object) -> str:
     if not name.startswith("/") or any(c.isspace() for c in name) or len(name) < 2:
         raise ValueError(f"{kind} must be an absolute ROS name like '/cmd_vel', got {name!r}")
     return name
+
+
+def check_uri(uri: object) -> str:
+    """``uri`` when it is a non-empty str with no whitespace (an asset's
+    URI, ``package://pkg/meshes/base.stl``); else ``TypeError`` / ``ValueError``."""
+    if not isinstance(uri, str):
+        raise TypeError(f"uri must be a str, not {type(uri).__name__}")
+    if not uri or any(c.isspace() for c in uri):
+        raise ValueError(f"uri must be a URI like 'package://pkg/meshes/base.stl', got {uri!r}")
+    return uri
 
 
 def check_save_bandwidth(

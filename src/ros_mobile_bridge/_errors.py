@@ -11,6 +11,7 @@ from typing import Any
 
 __all__ = [
     "ActionGoalError",
+    "AssetError",
     "ConnectError",
     "DecodeError",
     "MessageError",
@@ -81,6 +82,16 @@ class ServiceTimeout(ServiceError, TimeoutError):
         super().__init__(service, f"{text} ({detail})" if detail else text)
 
 
+class AssetError(RosBridgeError):
+    """The server could not give the asset ``uri``; ``reason`` carries the
+    server's own text."""
+
+    def __init__(self, uri: str, reason: str) -> None:
+        self.uri = uri
+        self.reason = reason
+        super().__init__(f"asset {uri!r} could not be fetched: {reason}")
+
+
 class ActionGoalError(RosBridgeError):
     """An action goal was rejected, aborted, or lost; ``reason`` says which."""
 
@@ -108,7 +119,8 @@ class MessageError(DecodeError, ValueError):
     ``type_name`` is the ROS type, ``field`` the dotted path of the field
     (``"linear.x"``; ``None`` when the whole value is wrong), ``reason``
     what is wrong, ``call`` the call that met it (``"publish /cmd_vel"``;
-    empty where the codec raised it outside a call). A :class:`DecodeError`
+    empty where it was raised outside a call, by a class's constructor for
+    instance: the text then reads ``invalid <type>: ...``). A :class:`DecodeError`
     and a ``ValueError``, so both older ``except`` clauses still catch it."""
 
     def __init__(
@@ -118,9 +130,11 @@ class MessageError(DecodeError, ValueError):
         self.reason = reason
         self.field = field
         self.call = call
-        text = f"cannot encode {type_name}: "
+        # in a call the value was to be sent; outside one (a class's
+        # constructor, from_dict) it was only built
+        text = f"{call}: cannot encode {type_name}: " if call else f"invalid {type_name}: "
         text += f"field {field!r}: {reason}" if field else reason
-        super().__init__(f"{call}: {text}" if call else text)
+        super().__init__(text)
 
     def in_call(self, call: str) -> MessageError:
         """The same error, naming ``call`` (the front adds it)."""

@@ -340,9 +340,10 @@ class ClientOptions:
     (Foxglove control messages, rosbridge operations). A deeper frame is
     skipped unparsed: a ``"json_depth"`` rejection."""
     max_channels: int = 10_000
-    """Foxglove: server channels kept per connection (rosbridge: topics kept
-    from one discovery poll). Channels beyond it are refused, counted once
-    per advertisement as a ``"channel_limit"`` rejection."""
+    """Foxglove: server channels kept per connection, and names kept per
+    table of its connection graph (rosbridge: topics kept from one discovery
+    poll). Channels beyond it are refused, counted once per advertisement
+    (or graph update) as a ``"channel_limit"`` rejection."""
     max_services: int = 10_000
     """Services kept per connection; beyond it a ``"service_limit"``
     rejection, once per advertisement (or discovery poll)."""

@@ -17,14 +17,21 @@ __all__ = [
     "Dispatch",
     "GoalState",
     "Message",
+    "PlaybackRequest",
+    "PlaybackState",
+    "PlaybackStatus",
     "Priority",
     "Protocol",
     "SaveBandwidth",
     "ServerInfo",
+    "ServerStatus",
     "ServiceInfo",
     "Status",
+    "StatusLevel",
+    "StatusRemoved",
     "SubscriptionState",
     "SubscriptionStats",
+    "TopicEndpoints",
     "TopicInfo",
 ]
 
@@ -36,6 +43,8 @@ SubscriptionState = Literal["pending", "active"]
 Compression = Literal["cbor", "cbor-raw"]
 SaveBandwidth = bool | Literal["adaptive"]
 GoalState = Literal["pending", "active", "succeeded", "canceled", "aborted", "failed"]
+StatusLevel = Literal["info", "warning", "error"]
+PlaybackStatus = Literal["playing", "paused", "buffering", "ended"]
 
 if sys.version_info >= (3, 13):
     from typing import TypeVar
@@ -51,6 +60,11 @@ ResultT = TypeVar("ResultT", default=Any)
 an instance of its ``Goal`` class, else ``Any``."""
 FeedbackT = TypeVar("FeedbackT", default=Any)
 """An action goal's feedback: the action's ``Feedback`` class, else ``Any``."""
+RequestT = TypeVar("RequestT", default=Any)
+"""A served call's request: the service's ``Request`` class when ``serve()``
+names the service's class, else ``Any``."""
+ResponseT = TypeVar("ResponseT", default=Any)
+"""A served call's response: the service's ``Response`` class, else ``Any``."""
 
 DEFAULT_PORTS: Mapping[str, int] = {"foxglove-ws": 8765, "rosbridge": 9090, "zenoh": 7447}
 """The port each protocol's bridge listens on unless told otherwise."""
@@ -219,3 +233,73 @@ class ActionOutcome(Generic[ResultT]):
 
     status: Literal["succeeded", "canceled"]
     result: ResultT
+
+
+@dataclass(frozen=True, slots=True)
+class TopicEndpoints:
+    """Who publishes and who subscribes to one topic, as the robot's graph
+    says now (``Client.topic_endpoints``): node names (rosbridge, Zenoh) or
+    the ids the Foxglove server gives them (foxglove_bridge: node names),
+    sorted. ``publishers`` / ``subscribers`` are empty for a topic the
+    graph does not know."""
+
+    topic: str
+    publishers: tuple[str, ...]
+    subscribers: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ServerStatus:
+    """A status message the Foxglove server sent (``Client.watch_server_status``):
+    ``level`` and ``message`` as the server gave them; ``id`` names it when
+    the server may withdraw it later (a :class:`StatusRemoved`)."""
+
+    level: StatusLevel
+    message: str
+    id: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class StatusRemoved:
+    """The Foxglove server withdrew the status messages with these ``ids``."""
+
+    ids: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class PlaybackState:
+    """How a Foxglove server playing a recording plays it now
+    (``Client.playback_state``): ``status``, the playback time
+    ``current_time_ns`` (nanoseconds, the recording's clock), ``speed`` (a
+    factor of real time), ``did_seek`` (this state follows a jump in time)
+    and ``request_id``: the id of the :class:`PlaybackRequest` it answers,
+    or None when the server changed playback on its own."""
+
+    status: PlaybackStatus
+    current_time_ns: int
+    speed: float
+    did_seek: bool
+    request_id: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class PlaybackRequest:
+    """A request to a Foxglove server playing a recording
+    (``Client.control_playback``): ``play`` (True) or pause (False), at
+    ``speed`` (a factor of real time, > 0), jumping first to ``seek_ns``
+    (nanoseconds, the recording's clock) unless None."""
+
+    play: bool
+    speed: float = 1.0
+    seek_ns: int | None = None
+
+    def __post_init__(self) -> None:
+        """Bad values raise ``TypeError`` / ``ValueError`` here, before anything is sent."""
+        if not isinstance(self.play, bool):
+            raise TypeError(f"play must be a bool, got {type(self.play).__name__}")
+        if isinstance(self.speed, bool) or not isinstance(self.speed, int | float):
+            raise TypeError(f"speed must be a number, got {type(self.speed).__name__}")
+        if not 0 < self.speed < float("inf"):
+            raise ValueError(f"speed must be a positive factor of real time, got {self.speed!r}")
+        if self.seek_ns is not None and (type(self.seek_ns) is not int or self.seek_ns < 0):
+            raise ValueError(f"seek_ns must be None or an int >= 0 (ns), got {self.seek_ns!r}")

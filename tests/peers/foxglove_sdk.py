@@ -16,7 +16,13 @@ from typing import Any
 import foxglove
 import numpy as np
 from foxglove import Channel, MessageSchema, Parameter, Schema, Service, ServiceSchema
-from foxglove.websocket import Capability
+from foxglove.websocket import (
+    Capability,
+    PlaybackCommand,
+    PlaybackControlRequest,
+    PlaybackState,
+    PlaybackStatus,
+)
 from rosbags.typesys import Stores, get_typestore
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
@@ -97,6 +103,10 @@ class Recorder:
     subscribed: list[str] = field(default_factory=list)
     unsubscribed: list[str] = field(default_factory=list)
     param_subscribed: list[str] = field(default_factory=list)
+    playback_requests: list[tuple[bool, float, int | None, str]] = field(default_factory=list)
+    """(play, speed, seek time, request id) per playback control request."""
+    graph_subscriptions: list[bool] = field(default_factory=list)
+    """True per first subscription to the connection graph, False per last unsubscription."""
     channels: dict[tuple[int, int], tuple[str, str, str]] = field(default_factory=dict)
 
 
@@ -160,11 +170,30 @@ class _Listener:
     def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
         pass
 
+    def on_playback_control_request(self, request: PlaybackControlRequest) -> PlaybackState:
+        """A player of the recording: it plays or pauses at the speed asked,
+        from the time asked (else from the start of its range)."""
+        play = request.playback_command == PlaybackCommand.Play
+        with self.r.lock:
+            self.r.playback_requests.append(
+                (play, request.playback_speed, request.seek_time, request.request_id)
+            )
+        seek = request.seek_time
+        return PlaybackState(
+            PlaybackStatus.Playing if play else PlaybackStatus.Paused,
+            seek if seek is not None else self.s.playback_start,
+            request.playback_speed,
+            seek is not None,
+            request.request_id,
+        )
+
     def on_connection_graph_subscribe(self) -> None:
-        pass
+        with self.r.lock:
+            self.r.graph_subscriptions.append(True)
 
     def on_connection_graph_unsubscribe(self) -> None:
-        pass
+        with self.r.lock:
+            self.r.graph_subscriptions.append(False)
 
 
 class SdkServer:
@@ -181,10 +210,16 @@ class SdkServer:
         parameters: dict[str, Any] | None = None,
         tls: tuple[bytes, bytes] | None = None,
         listener: type[_Listener] | None = None,
+        asset_handler: Callable[[str], bytes | None] | None = None,
+        playback_time_range: tuple[int, int] | None = None,
     ) -> None:
         """``tls``: ``(certificate_pem, key_pem)`` to serve ``wss://``;
-        ``listener``: a subclass of the recording listener to use instead."""
+        ``listener``: a subclass of the recording listener to use instead;
+        ``asset_handler``: serve assets (the server then lists ``assets``);
+        ``playback_time_range``: a recording's (start, end) in ns (the
+        server then lists ``playbackControl``)."""
         self.recorder = Recorder()
+        self.playback_start = playback_time_range[0] if playback_time_range else 0
         self.param_lock = threading.Lock()
         self.parameters: dict[str, Any] = dict(parameters or {})
         self.context = foxglove.Context()
@@ -200,6 +235,8 @@ class SdkServer:
             if supported_encodings is None
             else supported_encodings,
             services=services or [],
+            asset_handler=asset_handler,
+            playback_time_range=playback_time_range,
             tls_cert=tls[0] if tls else None,
             tls_key=tls[1] if tls else None,
         )
@@ -233,6 +270,14 @@ class SdkServer:
     def unsubscribed(self) -> list[str]:
         with self.recorder.lock:
             return list(self.recorder.unsubscribed)
+
+    def playback_requests(self) -> list[tuple[bool, float, int | None, str]]:
+        with self.recorder.lock:
+            return list(self.recorder.playback_requests)
+
+    def graph_subscriptions(self) -> list[bool]:
+        with self.recorder.lock:
+            return list(self.recorder.graph_subscriptions)
 
     def publish_parameters(self, values: dict[str, Any]) -> None:
         with self.param_lock:

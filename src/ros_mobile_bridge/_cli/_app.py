@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from typing import Any, NoReturn
 
 from .._errors import RosBridgeError
+from .._loop._backends import BACKENDS, run_args
 from .._version import __version__
 from ._format import UsageError
 from ._table import ENTRIES, GROUP_HELP, Entry, group_entries, groups
@@ -90,9 +91,9 @@ def _common_options(p: argparse.ArgumentParser, *, default: Any, top: bool) -> N
     )
     p.add_argument(
         "--backend",
-        choices=("asyncio", "trio"),
+        choices=BACKENDS,
         default=d("asyncio"),
-        help="event loop (default asyncio)",
+        help="event loop (default asyncio; uvloop: asyncio on uvloop)",
     )
     if top:
         p.add_argument(
@@ -153,7 +154,7 @@ def _verb_parser(verb: Verb) -> argparse.ArgumentParser:
     if needs_url:
         _common_options(parser, default=argparse.SUPPRESS, top=False)
     else:
-        parser.add_argument("--backend", choices=("asyncio", "trio"), default=argparse.SUPPRESS)
+        parser.add_argument("--backend", choices=BACKENDS, default=argparse.SUPPRESS)
     if verb.build is not None:
         verb.build(parser)
     with contextlib.suppress(argparse.ArgumentError):  # a verb's own -v (topics -v) wins
@@ -446,12 +447,11 @@ def _main(argv: Sequence[str]) -> int:
         return exc.code if isinstance(exc.code, int) else 2
     _setup_logging(ns)
     verbose = bool(ns.verbose) or ns.log_level == "DEBUG"
-    if ns.backend == "trio":
-        try:
-            importlib.import_module("trio")
-        except ImportError:
-            _say("--backend trio needs trio: pip install 'ros-mobile-bridge[trio]'")
-            return 2
+    try:  # the loop's package, before anything starts
+        run_args(ns.backend, None, f"--backend {ns.backend}")
+    except ImportError as exc:
+        _say(str(exc))
+        return 2
     try:
         if verb.run_sync is not None:
             return int(verb.run_sync(ns))

@@ -161,7 +161,7 @@ def _build_graph(p: argparse.ArgumentParser) -> None:
 
 
 # the verbs' help lines, as the index (_table) has them
-_NODES = "list the graph's nodes (Zenoh, rosbridge; --json)"
+_NODES = "list the graph's nodes (Zenoh, rosbridge, Foxglove's connection graph; --json)"
 _GRAPH = "the graph's nodes, topics, services, actions; --watch: every change"
 
 VERBS = [

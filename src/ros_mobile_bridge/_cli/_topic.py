@@ -48,12 +48,29 @@ _VELOCITY_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 
 async def _graph_counts(robot: Client, topic: str) -> tuple[int | None, int | None]:
     """A topic's publisher and subscriber counts where the transport reports
-    them (rosbridge, through /rosapi); ``None`` where it does not."""
-    if robot.protocol != "rosbridge":
-        return None, None
-    pubs = await _count(robot, "/rosapi/publishers", topic, "publishers")
-    subs = await _count(robot, "/rosapi/subscribers", topic, "subscribers")
-    return (int(pubs) if pubs.isdigit() else None), (int(subs) if subs.isdigit() else None)
+    them (rosbridge, through /rosapi; Foxglove, from the server's connection
+    graph); ``None`` where it does not, or the server cannot say."""
+    if robot.protocol == "rosbridge":
+        pubs = await _count(robot, "/rosapi/publishers", topic, "publishers")
+        subs = await _count(robot, "/rosapi/subscribers", topic, "subscribers")
+        return (int(pubs) if pubs.isdigit() else None), (int(subs) if subs.isdigit() else None)
+    if robot.protocol == "foxglove-ws" and "connectionGraph" in robot.server_info.capabilities:
+        from .._errors import RosBridgeError
+
+        try:
+            ends = await robot.topic_endpoints(topic)
+        except RosBridgeError:
+            return None, None
+        return len(ends.publishers), len(ends.subscribers)
+    return None, None
+
+
+def _reports_counts(robot: Client) -> bool:
+    """Whether :func:`_graph_counts` can know anything on this connection."""
+    caps = robot.server_info.capabilities
+    return robot.protocol == "rosbridge" or (
+        robot.protocol == "foxglove-ws" and "connectionGraph" in caps
+    )
 
 
 def _plural(n: int, word: str) -> str:
@@ -85,7 +102,7 @@ async def _topics(ns: argparse.Namespace) -> int:
             record = {"name": t.name, "type": t.schema_name, "encoding": t.encoding}
             out(json_line({**record, "publishers": pubs, "subscribers": subs}))
         return 0
-    known = robot.protocol == "rosbridge"
+    known = _reports_counts(robot)
     out("Published topics:")
     for t in topics:
         pubs = counts[t.name][0]
@@ -333,9 +350,9 @@ async def _info(ns: argparse.Namespace) -> int:
         out(f"Type: {topic.schema_name}")
         if topic.encoding:
             out(f"Encoding: {topic.encoding}")
-        if robot.protocol == "rosbridge":
-            pubs = await _count(robot, "/rosapi/publishers", ns.topic, "publishers")
-            subs = await _count(robot, "/rosapi/subscribers", ns.topic, "subscribers")
+        if _reports_counts(robot):
+            counts = await _graph_counts(robot, ns.topic)
+            pubs, subs = ("unknown" if n is None else str(n) for n in counts)
         else:
             pubs = subs = f"unknown ({robot.protocol} does not report it)"
         out(f"Publisher count: {pubs}")

@@ -68,12 +68,13 @@ class Verb:
 
 
 def run_signalled(fn: Callable[..., Awaitable[Any]], *args: Any, backend: str) -> int:
-    """Run ``fn(*args)`` on ``backend``, cancelled by SIGINT, SIGTERM or
+    """Run ``fn(*args)`` on ``backend`` (a name of :data:`.._loop._backends.BACKENDS`), cancelled by SIGINT, SIGTERM or
     SIGHUP (so every ``connect()`` block runs its teardown); the exit status
     is 128 + signal then, else what ``fn`` returned (None: 0). A second
     signal ends the process at once."""
     import anyio
 
+    from .._loop._backends import run_args
     from .._signals import cancel_on_signals
 
     async def signalled() -> int:
@@ -84,4 +85,5 @@ def run_signalled(fn: Callable[..., Awaitable[Any]], *args: Any, backend: str) -
             return stop.exit_code
         return int(code or 0)
 
-    return int(anyio.run(signalled, backend=backend))
+    loop, loop_options = run_args(backend, None, f"--backend {backend}")
+    return int(anyio.run(signalled, backend=loop, backend_options=loop_options))

@@ -9,16 +9,21 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from .._checks import check_name, check_schema
 from ..codec import same_type_name
 from ..interfaces._base import RosGoal, RosMessage
 
 __all__ = ["advertise_arguments", "goal_arguments", "publish_arguments", "subscribe_arguments"]
 
 
-def advertise_arguments(latch: Any, queue_size: Any, best_effort: Any) -> dict[str, Any]:
-    """``advertise``'s publisher options, checked (``TypeError`` /
-    ``ValueError`` naming the mistake), as keyword arguments for the
+def advertise_arguments(
+    topic: str, schema: str, latch: Any, queue_size: Any, best_effort: Any
+) -> dict[str, Any]:
+    """``advertise``'s arguments, checked (``TypeError`` / ``ValueError``
+    naming the mistake); its publisher options as keyword arguments for the
     adapter: only those that differ from the defaults."""
+    check_name("topic", topic)
+    check_schema(schema)
     if not isinstance(latch, bool):
         raise TypeError("latch must be a bool")
     if not isinstance(best_effort, bool):

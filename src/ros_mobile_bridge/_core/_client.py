@@ -9,38 +9,48 @@ holds no wire format and starts no task of its own."""
 from __future__ import annotations
 
 import contextlib
-import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from typing import TYPE_CHECKING, Any, TypeVar, overload
 
 import anyio
 
-from .._checks import check_name, check_save_bandwidth, check_schema, check_timeout, nearest_hint
+from .._checks import (
+    check_name,
+    check_save_bandwidth,
+    check_schema,
+    check_timeout,
+    check_uri,
+    nearest_hint,
+)
 from .._errors import (
     ConnectError,
     MessageError,
     NotConnected,
     ParameterError,
     RosBridgeError,
-    ServiceTimeout,
 )
 from .._options import ClientOptions
 from .._types import (
     Compression,
     ConnectionStats,
     Dispatch,
+    PlaybackRequest,
+    PlaybackState,
     Priority,
     SaveBandwidth,
     ServerInfo,
+    ServerStatus,
     ServiceInfo,
     Status,
+    StatusRemoved,
+    TopicEndpoints,
     TopicInfo,
 )
 from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
 from ..codec._classes import remember
-from ..flow import Watcher
+from ..flow import FeedWatcher, Present, Watcher
 from ..interfaces._base import RosGoal, RosMessage, RosRequest, RosService
 from ._action import ActionGoal
 from ._arguments import advertise_arguments, goal_arguments, publish_arguments, subscribe_arguments
@@ -60,9 +70,9 @@ _BUNDLED = "ros_mobile_bridge.interfaces."
 T = TypeVar("T")
 M = TypeVar("M", bound=RosMessage)
 R = TypeVar("R", bound=RosMessage)
+_Req = TypeVar("_Req", bound=RosMessage)
 _Res = TypeVar("_Res", bound=RosMessage)
 _Fb = TypeVar("_Fb", bound=RosMessage)
-_Info = TypeVar("_Info", TopicInfo, ServiceInfo)
 
 
 class Client:
@@ -152,12 +162,16 @@ class Client:
         """The ROS nodes of the robot's graph now: full names, sorted, this
         client's own node left out. Zenoh: the nodes' liveliness tokens;
         rosbridge: ``/rosapi/nodes`` (``ServiceError`` when the bridge has
-        no rosapi); Foxglove: the protocol has no nodes, so
-        ``NotSupportedError``. There is no node watch: the graph command
-        (``rmb graph --watch``) polls this."""
-        self._conn.require_connected()
-        adapter = self._conn.adapter
-        return await require(adapter.node_list, "node_list", adapter.protocol).nodes()
+        no rosapi); Foxglove: the ids in the server's connection graph
+        (``NotSupportedError`` without its ``connectionGraph``). There is no
+        node watch: the graph command (``rmb graph --watch``) polls this."""
+        return await self._conn.offered("node_list").nodes()
+
+    async def topic_endpoints(self, topic: str) -> TopicEndpoints:
+        """Who publishes and subscribes to ``topic`` now, from the source :meth:`nodes`
+        reads (rosbridge: ``/rosapi/publishers`` and ``/subscribers``); empty when unknown."""
+        check_name("topic", topic)
+        return await self._conn.offered("node_list").topic_endpoints(topic)
 
     async def wait_for_topic(self, topic: str, *, timeout: float | None = None) -> TopicInfo:
         """The topic's :class:`~ros_mobile_bridge.TopicInfo` once the robot
@@ -167,60 +181,62 @@ class Client:
         connection is lost for good (or closes) first. While the connection
         is being re-established it keeps waiting."""
         check_name("topic", topic)
-        return await self._wait_for("topic", topic, self._router.topics.watch, timeout)
+        return await self._conn.wait_listed("topic", topic, self._router.topics.watch, timeout)
 
     async def wait_for_service(self, name: str, *, timeout: float | None = None) -> ServiceInfo:
         """The service's :class:`~ros_mobile_bridge.ServiceInfo` once the
         robot offers ``name``; as :meth:`wait_for_topic`, for services."""
         check_name("service name", name)
-        return await self._wait_for("service", name, self._router.services.watch, timeout)
+        return await self._conn.wait_listed("service", name, self._router.services.watch, timeout)
 
-    async def _wait_for(
-        self,
-        kind: str,
-        name: str,
-        watch: Callable[[], Watcher[list[_Info]]],
-        timeout: float | None,
-    ) -> _Info:
-        """Watch the list and the status together, in the call's own task
-        group (both end with the call): the first of the name listed, the
-        connection ended, or the deadline."""
-        limit = check_timeout(timeout)
-        if self._conn.status.value != "reconnecting":
-            self._conn.require_connected()
-        found: list[_Info] = []
-        known: list[str] = []
-        ended: list[Status] = []
+    # -- what a Foxglove server offers beside the graph (docs/transports) -----
+    async def fetch_asset(self, uri: str, *, timeout: float | None = None) -> bytes:
+        """The file the server offers as ``uri`` (``assets``: meshes, ``package://``
+        URIs); ``AssetError`` with the server's reason, ``NotSupportedError``
+        without assets, ``ServiceTimeout`` past ``timeout``."""
+        check_uri(uri)
+        return await self._request(
+            f"fetchAsset {uri}", lambda _: self._conn.offered("assets").fetch_asset(uri), timeout
+        )
 
-        async def look(scope: anyio.CancelScope) -> None:
-            async for listed in watch():
-                match = [info for info in listed if info.name == name]
-                if match:
-                    found.append(match[0])
-                    scope.cancel()
-                    return
-                known[:] = [info.name for info in listed]
+    @property
+    def server_time(self) -> int | None:
+        """The server's clock (ns) as it last sent it (Foxglove ``time``: a simulator's
+        or a recording's clock); None before that, and over rosbridge and Zenoh."""
+        return self._router.server_time.value
 
-        async def status(scope: anyio.CancelScope) -> None:
-            async for now in self._conn.status.watch():
-                if now in ("error", "closed"):
-                    ended.append(now)
-                    scope.cancel()
-                    return
+    def watch_server_time(self) -> Present[int]:
+        """Async iterator: :attr:`server_time` at once when known, then the newest."""
+        return Present(self._router.server_time)
 
-        with anyio.move_on_after(limit if limit is not None else float("inf")):
-            async with anyio.create_task_group() as tg:
-                tg.start_soon(look, tg.cancel_scope)
-                tg.start_soon(status, tg.cancel_scope)
-        if found:
-            return found[0]
-        if ended:
-            reason = f": {self._conn.last_error}" if self._conn.last_error else ""
-            how = "was lost for good" if ended[0] == "error" else "closed"
-            raise NotConnected(f"the connection {how} before {kind} {name} appeared{reason}")
-        assert limit is not None
-        raise TimeoutError(
-            f"the robot did not offer {kind} {name} within {limit:g} s{nearest_hint(name, known)}"
+    def watch_server_status(self) -> FeedWatcher[ServerStatus | StatusRemoved]:
+        """Async iterator: each status the server sends or withdraws from now on
+        (each also logged at its level); a reader 256 behind loses the oldest.
+        Foxglove only: nothing arrives over rosbridge and Zenoh."""
+        return self._router.server_status.watch()
+
+    @property
+    def playback_state(self) -> PlaybackState | None:
+        """How the server plays its recording, as it last said (Foxglove
+        ``playbackControl``); None before that, and over rosbridge and Zenoh."""
+        return self._router.playback.value
+
+    def watch_playback(self) -> Present[PlaybackState]:
+        """Async iterator: :attr:`playback_state` at once when known, then the newest."""
+        return Present(self._router.playback)
+
+    async def control_playback(
+        self, request: PlaybackRequest, *, timeout: float | None = None
+    ) -> PlaybackState:
+        """Play, pause, seek or change the speed of the recording the server
+        plays; the state answering it. ``NotSupportedError`` without Foxglove's
+        ``playbackControl``; ``ServiceTimeout`` when no answer came within ``timeout``."""
+        if not isinstance(request, PlaybackRequest):
+            raise TypeError(f"request must be a PlaybackRequest, not {type(request).__name__}")
+        return await self._request(
+            "playbackControlRequest",
+            lambda _: self._conn.offered("playback").control_playback(request),
+            timeout,
         )
 
     # -- subscriptions ------------------------------------------------------
@@ -374,23 +390,16 @@ class Client:
         queue_size: int | None = None,
         best_effort: bool = False,
     ) -> None:
-        """Advertise ``topic`` with type ``schema`` ahead of the first publish,
-        taking the bridge's set-up time out of the hot path. ``latch=True``
-        (rosbridge, Zenoh) keeps the last message (``queue_size`` of them)
-        for subscribers that join later; ``queue_size`` is the publisher's
-        depth (rosbridge, Zenoh); ``best_effort=True`` (Zenoh) publishes best
-        effort. Where the protocol cannot: ``NotSupportedError``."""
-        check_name("topic", topic)
-        check_schema(schema)
-        options = advertise_arguments(latch, queue_size, best_effort)
-        self._conn.require_connected()
+        """Advertise ``topic`` as ``schema`` before the first publish. ``latch``: keep
+        the last ``queue_size`` messages (1) for late subscribers (rosbridge, Zenoh);
+        ``best_effort`` (Zenoh). ``NotSupportedError`` where the protocol cannot."""
+        options = advertise_arguments(topic, schema, latch, queue_size, best_effort)
         await self._conn.advertise(topic, schema, options)
 
     async def unadvertise(self, topic: str) -> None:
         """Stop publishing ``topic``. A velocity topic still gets its zero
         Twist on teardown."""
         check_name("topic", topic)
-        self._conn.require_connected()
         await self._conn.unadvertise(topic)
 
     @overload
@@ -623,14 +632,27 @@ class Client:
         except MessageError as exc:
             raise exc.in_call(f"call_service {name}") from None
 
+    @overload
     def serve(
         self,
         name: str,
-        service_type: str | type[RosService],
+        service_type: type[RosService[_Req, R]],
+        *,
+        timeout: float = ...,
+        buffer: int = ...,
+    ) -> AbstractAsyncContextManager[ServiceRequests[_Req, R]]: ...
+    @overload
+    def serve(
+        self, name: str, service_type: str, *, timeout: float = ..., buffer: int = ...
+    ) -> AbstractAsyncContextManager[ServiceRequests]: ...
+    def serve(
+        self,
+        name: str,
+        service_type: str | type[RosService[Any, Any]],
         *,
         timeout: float = DEFAULT_SERVE_TIMEOUT,
         buffer: int = DEFAULT_SERVE_BUFFER,
-    ) -> AbstractAsyncContextManager[ServiceRequests]:
+    ) -> AbstractAsyncContextManager[ServiceRequests[Any, Any]]:
         """Offer service ``name`` of type ``service_type`` (the service's
         class, ``AddTwoInts``, or its name, ``"pkg/srv/Name"``) to the ROS
         graph through the bridge; an async context manager yielding
@@ -685,27 +707,10 @@ class Client:
             yield served
 
     async def _request(
-        self,
-        what: str,
-        call: Callable[[float], Awaitable[T]],
-        timeout: float | None,
-        *,
-        slack: float = 0.0,
+        self, what: str, call: Callable[[float], Awaitable[T]], timeout: float | None, **kw: float
     ) -> T:
-        """Run one correlated request under its deadline (``timeout`` or
-        ``options.service_timeout``) and report its round trip to
-        ``on_latency``. ``call`` gets the limit (an adapter may forward it);
-        the local deadline is ``slack`` later, so the server's own timeout
-        answer arrives first. ``ServiceTimeout`` names ``what``."""
-        limit = check_timeout(timeout) or self._options.service_timeout
-        self._conn.require_connected()
-        start = time.perf_counter()
-        with anyio.move_on_after(limit + slack) as scope:
-            result = await call(limit)
-        if scope.cancelled_caught:
-            raise ServiceTimeout(what, limit)
-        self._options.report_latency((time.perf_counter() - start) * 1000.0)
-        return result
+        """One correlated request under its deadline: :meth:`Connection.request`."""
+        return await self._conn.request(what, call, timeout, **kw)
 
     # -- parameters ---------------------------------------------------------
     def _parameters(self) -> ParameterAccess:

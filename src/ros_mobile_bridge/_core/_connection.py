@@ -11,18 +11,27 @@ import logging
 import random
 import time
 from collections.abc import Awaitable, Callable, Mapping
-from typing import Any, Final, Generic, TypeVar
+from typing import Any, Final, Generic, Literal, TypeVar, overload
 
 import anyio
 import anyio.abc
 
-from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError
+from .._checks import check_timeout, nearest_hint
+from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError, ServiceTimeout
 from .._loop._wakeup import serve_timers
 from .._options import ClientOptions
-from .._types import Status
-from ..adapters import Adapter, ServiceHost
+from .._types import ServiceInfo, Status, TopicInfo
+from ..adapters import (
+    Adapter,
+    AssetFetcher,
+    NodeLister,
+    PlaybackControl,
+    ServiceHost,
+    require,
+)
+from ..adapters._seam import Part
 from ..codec import same_type_name
-from ..flow import Bucket, Subscription, ThrottleMode, Watchable, participate
+from ..flow import Bucket, Subscription, ThrottleMode, Watchable, Watcher, participate
 from ..interfaces._base import RosMessage
 from ._outbound import Outbound
 from ._router import Route, Router
@@ -39,6 +48,8 @@ __all__ = [
 ]
 
 _M = TypeVar("_M", bound=RosMessage)
+_Info = TypeVar("_Info", TopicInfo, ServiceInfo)
+_T = TypeVar("_T")
 
 TWIST: Final = "geometry_msgs/msg/Twist"
 TWIST_STAMPED: Final = "geometry_msgs/msg/TwistStamped"
@@ -102,16 +113,59 @@ class Connection:
                 + (f": {self.last_error}" if self.last_error else "")
             )
 
+    async def request(
+        self,
+        what: str,
+        call: Callable[[float], Awaitable[_T]],
+        timeout: float | None,
+        *,
+        slack: float = 0.0,
+    ) -> _T:
+        """Run one correlated request under its deadline (``timeout`` or
+        ``options.service_timeout``) and report its round trip to
+        ``on_latency``. ``call`` gets the limit (an adapter may forward it);
+        the local deadline is ``slack`` later, so the server's own timeout
+        answer arrives first. ``ServiceTimeout`` names ``what``."""
+        limit = check_timeout(timeout) or self._options.service_timeout
+        self.require_connected()
+        start = time.perf_counter()
+        with anyio.move_on_after(limit + slack) as scope:
+            result = await call(limit)
+        if scope.cancelled_caught:
+            raise ServiceTimeout(what, limit)
+        self._options.report_latency((time.perf_counter() - start) * 1000.0)
+        return result
+
+    @overload
+    def offered(self, name: Literal["node_list"]) -> NodeLister: ...
+
+    @overload
+    def offered(self, name: Literal["assets"]) -> AssetFetcher: ...
+
+    @overload
+    def offered(self, name: Literal["playback"]) -> PlaybackControl: ...
+
+    def offered(self, name: Part) -> Any:
+        """The connected adapter's optional part ``name`` (``NotConnected``
+        when there is none connected; the one ``NotSupportedError`` of
+        :func:`~..adapters.require` when it lacks the part)."""
+        self.require_connected()
+        return require(getattr(self.adapter, name), name, self.adapter.protocol)
+
     async def advertise(self, topic: str, schema: str, options: dict[str, Any]) -> None:
         """Advertise ``topic`` with the publisher ``options`` (checked
         keyword arguments of the adapter's ``advertise``), which a reconnect
-        restores with it; forgotten by :meth:`unadvertise`."""
+        restores with it; forgotten by :meth:`unadvertise`. ``NotConnected``
+        unless connected."""
+        self.require_connected()
         new = topic not in self.adapter.publishing()
         await self.adapter.advertise(topic, schema, **options)
         if new:
             self._publisher_options[topic] = options
 
     async def unadvertise(self, topic: str) -> None:
+        """Stop publishing ``topic`` (``NotConnected`` unless connected)."""
+        self.require_connected()
         self._publisher_options.pop(topic, None)
         await self.adapter.unadvertise(topic)
 
@@ -122,6 +176,56 @@ class Connection:
     def current_host(self) -> ServiceHost | None:
         """The adapter's serving part while connected, else None."""
         return self.adapter.serving if self.connected else None
+
+    async def wait_listed(
+        self,
+        kind: str,
+        name: str,
+        watch: Callable[[], Watcher[list[_Info]]],
+        timeout: float | None,
+    ) -> _Info:
+        """(``Client.wait_for_topic`` / ``wait_for_service``:) the entry of
+        ``name`` once ``watch()``'s list has it. Watches the list and the
+        status together, in the call's own task group (both end with the
+        call): the first of the name listed, the connection ended, or the
+        deadline."""
+        limit = check_timeout(timeout)
+        if self.status.value != "reconnecting":
+            self.require_connected()
+        found: list[_Info] = []
+        known: list[str] = []
+        ended: list[Status] = []
+
+        async def look(scope: anyio.CancelScope) -> None:
+            async for listed in watch():
+                match = [info for info in listed if info.name == name]
+                if match:
+                    found.append(match[0])
+                    scope.cancel()
+                    return
+                known[:] = [info.name for info in listed]
+
+        async def status(scope: anyio.CancelScope) -> None:
+            async for now in self.status.watch():
+                if now in ("error", "closed"):
+                    ended.append(now)
+                    scope.cancel()
+                    return
+
+        with anyio.move_on_after(limit if limit is not None else float("inf")):
+            async with anyio.create_task_group() as tg:
+                tg.start_soon(look, tg.cancel_scope)
+                tg.start_soon(status, tg.cancel_scope)
+        if found:
+            return found[0]
+        if ended:
+            reason = f": {self.last_error}" if self.last_error else ""
+            how = "was lost for good" if ended[0] == "error" else "closed"
+            raise NotConnected(f"the connection {how} before {kind} {name} appeared{reason}")
+        assert limit is not None
+        raise TimeoutError(
+            f"the robot did not offer {kind} {name} within {limit:g} s{nearest_hint(name, known)}"
+        )
 
     # -- tasks -----------------------------------------------------------------
     def start(self, tg: anyio.abc.TaskGroup) -> None:

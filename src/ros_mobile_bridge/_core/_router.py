@@ -21,7 +21,17 @@ import anyio.lowlevel
 from .._checks import nearest_hint
 from .._errors import ConnectError
 from .._options import ClientOptions
-from .._types import Compression, Dispatch, SaveBandwidth, ServiceInfo, Status, TopicInfo
+from .._types import (
+    Compression,
+    Dispatch,
+    PlaybackState,
+    SaveBandwidth,
+    ServerStatus,
+    ServiceInfo,
+    Status,
+    StatusRemoved,
+    TopicInfo,
+)
 from ..adapters import (
     Adapter,
     Event,
@@ -29,6 +39,7 @@ from ..adapters import (
     ParameterValues,
     Rejected,
     Replayed,
+    ServerClock,
     SubscribeHints,
     TopicState,
     require,
@@ -36,6 +47,7 @@ from ..adapters import (
 from ..flow import (
     AdaptiveThrottle,
     Bucket,
+    Feed,
     FrameQueue,
     LagMonitor,
     RawFrame,
@@ -93,6 +105,9 @@ class Router:
         self.topics: Watchable[list[TopicInfo]] = Watchable(adapter.topics)
         self.services: Watchable[list[ServiceInfo]] = Watchable(adapter.services)
         self.parameters: Watchable[dict[str, Any]] = Watchable({})
+        self.server_time: Watchable[int | None] = Watchable(None)
+        self.server_status: Feed[ServerStatus | StatusRemoved] = Feed()
+        self.playback: Watchable[PlaybackState | None] = Watchable(None)
         self._rejections = RejectionLog(self._log)
         self._routes: dict[str, list[Route]] = {}
         self._unoffered: dict[Route, float] = {}  # route -> when to warn (unknown_topic_warning)
@@ -188,6 +203,12 @@ class Router:
         elif type(event) is Replayed:
             for route in self._routes.get(event.topic, ()):
                 route.queue.replayed(event.size)
+        elif type(event) is ServerClock:
+            self.server_time.set(event.time_ns)
+        elif type(event) is ServerStatus or type(event) is StatusRemoved:
+            self.server_status.publish(event)
+        elif type(event) is PlaybackState:
+            self.playback.set(event)
 
     def set_topic_state(self, topic: str, active: bool) -> None:
         """The server now carries ``topic`` to us, or not."""
@@ -406,6 +427,9 @@ class Router:
         self.topics.close()
         self.services.close()
         self.parameters.close()
+        self.server_time.close()
+        self.server_status.close()
+        self.playback.close()
 
     # -- parameters ------------------------------------------------------------
     @contextlib.asynccontextmanager

@@ -18,7 +18,7 @@ from collections import deque
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
-from typing import Any, Final, Literal
+from typing import Any, Final, Generic, Literal
 
 import anyio
 
@@ -30,6 +30,7 @@ from .._errors import (
     RosBridgeError,
     ServiceError,
 )
+from .._types import RequestT, ResponseT
 from ..adapters import ServiceHost
 from ..interfaces._base import RosMessage
 
@@ -95,16 +96,21 @@ Answer = Callable[[_Call, Outcome, Any, bool], Awaitable[None]]
 """The engine's answering step: (call, outcome, values, result)."""
 
 
-class ServiceRequest:
+class ServiceRequest(Generic[RequestT, ResponseT]):
     """One call to a service this client serves. ``args`` is the decoded
     request: an instance of the service's ``Request`` class when the
-    library knows the type's definition (``req.args.a``), else a dict; ``id`` the server's id for the call, ``service`` the
-    service name, ``deadline`` the ``anyio.current_time()`` after which the
-    library answers it ``result: false``.
+    library knows the type's definition (``req.args.a``), else a dict;
+    ``id`` the server's id for the call, ``service`` the service name,
+    ``deadline`` the ``anyio.current_time()`` after which the library
+    answers it ``result: false``. Served as ``serve(name, AddTwoInts)``, a
+    request is a ``ServiceRequest[AddTwoInts.Request, AddTwoInts.Response]``
+    for type checkers.
 
     Answer it once, with :meth:`reply` or :meth:`fail`."""
 
     __slots__ = ("_answer", "_call", "args", "deadline", "id", "service")
+
+    args: RequestT
 
     def __init__(self, call: _Call, service: str, args: Any, answer: Answer) -> None:
         self._call = call
@@ -127,7 +133,7 @@ class ServiceRequest:
         """How it was answered (a :class:`ServeStats` counter name), or None."""
         return self._call.outcome
 
-    async def reply(self, values: Mapping[str, Any] | RosMessage | None = None) -> None:
+    async def reply(self, values: ResponseT | Mapping[str, Any] | None = None) -> None:
         """Answer with the response ``values``: an instance of the
         service's ``Response`` class (``AddTwoInts.Response(sum=3)``) or a
         dict (missing fields are zero when the type is known). Raises
@@ -161,9 +167,11 @@ class ServiceRequest:
         await self._answer(self._call, "failed", message, False)
 
 
-class ServiceRequests:
+class ServiceRequests(Generic[RequestT, ResponseT]):
     """The requests to one served service, in arrival order: ``async for req
-    in requests``. Yielded by :meth:`Client.serve`.
+    in requests``. Yielded by :meth:`Client.serve`; generic in the
+    service's ``Request`` and ``Response`` classes when it names the
+    service's class.
 
     Moving on to the next request answers the previous one ``result: false``
     if the loop body did not. The iteration raises ``NotConnected`` when the
@@ -181,11 +189,12 @@ class ServiceRequests:
         """The counters so far (see :class:`ServeStats`)."""
         return self._serving.stats
 
-    def __aiter__(self) -> ServiceRequests:
+    def __aiter__(self) -> ServiceRequests[RequestT, ResponseT]:
         return self
 
-    async def __anext__(self) -> ServiceRequest:
-        return await self._serving.next()
+    async def __anext__(self) -> ServiceRequest[RequestT, ResponseT]:
+        request: ServiceRequest[RequestT, ResponseT] = await self._serving.next()
+        return request
 
 
 class Serving:

@@ -30,23 +30,27 @@ from .._checks import check_timeout as _check_timeout
 from .._connect import ProtocolArg, connect
 from .._core._client import Client
 from .._errors import NotConnected
+from .._loop._backends import Backend, run_args
 from .._options import CLOSE_SLACK_S, ClientOptions
 from .._types import (
     Compression,
     ConnectionStats,
     Dispatch,
+    PlaybackRequest,
+    PlaybackState,
     Priority,
     SaveBandwidth,
     ServerInfo,
     ServiceInfo,
     Status,
+    TopicEndpoints,
     TopicInfo,
 )
 from ..codec import FieldDef
 from ..flow import Subscription
 from ..interfaces._base import RosGoal, RosMessage, RosRequest
 from ._blocks import SyncActionGoal, SyncSubscription
-from ._worker import JOIN_S, Children, Held, Parent, SyncBackend, Worker
+from ._worker import JOIN_S, Children, Held, Parent, Worker
 
 if TYPE_CHECKING:
     pass
@@ -98,7 +102,7 @@ def connect_sync(
     port: int | None = None,
     secure: bool | None = None,
     options: ClientOptions | None = None,
-    backend: SyncBackend = "asyncio",
+    backend: Backend = "asyncio",
     backend_options: Mapping[str, Any] | None = None,
 ) -> SyncClient:
     """Connect from code that is not async (scripts, notebooks, test
@@ -112,9 +116,10 @@ def connect_sync(
         # the block's end sent the zero Twist and stopped the worker thread
 
     ``target``, ``protocol``, ``port``, ``secure`` and ``options`` are
-    :func:`~ros_mobile_bridge.connect`'s, plus ``backend`` (``"asyncio"`` or
-    ``"trio"``) and ``backend_options`` (:func:`anyio.run`'s) for the event
-    loop of the worker thread the client runs in. It raises what
+    :func:`~ros_mobile_bridge.connect`'s, plus ``backend`` (``"asyncio"``,
+    ``"trio"``, or ``"uvloop"``: asyncio on uvloop, the ``[uvloop]`` extra)
+    and ``backend_options`` (:func:`anyio.run`'s) for the event loop of the
+    worker thread the client runs in. It raises what
     ``connect()`` raises (``ValueError``, ``ConnectError``, ...), with the
     worker already stopped.
 
@@ -123,23 +128,15 @@ def connect_sync(
     to) and join the thread. A ``KeyboardInterrupt`` in a blocking call
     cancels that call; leaving the ``with`` block then closes as usual. A
     client still open at interpreter exit is closed by an ``atexit`` hook."""
-    if backend not in ("asyncio", "trio"):
-        raise ValueError(f"backend must be 'asyncio' or 'trio', got {backend!r}")
-    if backend == "trio":
-        try:
-            import trio  # noqa: F401  (the worker's loop needs it; say so before starting one)
-        except ImportError:
-            raise ImportError(
-                "connect_sync(backend='trio') needs trio: pip install trio "
-                "(or ros-mobile-bridge's [trio] extra)"
-            ) from None
     if backend_options is not None and not isinstance(backend_options, Mapping):
         raise TypeError("backend_options must be a mapping or None")
+    # the loop's package is asked for before a loop starts
+    loop, loop_options = run_args(backend, backend_options, f"connect_sync(backend={backend!r})")
     if options is not None and not isinstance(options, ClientOptions):
         raise TypeError("options must be a ClientOptions")
     cm = connect(target, protocol=protocol, port=port, secure=secure, options=options)
     opts = options or ClientOptions()
-    worker = Worker(backend, backend_options, f"rmb-sync-{backend}", opts.logger)
+    worker = Worker(loop, loop_options, f"rmb-sync-{backend}", opts.logger)
     held = Held(worker, cm, "the connection")
     try:
         client = held.enter()
@@ -303,6 +300,18 @@ class SyncClient:
     def server_info(self) -> ServerInfo:
         """What the server said about itself: :attr:`Client.server_info`."""
         return self._client.server_info
+
+    @property
+    @_mirrors
+    def playback_state(self) -> PlaybackState | None:
+        """:attr:`Client.playback_state`."""
+        return self._client.playback_state
+
+    @property
+    @_mirrors
+    def server_time(self) -> int | None:
+        """:attr:`Client.server_time`."""
+        return self._client.server_time
 
     @property
     @_mirrors
@@ -481,6 +490,25 @@ class SyncClient:
     def nodes(self) -> list[str]:
         """:meth:`Client.nodes`, blocking."""
         return self._call(_nodes, self._client, timeout=None, what="nodes")
+
+    @_mirrors
+    def topic_endpoints(self, topic: str) -> TopicEndpoints:
+        """:meth:`Client.topic_endpoints`, blocking."""
+        return self._call(self._client.topic_endpoints, topic, timeout=None, what="topic_endpoints")
+
+    @_mirrors
+    def control_playback(
+        self, request: PlaybackRequest, *, timeout: float | None = None
+    ) -> PlaybackState:
+        """:meth:`Client.control_playback`, blocking; ``timeout`` is the request's own."""
+        return self._call(
+            _control_playback, self._client, request, timeout, timeout=None, what="playback"
+        )
+
+    @_mirrors
+    def fetch_asset(self, uri: str, *, timeout: float | None = None) -> bytes:
+        """:meth:`Client.fetch_asset`, blocking; ``timeout`` is the request's own."""
+        return self._call(_fetch_asset, self._client, uri, timeout, timeout=None, what=uri)
 
     @_mirrors
     def get_parameters(
@@ -701,6 +729,16 @@ async def _call_service(
 
 async def _nodes(client: Client) -> list[str]:
     return await client.nodes()
+
+
+async def _control_playback(
+    client: Client, request: PlaybackRequest, timeout: float | None
+) -> PlaybackState:
+    return await client.control_playback(request, timeout=timeout)
+
+
+async def _fetch_asset(client: Client, uri: str, timeout: float | None) -> bytes:
+    return await client.fetch_asset(uri, timeout=timeout)
 
 
 async def _get_parameters(

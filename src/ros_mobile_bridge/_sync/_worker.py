@@ -15,7 +15,7 @@ import threading
 import weakref
 from collections.abc import Awaitable, Callable, Hashable, Mapping
 from contextlib import AbstractAsyncContextManager
-from typing import TYPE_CHECKING, Any, Final, Generic, Literal, TypeVar
+from typing import TYPE_CHECKING, Any, Final, Generic, TypeVar
 
 import anyio
 
@@ -25,10 +25,9 @@ from .._errors import NotConnected
 if TYPE_CHECKING:
     from anyio.from_thread import BlockingPortal
 
-__all__ = ["JOIN_S", "Children", "Held", "Parent", "SyncBackend", "Worker", "set_event"]
+__all__ = ["JOIN_S", "Children", "Held", "Parent", "Worker", "set_event"]
 
 T = TypeVar("T")
-SyncBackend = Literal["asyncio", "trio"]
 
 #: How long ``close()`` waits for the worker thread to end after its loop
 #: was told to stop.
@@ -45,11 +44,13 @@ class Worker:
 
     def __init__(
         self,
-        backend: SyncBackend,
+        backend: str,
         backend_options: Mapping[str, Any] | None,
         name: str,
         log: logging.Logger,
     ) -> None:
+        """``backend`` and ``backend_options`` are :func:`anyio.run`'s
+        (see :func:`.._loop._backends.run_args`)."""
         self._log = log
         self._backend = backend
         self._backend_options = dict(backend_options) if backend_options else None

@@ -9,6 +9,7 @@ from ._rosbridge import open_rosbridge as open_rosbridge
 from ._rosbridge import start_rosbridge as start_rosbridge
 from ._seam import ActionClient as ActionClient
 from ._seam import Adapter as Adapter
+from ._seam import AssetFetcher as AssetFetcher
 from ._seam import Event as Event
 from ._seam import EventSink as EventSink
 from ._seam import GoalEvents as GoalEvents
@@ -16,8 +17,10 @@ from ._seam import GraphChanged as GraphChanged
 from ._seam import NodeLister as NodeLister
 from ._seam import ParameterAccess as ParameterAccess
 from ._seam import ParameterValues as ParameterValues
+from ._seam import PlaybackControl as PlaybackControl
 from ._seam import Rejected as Rejected
 from ._seam import Replayed as Replayed
+from ._seam import ServerClock as ServerClock
 from ._seam import ServiceHandler as ServiceHandler
 from ._seam import ServiceHost as ServiceHost
 from ._seam import SubscribeHints as SubscribeHints

@@ -25,13 +25,14 @@ from .._errors import (
     ServiceError,
 )
 from .._options import ClientOptions
-from .._types import ServerInfo, ServiceInfo, TopicInfo
+from .._types import ServerInfo, ServerStatus, ServiceInfo, StatusLevel, StatusRemoved, TopicInfo
 from ..codec import CodecRegistry, SchemaTooLarge
 from ..flow import Decoder, PendingRequests, RawFrame, WireMessage
 from ..interfaces._base import RosMessage
 from ..transport import WebSocket
 from ..wire import foxglove as fx
 from ..wire._limits import truncate_for_log
+from ._foxglove_offers import FoxgloveAssets, FoxgloveGraph, FoxglovePlayback
 from ._foxglove_parameters import FoxgloveParameters
 from ._pauses import PauseSchedule
 from ._seam import (
@@ -39,6 +40,7 @@ from ._seam import (
     GraphChanged,
     ParameterValues,
     Replayed,
+    ServerClock,
     SubscribeHints,
     TopicState,
 )
@@ -55,6 +57,14 @@ from ._shared import (
 __all__ = ["FoxgloveAdapter", "open_foxglove", "start_foxglove"]
 
 _EMPTY_CDR: Final = b"\x00\x01\x00\x00"
+_LEVELS: Final[dict[int, tuple[StatusLevel, int]]] = {
+    0: ("info", logging.INFO),
+    1: ("warning", logging.WARNING),
+    2: ("error", logging.ERROR),
+}
+"""A status ``level`` -> its name and log level (an unknown level is an error)."""
+_STATUS_IDS_KEPT: Final = 1024
+"""Status ids whose message is kept for the log line of their withdrawal."""
 """A CDR encapsulation header (little endian) with no body: an empty request."""
 
 
@@ -132,14 +142,14 @@ def _greeted(engine: fx.FoxgloveEngine) -> bool:
 
 
 class FoxgloveAdapter:
-    """One Foxglove WebSocket connection (see :class:`~.Adapter`). Its one
-    optional part is :attr:`parameters`, when the server offers them; the
-    protocol has no actions, no ROS nodes, no type descriptions, and a
-    client cannot serve a service over it."""
+    """One Foxglove WebSocket connection (see :class:`~.Adapter`). Its
+    optional parts: :attr:`parameters`, when the server offers them;
+    :attr:`assets`, :attr:`node_list` (the connection graph) and
+    :attr:`playback`, which check the server's capability per call. The protocol has no actions,
+    no type descriptions, and a client cannot serve a service over it."""
 
     protocol = "foxglove-ws"
     wire_timeout_slack = 0.0  # the protocol carries no timeout
-    node_list: None = None
     actions: None = None
     serving: None = None
     descriptions: None = None
@@ -187,9 +197,22 @@ class FoxgloveAdapter:
             closed=lambda: ws.closed,
         )
         self._params = self._parameters.requests
+        capabilities = self._capabilities
+        self.assets = FoxgloveAssets(engine, self._send_request, self._check_pending, capabilities)
+        self.node_list = FoxgloveGraph(
+            engine, self._send_request, capabilities, options, self._events.reject
+        )
+        self.playback = FoxglovePlayback(
+            engine, self._send_request, self._check_pending, capabilities
+        )
+        self._statuses: dict[str, tuple[str, int]] = {}  # status id -> (message, log level)
         self.parameters: FoxgloveParameters | None = None
         self._offer_parameters()
         self._index_channels(tuple(engine.channels.values()), ())
+
+    def _capabilities(self) -> tuple[str, ...]:
+        """The server's capabilities now (a later serverInfo may change them)."""
+        return self.server_info.capabilities
 
     def _offer_parameters(self) -> None:
         """:attr:`parameters` as the server's capabilities say now."""
@@ -361,7 +384,14 @@ class FoxgloveAdapter:
         :meth:`~EventSink.quiet_until`, unless a request waits for its answer
         or a topic saves bandwidth (its pauses are timed by the reader)."""
         sink = self._events.sink
-        if sink is None or self._calls or self._params or self._pauses.rates:
+        if (
+            sink is None
+            or self._calls
+            or self._params
+            or self.assets.requests
+            or self.playback.requests
+            or self._pauses.rates
+        ):
             return 0.0
         return sink.quiet_until(now)
 
@@ -495,9 +525,34 @@ class FoxgloveAdapter:
             values = {p.name: p.value for p in event.parameters}
             if event.id is None or not self._params.resolve(event.id, values):
                 self._events.emit(ParameterValues(values))
+        elif isinstance(event, fx.Time):
+            self._events.emit(ServerClock(event.timestamp_ns))
         elif isinstance(event, fx.Status):
-            level = {0: logging.INFO, 1: logging.WARNING}.get(event.level, logging.ERROR)
+            name, level = _LEVELS.get(event.level, _LEVELS[2])
             self._log.log(level, "server status: %s", truncate_for_log(event.message))
+            if event.id is not None:
+                self._statuses.pop(event.id, None)  # (re-inserted last: the newest)
+                self._statuses[event.id] = (event.message, level)
+                if len(self._statuses) > _STATUS_IDS_KEPT:  # the oldest goes
+                    del self._statuses[next(iter(self._statuses))]
+            self._events.emit(ServerStatus(name, event.message, event.id))
+        elif isinstance(event, fx.RemoveStatus):
+            for status_id in event.ids:
+                message, level = self._statuses.pop(status_id, ("", logging.INFO))
+                shown = f": {truncate_for_log(message)}" if message else ""
+                self._log.log(level, "server status %s withdrawn%s", status_id, shown)
+            self._events.emit(StatusRemoved(event.ids))
+        elif isinstance(event, fx.FetchAssetResponse):
+            if not self.assets.on_response(event):
+                self._log.warning("fetchAsset answer for unknown request %d", event.request_id)
+        elif isinstance(event, fx.ConnectionGraphUpdate):
+            self.node_list.on_update(event)
+        elif isinstance(event, fx.PlaybackState):
+            state = self.playback.on_state(event)
+            if state is None:
+                self._events.reject("malformed", f"playback state of unknown status {event.status}")
+            else:
+                self._events.emit(state)
         elif isinstance(event, fx.ServerInfo):
             # A later serverInfo resets the server's tables; the engine has
             # already reported the old channels and services as unadvertised.
@@ -714,7 +769,9 @@ class FoxgloveAdapter:
     def _check_pending(self, what: str) -> None:
         """``ServiceError`` at once when ``max_pending_requests`` requests
         already wait for an answer on this connection."""
-        check_pending(self._options, len(self._calls) + len(self._params), what)
+        waiting = len(self._calls) + len(self._params)
+        waiting += len(self.assets.requests) + len(self.playback.requests)
+        check_pending(self._options, waiting, what)
 
     # -- lifecycle ----------------------------------------------------------
     async def send(self, message: WireMessage) -> None:
@@ -728,6 +785,9 @@ class FoxgloveAdapter:
         assert isinstance(error, RosBridgeError)
         self._calls.fail_all(error)
         self._params.fail_all(error)
+        self.assets.requests.fail_all(error)
+        self.playback.requests.fail_all(error)
+        self.node_list.fail(error)
 
     async def keepalive(self) -> None:
         interval = self._options.keepalive_interval

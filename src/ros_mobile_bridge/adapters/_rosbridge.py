@@ -205,6 +205,8 @@ class RosbridgeAdapter:
 
     protocol = "rosbridge"
     wire_timeout_slack = _WIRE_SLACK
+    assets: None = None  # Foxglove's alone
+    playback: None = None
 
     def __init__(self, ws: WebSocket, options: ClientOptions) -> None:
         self._ws = ws

@@ -12,7 +12,7 @@ import anyio
 
 from .._errors import ConnectError, NotConnected, ServiceError
 from .._options import ClientOptions
-from .._types import ServiceInfo, TopicInfo
+from .._types import ServiceInfo, TopicEndpoints, TopicInfo
 from ._rosbridge_calls import RosbridgeCalls
 from ._seam import GraphChanged
 from ._shared import EventSource
@@ -67,6 +67,14 @@ class RosbridgeDiscovery:
         bridge offers no rosapi, ``TimeoutError`` after 5 s."""
         names = sorted(set(names_in(await self._rosapi("/rosapi/nodes"), "nodes")))
         return names[: self._options.max_channels]
+
+    async def topic_endpoints(self, topic: str) -> TopicEndpoints:
+        """``/rosapi/publishers`` and ``/rosapi/subscribers`` of ``topic``
+        (node names); ``ServiceError`` when the bridge offers no rosapi."""
+        args = {"topic": topic}
+        pubs = names_in(await self._rosapi("/rosapi/publishers", args), "publishers")
+        subs = names_in(await self._rosapi("/rosapi/subscribers", args), "subscribers")
+        return TopicEndpoints(topic, tuple(sorted(pubs)), tuple(sorted(subs)))
 
     async def discover(self, *, first: bool = False) -> bool:
         """Poll the graph once; True when it changed. A failing rosapi is

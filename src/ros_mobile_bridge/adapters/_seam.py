@@ -14,13 +14,23 @@ from dataclasses import dataclass
 from typing import Any, Final, Literal, Protocol, TypeVar
 
 from .._errors import NotSupportedError, RosBridgeError
-from .._types import ServerInfo, ServiceInfo, TopicInfo
+from .._types import (
+    PlaybackRequest,
+    PlaybackState,
+    ServerInfo,
+    ServerStatus,
+    ServiceInfo,
+    StatusRemoved,
+    TopicEndpoints,
+    TopicInfo,
+)
 from ..codec import CodecRegistry
 from ..flow import RawFrame, WireMessage
 
 __all__ = [
     "ActionClient",
     "Adapter",
+    "AssetFetcher",
     "Event",
     "EventSink",
     "GoalEvents",
@@ -28,8 +38,10 @@ __all__ = [
     "NodeLister",
     "ParameterAccess",
     "ParameterValues",
+    "PlaybackControl",
     "Rejected",
     "Replayed",
+    "ServerClock",
     "ServiceHandler",
     "ServiceHost",
     "SubscribeHints",
@@ -134,9 +146,30 @@ class Replayed:
     size: int
 
 
-Event = RawFrame | GraphChanged | TopicState | ParameterValues | Rejected | Replayed
+@dataclass(frozen=True, slots=True)
+class ServerClock:
+    """The server's clock now reads ``time_ns`` (Foxglove's ``time``: a
+    simulator's or a recording's clock)."""
+
+    time_ns: int
+
+
+Event = (
+    RawFrame
+    | GraphChanged
+    | TopicState
+    | ParameterValues
+    | Rejected
+    | Replayed
+    | ServerClock
+    | ServerStatus
+    | StatusRemoved
+    | PlaybackState
+)
 """What an adapter hands up. A :class:`~ros_mobile_bridge.flow.RawFrame` is
-one message for a subscribed topic, not decoded."""
+one message for a subscribed topic, not decoded; the public
+:class:`~ros_mobile_bridge.ServerStatus`, :class:`~ros_mobile_bridge.StatusRemoved`
+and :class:`~ros_mobile_bridge.PlaybackState` are handed up as they are."""
 
 
 class EventSink(Protocol):
@@ -170,12 +203,41 @@ class EventSink(Protocol):
 
 
 class NodeLister(Protocol):
-    """The ROS nodes of the graph (rosbridge: ``/rosapi/nodes``; Zenoh: the
-    liveliness tokens). The Foxglove protocol reports none."""
+    """The ROS nodes of the graph and each topic's endpoints (rosbridge:
+    ``/rosapi``; Zenoh: the liveliness tokens; Foxglove: the server's
+    connection graph, where it offers one)."""
 
     async def nodes(self) -> list[str]:
         """The nodes now, full names, sorted (this client's own node left
         out). ``ServiceError`` when the bridge cannot say."""
+        ...
+
+    async def topic_endpoints(self, topic: str) -> TopicEndpoints:
+        """Who publishes and subscribes to ``topic`` now (empty tuples for
+        a topic the graph does not know)."""
+        ...
+
+
+class AssetFetcher(Protocol):
+    """Fetching a file the server offers by URI (Foxglove's ``assets``:
+    meshes and robot descriptions, ``package://`` URIs)."""
+
+    async def fetch_asset(self, uri: str) -> bytes:
+        """The asset's bytes. ``AssetError`` with the server's reason when
+        it refused; ``NotSupportedError`` naming the capability when the
+        server offers no assets."""
+        ...
+
+
+class PlaybackControl(Protocol):
+    """Controlling a server that plays a recording (Foxglove's
+    ``playbackControl``). Every state the server sends is also handed up as
+    a :class:`~ros_mobile_bridge.PlaybackState` event."""
+
+    async def control_playback(self, request: PlaybackRequest) -> PlaybackState:
+        """Send ``request``; the state the server answers it with.
+        ``NotSupportedError`` naming the capability when the server offers
+        no playback control."""
         ...
 
 
@@ -261,7 +323,8 @@ class Adapter(Protocol):
 
     The core below is what every transport does. What only some do is an
     optional part: :attr:`node_list`, :attr:`parameters`, :attr:`actions`,
-    :attr:`serving`, :attr:`descriptions`, each None where this connection
+    :attr:`serving`, :attr:`descriptions`, :attr:`assets`, :attr:`playback`,
+    each None where this connection
     cannot (the protocol has no such operation, or this server does not
     offer it). The client checks a part once, with :func:`require`, which
     raises the one ``NotSupportedError`` for all."""
@@ -284,6 +347,12 @@ class Adapter(Protocol):
 
     @property
     def descriptions(self) -> TypeDescriber | None: ...
+
+    @property
+    def assets(self) -> AssetFetcher | None: ...
+
+    @property
+    def playback(self) -> PlaybackControl | None: ...
 
     @property
     def topics(self) -> list[TopicInfo]: ...
@@ -380,7 +449,7 @@ class Adapter(Protocol):
         """Close the connection (never raises)."""
 
 
-Part = Literal["node_list", "parameters", "actions", "serving"]
+Part = Literal["node_list", "parameters", "actions", "serving", "assets", "playback"]
 """The optional parts of an :class:`Adapter` a call may require."""
 
 _OFFERS: Final[dict[str, str]] = {
@@ -388,6 +457,8 @@ _OFFERS: Final[dict[str, str]] = {
     "parameters": "no parameters",
     "actions": "no actions",
     "serving": "no way to serve a service",
+    "assets": "no assets (Foxglove's 'assets' capability)",
+    "playback": "no playback control (Foxglove's 'playbackControl' capability)",
 }
 _PROTOCOL_NAMES: Final = {"foxglove-ws": "Foxglove", "rosbridge": "rosbridge", "zenoh": "Zenoh"}
 

@@ -140,6 +140,8 @@ class ZenohAdapter:
 
     protocol = "zenoh"
     wire_timeout_slack = 0.0  # the client's deadline is the query's timeout
+    assets: None = None  # Foxglove's alone
+    playback: None = None
 
     def __init__(
         self,

@@ -11,7 +11,7 @@ it); the graph itself only counts what it refuses."""
 
 from __future__ import annotations
 
-from .._types import ServiceInfo, TopicInfo
+from .._types import ServiceInfo, TopicEndpoints, TopicInfo
 from ..codec import same_type_name
 from ..wire import rmw_zenoh as rz
 from ._shared import EventSource
@@ -125,3 +125,16 @@ class ZenohGraph:
             if token.kind is rz.EntityKind.NODE and key != self._own_node
         }
         return sorted(names)
+
+    async def topic_endpoints(self, topic: str) -> TopicEndpoints:
+        """The nodes whose publisher and subscription tokens name ``topic``
+        (this client's own entities included: they are on the graph)."""
+        ends: dict[rz.EntityKind, set[str]] = {
+            rz.EntityKind.PUBLISHER: set(),
+            rz.EntityKind.SUBSCRIPTION: set(),
+        }
+        for token in self.tokens.values():
+            if token.name == topic and token.kind in ends:
+                ends[token.kind].add(f"{token.namespace.rstrip('/')}/{token.node_name}")
+        pubs, subs = ends[rz.EntityKind.PUBLISHER], ends[rz.EntityKind.SUBSCRIPTION]
+        return TopicEndpoints(topic, tuple(sorted(pubs)), tuple(sorted(subs)))

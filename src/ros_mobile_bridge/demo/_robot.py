@@ -64,6 +64,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 from rosbags.typesys.stores import ros2_jazzy as _jazzy
 
+from ._assets import connection_graph, serve_asset
 from ._png import CameraRenderer
 
 __all__ = [
@@ -391,6 +392,7 @@ class DemoRobot:
                         Capability.Services,
                         Capability.Parameters,
                         Capability.Time,
+                        Capability.ConnectionGraph,
                     ],
                     server_listener=_Listener(
                         advertise=self._on_client_advertise,
@@ -401,8 +403,10 @@ class DemoRobot:
                     ),
                     supported_encodings=["json", "cdr"],
                     services=services,
+                    asset_handler=serve_asset,
                     context=context,
                 )
+                server.publish_connection_graph(connection_graph(TOPICS, CMD_VEL_TOPICS, SERVICES))
             except BaseException:
                 for channel in channels.values():
                     channel.close()

@@ -3,6 +3,8 @@ the publish outbox and the pending-request registry. Knows no wire protocol."""
 
 from ._breaker import BreakerState as BreakerState
 from ._breaker import CircuitBreaker as CircuitBreaker
+from ._feed import Feed as Feed
+from ._feed import FeedWatcher as FeedWatcher
 from ._frame import Decoder as Decoder
 from ._frame import RawFrame as RawFrame
 from ._lag import LagMonitor as LagMonitor
@@ -21,5 +23,6 @@ from ._throttle import AdaptiveThrottle as AdaptiveThrottle
 from ._throttle import Bucket as Bucket
 from ._throttle import ThrottleMode as ThrottleMode
 from ._throttle import resolve_presets as resolve_presets
+from ._watch import Present as Present
 from ._watch import Watchable as Watchable
 from ._watch import Watcher as Watcher

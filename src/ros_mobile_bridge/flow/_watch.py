@@ -6,7 +6,7 @@ from typing import Generic, TypeVar
 
 import anyio
 
-__all__ = ["Watchable", "Watcher"]
+__all__ = ["Present", "Watchable", "Watcher"]
 
 T = TypeVar("T")
 
@@ -86,3 +86,21 @@ class Watcher(Generic[T]):
             await cell.changed.wait()
         self._seen = cell.version
         return cell.value
+
+
+class Present(Generic[T]):
+    """Async iterator over a ``Watchable[T | None]``'s values that are not
+    None: the current one at once when there is one, then every change to
+    a value (a value not yet known, None, is waited out)."""
+
+    def __init__(self, source: Watchable[T | None]) -> None:
+        self._values = source.watch()
+
+    def __aiter__(self) -> Present[T]:
+        return self
+
+    async def __anext__(self) -> T:
+        while True:
+            value = await self._values.__anext__()
+            if value is not None:
+                return value

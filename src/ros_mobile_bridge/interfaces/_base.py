@@ -42,6 +42,7 @@ __all__ = [
 ]
 
 _M = TypeVar("_M", bound="RosMessage")
+_Request = TypeVar("_Request", bound="RosMessage")
 _Response = TypeVar("_Response", bound="RosMessage")
 _Result = TypeVar("_Result", bound="RosMessage")
 _Feedback = TypeVar("_Feedback", bound="RosMessage")
@@ -429,11 +430,14 @@ class RosGoal(RosMessage, Generic[_Result, _Feedback]):
     __slots__ = ()
 
 
-class RosService:
+class RosService(Generic[_Request, _Response]):
     """The base of every service class: a namespace holding the service's
     ``Request`` and ``Response`` classes, its ROS type name
     (``__ros_type__``, ``"std_srvs/srv/SetBool"``) and its ``RIHS01_`` hash
-    (``__ros_hash__``). It has no instances."""
+    (``__ros_hash__``). It has no instances. ``RosService[Request,
+    Response]`` tells type checkers the two classes, so a service served as
+    ``serve(name, AddTwoInts)`` hands out ``AddTwoInts.Request`` instances
+    and takes ``AddTwoInts.Response`` replies."""
 
     __slots__ = ()
 

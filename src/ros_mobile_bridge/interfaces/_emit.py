@@ -351,7 +351,10 @@ class ClassWriter:
     def namespace(self, ns: Namespace, indent: str) -> list[str]:
         """The lines of the class statement of a service or an action."""
         inner = indent + "    "
-        lines = [f"{indent}class {ns.qualname.rpartition('.')[2]}({ns.base}):"]
+        name = ns.qualname.rpartition(".")[2]
+        lines = [f"{indent}class {name}({ns.base}):"]
+        if len(lines[0]) > LINE:  # as the formatter splits it
+            lines = [f"{indent}class {name}(", f"{inner}{ns.base}", f"{indent}):"]
         lines += docstring(ns.summary, [], inner)
         lines.append("")
         lines.append(f"{inner}__slots__ = ()")

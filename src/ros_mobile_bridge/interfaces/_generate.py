@@ -197,7 +197,7 @@ def _service(
     ns = Namespace(
         name,
         qualname,
-        "RosService",
+        f'RosService["{qualname}.Request", "{qualname}.Response"]',
         f"The ROS service ``{name}``{what}: a ``{qualname}.Request`` in, "
         f"a ``{qualname}.Response`` out.",
     )
@@ -334,7 +334,7 @@ class ModuleWriter(ClassWriter):
         layout = self.layout
         cls = module.cls
         body = self.one(cls, "")
-        bases = {cls.base if isinstance(cls, Namespace) else "RosMessage"}
+        bases = {cls.base.partition("[")[0] if isinstance(cls, Namespace) else "RosMessage"}
         if isinstance(cls, Namespace):
             bases.add("RosMessage")
             if any(isinstance(m, Namespace) for m in cls.members):

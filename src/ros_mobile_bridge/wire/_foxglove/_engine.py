@@ -18,7 +18,6 @@ from ._events import (
     Channel,
     Event,
     Parameter,
-    PlaybackState,
     ProtocolViolation,
     ServerInfo,
     ServiceDef,
@@ -50,6 +49,7 @@ from ._readers import (
     read_connection_graph_update,
     read_fetch_asset_response,
     read_parameter_values,
+    read_playback_state,
     read_remove_status,
     read_server_info,
     read_service_call_failure,
@@ -70,6 +70,7 @@ from ._writers import (
     encode_fetch_asset,
     encode_get_parameters,
     encode_message_data,
+    encode_playback_control,
     encode_service_call_request,
     encode_set_parameters,
     encode_subscribe_connection_graph,
@@ -457,7 +458,7 @@ class FoxgloveEngine:
             if opcode == OP_FETCH_ASSET_RESPONSE:
                 return [read_fetch_asset_response(view, size)]
             if opcode == OP_PLAYBACK_STATE:
-                return [PlaybackState(view[1:].tobytes())]
+                return [read_playback_state(view, size)]
         except Exception as exc:  # the contract: server input never raises
             return [ProtocolViolation(f"binary opcode 0x{opcode:02x}: internal error: {exc!r}")]
         return [ProtocolViolation(f"unknown binary opcode 0x{opcode:02x}")]
@@ -633,3 +634,13 @@ class FoxgloveEngine:
         """``fetchAsset`` (needs ``assets``); the answer is a
         :class:`FetchAssetResponse` with the same ``request_id``."""
         return encode_fetch_asset(uri, request_id)
+
+    def playback_control(
+        self, play: bool, speed: float, seek_ns: int | None, request_id: str
+    ) -> bytes:
+        """A playback-control-request frame (opcode 0x03, ``foxglove.sdk``;
+        needs ``playbackControl``): play (True) or pause at ``speed`` (a
+        factor of real time, > 0), after a seek to ``seek_ns`` unless None.
+        The server's :class:`PlaybackState` answering it carries ``request_id``
+        (non-empty)."""
+        return encode_playback_control(play, speed, seek_ns, request_id)

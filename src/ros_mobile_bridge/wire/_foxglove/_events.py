@@ -267,10 +267,17 @@ class FetchAssetResponse(Event):
 
 @dataclass(frozen=True, slots=True)
 class PlaybackState(Event):
-    """A playback-state frame (``foxglove.sdk``): the bytes after the opcode,
-    undecoded."""
+    """A playback-state frame (``foxglove.sdk``, ``playbackControl``): the
+    ``status`` (0 playing, 1 paused, 2 buffering, 3 ended; another value is
+    kept as sent), the playback time ``current_time_ns``, the ``speed`` (a
+    factor of real time), whether a seek caused it (``did_seek``) and the id
+    of the playback control request it answers (``""`` for none)."""
 
-    raw: bytes
+    status: int
+    current_time_ns: int
+    speed: float
+    did_seek: bool
+    request_id: str
 
 
 @dataclass(frozen=True, slots=True)

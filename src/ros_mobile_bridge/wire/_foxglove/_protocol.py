@@ -20,10 +20,13 @@ __all__ = [
     "OP_CLIENT_MESSAGE_DATA",
     "OP_FETCH_ASSET_RESPONSE",
     "OP_MESSAGE_DATA",
+    "OP_PLAYBACK_CONTROL_REQUEST",
     "OP_PLAYBACK_STATE",
     "OP_SERVICE_CALL_REQUEST",
     "OP_SERVICE_CALL_RESPONSE",
     "OP_TIME",
+    "PLAYBACK_REQUEST_HEADER",
+    "PLAYBACK_STATE_HEADER",
     "SERVICE_REQUEST_HEADER",
     "SERVICE_RESPONSE_HEADER",
     "SUBPROTOCOLS",
@@ -64,6 +67,7 @@ OP_PLAYBACK_STATE: Final = 0x05
 # Binary opcodes, client -> server.
 OP_CLIENT_MESSAGE_DATA: Final = 0x01
 OP_SERVICE_CALL_REQUEST: Final = 0x02
+OP_PLAYBACK_CONTROL_REQUEST: Final = 0x03  # foxglove.sdk, the playbackControl capability
 
 # Headers, read after the 1-byte opcode (offset 1).
 MESSAGE_DATA_HEADER: Final = Struct("<IQ")  # subscription id, log time ns
@@ -71,9 +75,12 @@ MESSAGE_DATA_PAYLOAD_AT: Final = 1 + MESSAGE_DATA_HEADER.size  # 13
 TIME: Final = Struct("<Q")
 SERVICE_RESPONSE_HEADER: Final = Struct("<III")  # service id, call id, encoding length
 FETCH_ASSET_HEADER: Final = Struct("<IBI")  # request id, status, error length
+PLAYBACK_STATE_HEADER: Final = Struct("<BQfBI")  # status, time ns, speed, did seek, id length
 # Written whole, opcode included.
 CLIENT_MESSAGE_HEADER: Final = Struct("<BI")
 SERVICE_REQUEST_HEADER: Final = Struct("<BIII")
+# opcode, command (0 play, 1 pause), speed, has seek, seek time ns, request id length
+PLAYBACK_REQUEST_HEADER: Final = Struct("<BBfBQI")
 
 BINARY_NAMES: Final[Mapping[int, str]] = MappingProxyType(
     {

@@ -21,6 +21,7 @@ from ._events import (
     MessageSchema,
     Parameter,
     ParameterValues,
+    PlaybackState,
     ProtocolViolation,
     RemoveStatus,
     ServerInfo,
@@ -34,7 +35,9 @@ from ._protocol import (
     DEFAULT_SCHEMA_ENCODINGS,
     FETCH_ASSET_HEADER,
     OP_FETCH_ASSET_RESPONSE,
+    OP_PLAYBACK_STATE,
     OP_SERVICE_CALL_RESPONSE,
+    PLAYBACK_STATE_HEADER,
     SERVICE_RESPONSE_HEADER,
 )
 
@@ -60,6 +63,7 @@ __all__ = [
     "read_connection_graph_update",
     "read_fetch_asset_response",
     "read_parameter_values",
+    "read_playback_state",
     "read_remove_status",
     "read_server_info",
     "read_service_call_failure",
@@ -496,3 +500,18 @@ def read_fetch_asset_response(view: memoryview, size: int) -> Event:
             "fetch asset response (opcode 0x04): error message is not valid UTF-8"
         )
     return FetchAssetResponse(request_id, status == 0, error, view[end:])
+
+
+def read_playback_state(view: memoryview, size: int) -> Event:
+    start = 1 + PLAYBACK_STATE_HEADER.size
+    if size < start:
+        return truncated(OP_PLAYBACK_STATE, size, start)
+    status, time_ns, speed, did_seek, id_len = PLAYBACK_STATE_HEADER.unpack_from(view, 1)
+    end = start + id_len
+    if end > size:
+        return truncated(OP_PLAYBACK_STATE, size, end)
+    try:
+        request_id = str(view[start:end], "utf-8")
+    except UnicodeDecodeError:
+        return ProtocolViolation("playback state (opcode 0x05): request id is not valid UTF-8")
+    return PlaybackState(status, time_ns, speed, did_seek != 0, request_id)

@@ -14,7 +14,9 @@ from ._events import Parameter
 from ._protocol import (
     CLIENT_MESSAGE_HEADER,
     OP_CLIENT_MESSAGE_DATA,
+    OP_PLAYBACK_CONTROL_REQUEST,
     OP_SERVICE_CALL_REQUEST,
+    PLAYBACK_REQUEST_HEADER,
     SERVICE_REQUEST_HEADER,
     U32_MAX,
 )
@@ -30,6 +32,7 @@ __all__ = [
     "encode_get_parameters",
     "encode_message_data",
     "encode_parameter",
+    "encode_playback_control",
     "encode_service_call_request",
     "encode_set_parameters",
     "encode_subscribe_connection_graph",
@@ -213,3 +216,26 @@ def encode_fetch_asset(uri: str, request_id: int) -> str:
     check_str(uri, "uri", nonempty=True)
     check_id(request_id, "request_id", u32=True)
     return dumps({"op": "fetchAsset", "uri": uri, "requestId": request_id})
+
+
+def encode_playback_control(
+    play: bool, speed: float, seek_ns: int | None, request_id: str
+) -> bytes:
+    """A playback-control-request frame (see :meth:`FoxgloveEngine.playback_control`)."""
+    if not isinstance(play, bool):
+        raise TypeError(f"play must be a bool, got {type(play).__name__}")
+    speed = float_arg(speed, "speed")
+    if not (0.0 < speed < float("inf")):
+        raise ValueError(f"speed must be a positive number, got {speed!r}")
+    if seek_ns is not None and (type(seek_ns) is not int or not 0 <= seek_ns < 1 << 64):
+        raise ValueError(f"seek_ns must be None or an int in 0 ..< 2**64, got {seek_ns!r}")
+    rid = check_str(request_id, "request_id", nonempty=True).encode("utf-8")
+    header = PLAYBACK_REQUEST_HEADER.pack(
+        OP_PLAYBACK_CONTROL_REQUEST,
+        0 if play else 1,
+        speed,
+        seek_ns is not None,
+        seek_ns or 0,
+        len(rid),
+    )
+    return header + rid

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["CancelGoal"]
 
 
-class CancelGoal(RosService):
+class CancelGoal(RosService["CancelGoal.Request", "CancelGoal.Response"]):
     """The ROS service ``action_msgs/srv/CancelGoal``: a ``CancelGoal.Request`` in, a ``CancelGoal.Response`` out."""
 
     __slots__ = ()

@@ -9,7 +9,7 @@ from ..._base import RosMessage, RosRequest, RosService
 __all__ = ["AddDiagnostics"]
 
 
-class AddDiagnostics(RosService):
+class AddDiagnostics(RosService["AddDiagnostics.Request", "AddDiagnostics.Response"]):
     """The ROS service ``diagnostic_msgs/srv/AddDiagnostics``: a ``AddDiagnostics.Request`` in, a ``AddDiagnostics.Response`` out."""
 
     __slots__ = ()

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["SelfTest"]
 
 
-class SelfTest(RosService):
+class SelfTest(RosService["SelfTest.Request", "SelfTest.Response"]):
     """The ROS service ``diagnostic_msgs/srv/SelfTest``: a ``SelfTest.Request`` in, a ``SelfTest.Response`` out."""
 
     __slots__ = ()

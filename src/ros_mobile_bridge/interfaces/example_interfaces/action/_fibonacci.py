@@ -83,7 +83,7 @@ class Fibonacci(RosAction):
         ) -> None:
             self.sequence = _array(self, "sequence", sequence)
 
-    class SendGoal(RosService):
+    class SendGoal(RosService["Fibonacci.SendGoal.Request", "Fibonacci.SendGoal.Response"]):
         """The ROS service ``example_interfaces/action/Fibonacci_SendGoal`` (sending a goal): a ``Fibonacci.SendGoal.Request`` in, a ``Fibonacci.SendGoal.Response`` out."""
 
         __slots__ = ()
@@ -142,7 +142,7 @@ class Fibonacci(RosAction):
                 self.accepted = accepted
                 self.stamp = _nested(self, "stamp", stamp, _builtin_interfaces.msg.Time)
 
-    class GetResult(RosService):
+    class GetResult(RosService["Fibonacci.GetResult.Request", "Fibonacci.GetResult.Response"]):
         """The ROS service ``example_interfaces/action/Fibonacci_GetResult`` (asking for a result): a ``Fibonacci.GetResult.Request`` in, a ``Fibonacci.GetResult.Response`` out."""
 
         __slots__ = ()

@@ -9,7 +9,7 @@ from ..._base import RosMessage, RosRequest, RosService
 __all__ = ["AddTwoInts"]
 
 
-class AddTwoInts(RosService):
+class AddTwoInts(RosService["AddTwoInts.Request", "AddTwoInts.Response"]):
     """The ROS service ``example_interfaces/srv/AddTwoInts``: a ``AddTwoInts.Request`` in, a ``AddTwoInts.Response`` out."""
 
     __slots__ = ()

@@ -9,7 +9,7 @@ from ..._base import RosMessage, RosRequest, RosService
 __all__ = ["Trigger"]
 
 
-class Trigger(RosService):
+class Trigger(RosService["Trigger.Request", "Trigger.Response"]):
     """The ROS service ``example_interfaces/srv/Trigger``: a ``Trigger.Request`` in, a ``Trigger.Response`` out."""
 
     __slots__ = ()

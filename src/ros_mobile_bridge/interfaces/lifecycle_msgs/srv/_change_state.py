@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 __all__ = ["ChangeState"]
 
 
-class ChangeState(RosService):
+class ChangeState(RosService["ChangeState.Request", "ChangeState.Response"]):
     """The ROS service ``lifecycle_msgs/srv/ChangeState``: a ``ChangeState.Request`` in, a ``ChangeState.Response`` out."""
 
     __slots__ = ()

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["GetAvailableStates"]
 
 
-class GetAvailableStates(RosService):
+class GetAvailableStates(RosService["GetAvailableStates.Request", "GetAvailableStates.Response"]):
     """The ROS service ``lifecycle_msgs/srv/GetAvailableStates``: a ``GetAvailableStates.Request`` in, a ``GetAvailableStates.Response`` out."""
 
     __slots__ = ()

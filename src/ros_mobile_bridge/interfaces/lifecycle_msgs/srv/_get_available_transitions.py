@@ -17,7 +17,9 @@ if TYPE_CHECKING:
 __all__ = ["GetAvailableTransitions"]
 
 
-class GetAvailableTransitions(RosService):
+class GetAvailableTransitions(
+    RosService["GetAvailableTransitions.Request", "GetAvailableTransitions.Response"]
+):
     """The ROS service ``lifecycle_msgs/srv/GetAvailableTransitions``: a ``GetAvailableTransitions.Request`` in, a ``GetAvailableTransitions.Response`` out."""
 
     __slots__ = ()

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 __all__ = ["GetState"]
 
 
-class GetState(RosService):
+class GetState(RosService["GetState.Request", "GetState.Response"]):
     """The ROS service ``lifecycle_msgs/srv/GetState``: a ``GetState.Request`` in, a ``GetState.Response`` out."""
 
     __slots__ = ()

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 __all__ = ["GetMap"]
 
 
-class GetMap(RosService):
+class GetMap(RosService["GetMap.Request", "GetMap.Response"]):
     """The ROS service ``nav_msgs/srv/GetMap``: a ``GetMap.Request`` in, a ``GetMap.Response`` out."""
 
     __slots__ = ()

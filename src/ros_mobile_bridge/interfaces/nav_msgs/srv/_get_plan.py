@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["GetPlan"]
 
 
-class GetPlan(RosService):
+class GetPlan(RosService["GetPlan.Request", "GetPlan.Response"]):
     """The ROS service ``nav_msgs/srv/GetPlan``: a ``GetPlan.Request`` in, a ``GetPlan.Response`` out."""
 
     __slots__ = ()

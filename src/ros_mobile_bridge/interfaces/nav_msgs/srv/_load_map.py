@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 __all__ = ["LoadMap"]
 
 
-class LoadMap(RosService):
+class LoadMap(RosService["LoadMap.Request", "LoadMap.Response"]):
     """The ROS service ``nav_msgs/srv/LoadMap``: a ``LoadMap.Request`` in, a ``LoadMap.Response`` out."""
 
     __slots__ = ()

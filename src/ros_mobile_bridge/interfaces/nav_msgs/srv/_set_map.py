@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["SetMap"]
 
 
-class SetMap(RosService):
+class SetMap(RosService["SetMap.Request", "SetMap.Response"]):
     """The ROS service ``nav_msgs/srv/SetMap``: a ``SetMap.Request`` in, a ``SetMap.Response`` out."""
 
     __slots__ = ()

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["DescribeParameters"]
 
 
-class DescribeParameters(RosService):
+class DescribeParameters(RosService["DescribeParameters.Request", "DescribeParameters.Response"]):
     """The ROS service ``rcl_interfaces/srv/DescribeParameters``: a ``DescribeParameters.Request`` in, a ``DescribeParameters.Response`` out."""
 
     __slots__ = ()

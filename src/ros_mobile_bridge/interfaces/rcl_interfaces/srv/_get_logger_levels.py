@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["GetLoggerLevels"]
 
 
-class GetLoggerLevels(RosService):
+class GetLoggerLevels(RosService["GetLoggerLevels.Request", "GetLoggerLevels.Response"]):
     """The ROS service ``rcl_interfaces/srv/GetLoggerLevels``: a ``GetLoggerLevels.Request`` in, a ``GetLoggerLevels.Response`` out."""
 
     __slots__ = ()

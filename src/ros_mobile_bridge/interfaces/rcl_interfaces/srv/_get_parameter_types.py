@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["GetParameterTypes"]
 
 
-class GetParameterTypes(RosService):
+class GetParameterTypes(RosService["GetParameterTypes.Request", "GetParameterTypes.Response"]):
     """The ROS service ``rcl_interfaces/srv/GetParameterTypes``: a ``GetParameterTypes.Request`` in, a ``GetParameterTypes.Response`` out."""
 
     __slots__ = ()

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["GetParameters"]
 
 
-class GetParameters(RosService):
+class GetParameters(RosService["GetParameters.Request", "GetParameters.Response"]):
     """The ROS service ``rcl_interfaces/srv/GetParameters``: a ``GetParameters.Request`` in, a ``GetParameters.Response`` out."""
 
     __slots__ = ()

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 __all__ = ["ListParameters"]
 
 
-class ListParameters(RosService):
+class ListParameters(RosService["ListParameters.Request", "ListParameters.Response"]):
     """The ROS service ``rcl_interfaces/srv/ListParameters``: a ``ListParameters.Request`` in, a ``ListParameters.Response`` out."""
 
     __slots__ = ()

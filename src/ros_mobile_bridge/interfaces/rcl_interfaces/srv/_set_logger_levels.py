@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 __all__ = ["SetLoggerLevels"]
 
 
-class SetLoggerLevels(RosService):
+class SetLoggerLevels(RosService["SetLoggerLevels.Request", "SetLoggerLevels.Response"]):
     """The ROS service ``rcl_interfaces/srv/SetLoggerLevels``: a ``SetLoggerLevels.Request`` in, a ``SetLoggerLevels.Response`` out."""
 
     __slots__ = ()

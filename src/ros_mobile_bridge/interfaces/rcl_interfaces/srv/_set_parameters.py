@@ -18,7 +18,7 @@ if TYPE_CHECKING:
 __all__ = ["SetParameters"]
 
 
-class SetParameters(RosService):
+class SetParameters(RosService["SetParameters.Request", "SetParameters.Response"]):
     """The ROS service ``rcl_interfaces/srv/SetParameters``: a ``SetParameters.Request`` in, a ``SetParameters.Response`` out."""
 
     __slots__ = ()

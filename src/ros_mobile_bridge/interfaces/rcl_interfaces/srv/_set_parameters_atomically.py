@@ -18,7 +18,9 @@ if TYPE_CHECKING:
 __all__ = ["SetParametersAtomically"]
 
 
-class SetParametersAtomically(RosService):
+class SetParametersAtomically(
+    RosService["SetParametersAtomically.Request", "SetParametersAtomically.Response"]
+):
     """The ROS service ``rcl_interfaces/srv/SetParametersAtomically``: a ``SetParametersAtomically.Request`` in, a ``SetParametersAtomically.Response`` out."""
 
     __slots__ = ()

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
 __all__ = ["SetCameraInfo"]
 
 
-class SetCameraInfo(RosService):
+class SetCameraInfo(RosService["SetCameraInfo.Request", "SetCameraInfo.Response"]):
     """The ROS service ``sensor_msgs/srv/SetCameraInfo``: a ``SetCameraInfo.Request`` in, a ``SetCameraInfo.Response`` out."""
 
     __slots__ = ()

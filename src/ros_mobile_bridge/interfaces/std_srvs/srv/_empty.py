@@ -9,7 +9,7 @@ from ..._base import RosMessage, RosRequest, RosService
 __all__ = ["Empty"]
 
 
-class Empty(RosService):
+class Empty(RosService["Empty.Request", "Empty.Response"]):
     """The ROS service ``std_srvs/srv/Empty``: a ``Empty.Request`` in, a ``Empty.Response`` out."""
 
     __slots__ = ()

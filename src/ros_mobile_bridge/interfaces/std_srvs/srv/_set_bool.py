@@ -9,7 +9,7 @@ from ..._base import RosMessage, RosRequest, RosService
 __all__ = ["SetBool"]
 
 
-class SetBool(RosService):
+class SetBool(RosService["SetBool.Request", "SetBool.Response"]):
     """The ROS service ``std_srvs/srv/SetBool``: a ``SetBool.Request`` in, a ``SetBool.Response`` out."""
 
     __slots__ = ()

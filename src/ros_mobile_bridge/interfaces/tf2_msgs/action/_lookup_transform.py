@@ -123,7 +123,9 @@ class LookupTransform(RosAction):
         __ros_hash__ = "RIHS01_2da0b02f990f04404ab8c98a2a68cf5bbc773ae747f96911f2d55499cfb51542"
         __ros_fields__ = ()
 
-    class SendGoal(RosService):
+    class SendGoal(
+        RosService["LookupTransform.SendGoal.Request", "LookupTransform.SendGoal.Response"]
+    ):
         """The ROS service ``tf2_msgs/action/LookupTransform_SendGoal`` (sending a goal): a ``LookupTransform.SendGoal.Request`` in, a ``LookupTransform.SendGoal.Response`` out."""
 
         __slots__ = ()
@@ -182,7 +184,9 @@ class LookupTransform(RosAction):
                 self.accepted = accepted
                 self.stamp = _nested(self, "stamp", stamp, _builtin_interfaces.msg.Time)
 
-    class GetResult(RosService):
+    class GetResult(
+        RosService["LookupTransform.GetResult.Request", "LookupTransform.GetResult.Response"]
+    ):
         """The ROS service ``tf2_msgs/action/LookupTransform_GetResult`` (asking for a result): a ``LookupTransform.GetResult.Request`` in, a ``LookupTransform.GetResult.Response`` out."""
 
         __slots__ = ()

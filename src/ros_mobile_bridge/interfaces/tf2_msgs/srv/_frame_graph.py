@@ -9,7 +9,7 @@ from ..._base import RosMessage, RosRequest, RosService
 __all__ = ["FrameGraph"]
 
 
-class FrameGraph(RosService):
+class FrameGraph(RosService["FrameGraph.Request", "FrameGraph.Response"]):
     """The ROS service ``tf2_msgs/srv/FrameGraph``: a ``FrameGraph.Request`` in, a ``FrameGraph.Response`` out."""
 
     __slots__ = ()

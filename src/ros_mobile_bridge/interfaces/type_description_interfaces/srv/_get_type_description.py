@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 __all__ = ["GetTypeDescription"]
 
 
-class GetTypeDescription(RosService):
+class GetTypeDescription(RosService["GetTypeDescription.Request", "GetTypeDescription.Response"]):
     """The ROS service ``type_description_interfaces/srv/GetTypeDescription``: a ``GetTypeDescription.Request`` in, a ``GetTypeDescription.Response`` out."""
 
     __slots__ = ()

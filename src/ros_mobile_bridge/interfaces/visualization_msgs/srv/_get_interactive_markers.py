@@ -17,7 +17,9 @@ if TYPE_CHECKING:
 __all__ = ["GetInteractiveMarkers"]
 
 
-class GetInteractiveMarkers(RosService):
+class GetInteractiveMarkers(
+    RosService["GetInteractiveMarkers.Request", "GetInteractiveMarkers.Response"]
+):
     """The ROS service ``visualization_msgs/srv/GetInteractiveMarkers``: a ``GetInteractiveMarkers.Request`` in, a ``GetInteractiveMarkers.Response`` out."""
 
     __slots__ = ()
