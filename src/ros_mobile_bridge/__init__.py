@@ -66,6 +66,7 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._types import SubscriptionState as SubscriptionState
     from ._types import SubscriptionStats as SubscriptionStats
     from ._types import TopicInfo as TopicInfo
+    from ._zenoh_options import ZenohSecurity as ZenohSecurity
     from .codec import FieldDef as FieldDef
     from .codec._jsonable import jsonable as jsonable
     from .flow import Batches as Batches
@@ -99,6 +100,7 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "BreakerPolicy": ("._options", "BreakerPolicy"),
     "ClientOptions": ("._options", "ClientOptions"),
     "ReconnectPolicy": ("._options", "ReconnectPolicy"),
+    "ZenohSecurity": ("._zenoh_options", "ZenohSecurity"),
     "SignalScope": ("._signals", "SignalScope"),
     "cancel_on_signals": ("._signals", "cancel_on_signals"),
     "DEFAULT_PORTS": ("._types", "DEFAULT_PORTS"),
@@ -217,6 +219,7 @@ __all__ = [
     "SyncSubscription",
     "ThrottleMode",
     "TopicInfo",
+    "ZenohSecurity",
     "__version__",
     "cancel_on_signals",
     "connect",

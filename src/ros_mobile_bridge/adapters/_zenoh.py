@@ -101,8 +101,10 @@ class _Publisher(Advertisement):
 
 async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
     """Open a zenoh client session to the router at ``endpoint`` and read
-    the domain's graph, within ``options.connect_timeout``. ``ConnectError``
-    when the router is refused or unreachable."""
+    the domain's graph, within ``options.connect_timeout``, secured by
+    ``options.zenoh_security`` and ``options.zenoh_config``.
+    ``ConnectError`` naming the cause when the router is refused or
+    unreachable, or the link's TLS or authentication fails."""
     deadline = anyio.current_time() + options.connect_timeout
     session = await ZenohSession.open(
         endpoint,
@@ -110,6 +112,9 @@ async def open_zenoh(endpoint: str, options: ClientOptions) -> ZenohAdapter:
         shared_memory=options.zenoh_shared_memory,
         max_items=options.zenoh_backlog,
         max_bytes=options.zenoh_backlog_bytes,
+        security=options.zenoh_security,
+        config=options.zenoh_config,
+        logger=options.logger,
     )
     try:
         adapter = ZenohAdapter(session, options, endpoint)
