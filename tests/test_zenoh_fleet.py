@@ -14,7 +14,7 @@ wait is on the event itself (the graph, a message, an answer)."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import anyio
