@@ -26,6 +26,8 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
+from _cli_run import cli_env
+from _cli_run import rmb as run_rmb
 from _util import take, wait_until
 from peers.zenoh_router import ZenohRouter, tls_settings, usrpwd_settings
 
@@ -52,6 +54,8 @@ class Pki:
     foreign_cert: str  # a client certificate signed by other_ca
     foreign_key: str
     users: str  # the routers' user/password dictionary
+    named_cert: str  # a router certificate for "localhost" only (not 127.0.0.1)
+    named_key: str
 
     def key_secrets(self) -> list[str]:
         """Lines of the private keys' PEM bodies: none may show anywhere."""
@@ -68,9 +72,12 @@ def pki(tmp_path_factory: pytest.TempPathFactory) -> Pki:
     server = ca.issue_cert("127.0.0.1", "localhost")
     client = ca.issue_cert("fleet-manager.example")
     foreign = other.issue_cert("fleet-manager.example")
+    named = ca.issue_cert("localhost")
     ca.cert_pem.write_to_path(str(d / "ca.pem"))
     other.cert_pem.write_to_path(str(d / "other-ca.pem"))
-    for name, cert in (("server", server), ("client", client), ("foreign", foreign)):
+    for name, cert in (
+        ("server", server), ("client", client), ("foreign", foreign), ("named", named)
+    ):  # fmt: skip
         cert.cert_chain_pems[0].write_to_path(str(d / f"{name}.pem"))
         cert.private_key_pem.write_to_path(str(d / f"{name}.key"))
     (d / "users.txt").write_text(f"{USER}:{PASSWORD}\n")
@@ -84,6 +91,8 @@ def pki(tmp_path_factory: pytest.TempPathFactory) -> Pki:
         foreign_cert=str(d / "foreign.pem"),
         foreign_key=str(d / "foreign.key"),
         users=str(d / "users.txt"),
+        named_cert=str(d / "named.pem"),
+        named_key=str(d / "named.key"),
     )
 
 
@@ -297,6 +306,43 @@ async def test_an_invalid_configuration_names_its_position_not_its_text(
     missing = tmp_path / "nowhere.json5"
     error = await refused(tls_router.locator, opts(zenoh_domain, zenoh_config=missing))
     assert f"{str(missing)!r} does not exist" in str(error)
+
+
+async def test_a_certificate_for_another_name_fails_unless_the_check_is_off(
+    pki: Pki, zenoh_domain: int
+) -> None:
+    with ZenohRouter(scheme="tls", settings=tls_settings(pki.named_cert, pki.named_key)) as r:
+        strict = opts(zenoh_domain, zenoh_security=rmb.ZenohSecurity(ca_file=pki.ca))
+        text = str(await refused(r.locator, strict))  # 127.0.0.1: not the certificate's name
+        assert "certificate is not trusted" in text
+        assert "mismatch" in text
+        loose = rmb.ZenohSecurity(ca_file=pki.ca, verify_name=False)
+        await exchange(r.locator, opts(zenoh_domain, zenoh_security=loose))
+
+
+async def test_user_and_password_over_plain_tcp(pki: Pki, zenoh_domain: int) -> None:
+    with ZenohRouter(settings=usrpwd_settings(pki.users)) as r:
+        right = rmb.ZenohSecurity(user=USER, password=PASSWORD)
+        await exchange(r.locator, opts(zenoh_domain, zenoh_security=right))
+        wrong = rmb.ZenohSecurity(user="intruder", password=PASSWORD)
+        text = str(await refused(r.locator, opts(zenoh_domain, zenoh_security=wrong)))
+        assert "authentication failed" in text
+        assert "the router answers" in text  # a router is there: not an unreachable one
+
+
+def test_rmb_reads_zenoh_session_config_uri(
+    tls_router: ZenohRouter, pki: Pki, tmp_path: Path
+) -> None:
+    """The command line starts from ``$ZENOH_SESSION_CONFIG_URI``, as
+    rmw_zenoh does: with the CA there, ``rmb`` reaches a ``tls/`` router."""
+    config = tmp_path / "session.json5"
+    config.write_text(f'{{transport: {{link: {{tls: {{root_ca_certificate: "{pki.ca}"}}}}}}}}')
+    done = run_rmb("nodes", tls_router.locator, env=cli_env(ZENOH_SESSION_CONFIG_URI=str(config)))
+    assert done.returncode == 0, done.stderr
+    refused_ = run_rmb("nodes", tls_router.locator, env=cli_env(drop=["ZENOH_SESSION_CONFIG_URI"]))
+    assert refused_.returncode == 1
+    assert "ConnectError" in refused_.stderr
+    assert "certificate is not trusted" in refused_.stderr
 
 
 # -- no secret anywhere -------------------------------------------------------------------------
