@@ -232,7 +232,11 @@ def _trailing_address(text: str) -> bool:
     """Whether an argument after a ROS name is the robot's address (``rmb
     echo /odom 127.0.0.1:8765``): a URL or ``host:port`` with a port. Types,
     names and YAML mappings never read so."""
-    return "://" in text or text.startswith(("tcp/", "tls/", "udp/")) or bool(_STRICT_HOST_PORT.match(text))
+    return (
+        "://" in text
+        or text.startswith(("tcp/", "tls/", "udp/"))
+        or bool(_STRICT_HOST_PORT.match(text))
+    )
 
 
 def _address_at(verb: Verb, pos: list[str]) -> int | None:
