@@ -11,14 +11,9 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Final, TypeAlias
+from typing import Final
 
-__all__ = ["ZenohConfigSource", "ZenohSecurity", "check_zenoh_config", "describe_zenoh_config"]
-
-ZenohConfigSource: TypeAlias = "str | os.PathLike[str]"
-"""A Zenoh configuration: a file path (JSON5, JSON or YAML, as zenoh reads
-``ZENOH_SESSION_CONFIG_URI``), or JSON5 text (a ``str`` whose first
-non-blank character is ``{``)."""
+__all__ = ["ZenohSecurity", "check_zenoh_config", "describe_zenoh_config", "is_json5_text"]
 
 _REDACTED: Final = "<redacted>"
 
@@ -117,7 +112,9 @@ def is_json5_text(source: str | os.PathLike[str]) -> bool:
 
 
 def check_zenoh_config(value: object) -> str | os.PathLike[str] | None:
-    """``value`` checked as a :data:`ZenohConfigSource` (or None);
+    """``value`` checked as a Zenoh configuration source (or None): a file
+    path (JSON5, JSON or YAML), or JSON5 text (a ``str`` whose first
+    non-blank character is ``{``);
     ``TypeError``/``ValueError`` never quoting JSON5 text (it may hold a
     password)."""
     if value is None:
