@@ -81,20 +81,20 @@ def offers(client: rmb.Client, robot: str) -> bool:
     """The client's graph holds every topic and service of ``robot``."""
     topics = {t.name for t in client.topics}
     services = {s.name for s in client.services}
-    return (
-        f"/{robot}/chatter" in topics
-        and {
-            f"/{robot}/set_bool",
-            f"/{robot}/fibonacci/_action/send_goal",
-        }
-        <= services
+    return {f"/{robot}/chatter", f"/{robot}/fibonacci/_action/status"} <= topics and {
+        f"/{robot}/set_bool",
+        f"/{robot}/fibonacci/_action/send_goal",
+    } <= services
+
+
+def offers_none_of(client: rmb.Client, robot: str) -> bool:
+    """No service of ``robot`` in the client's graph, nor a topic only it
+    has: the action's status topic, which the client does not subscribe to
+    (``/<robot>/chatter`` stays listed while the client's own subscription
+    to it lives)."""
+    return f"/{robot}/fibonacci/_action/status" not in {t.name for t in client.topics} and not any(
+        s.name.startswith(f"/{robot}/") for s in client.services
     )
-
-
-def serves_none_of(client: rmb.Client, robot: str) -> bool:
-    """No service of ``robot`` in the client's graph. (Its topic stays
-    listed while the client's own subscription to it lives.)"""
-    return not any(s.name.startswith(f"/{robot}/") for s in client.services)
 
 
 async def nodes_of(client: rmb.Client, robot: str) -> list[str]:
@@ -144,7 +144,7 @@ async def test_one_client_on_router_a_reaches_both_robots_and_follows_router_b(
             # router B goes: the robot behind it leaves the graph, alpha stays
             fleet.b.stop()
             await wait_until(
-                lambda: serves_none_of(client, "bravo"), 30.0, what="bravo to leave the graph"
+                lambda: offers_none_of(client, "bravo"), 30.0, what="bravo to leave the graph"
             )
             assert await nodes_of(client, "bravo") == []
             assert offers(client, "alpha")
