@@ -235,6 +235,52 @@ async def test_a_configuration_file_or_json5_text_carries_the_credentials(
     )
 
 
+async def test_a_secure_link_reconnects_with_its_credentials(pki: Pki, zenoh_domain: int) -> None:
+    """Mutual TLS and a password together; the router restarts: the client
+    reconnects (the probe and the session again, with the same security)
+    and its subscription delivers again."""
+    settings = {
+        **tls_settings(pki.server_cert, pki.server_key, client_ca_file=pki.ca),
+        **usrpwd_settings(pki.users),
+    }
+    security = rmb.ZenohSecurity(
+        ca_file=pki.ca,
+        cert_file=pki.client_cert,
+        key_file=pki.client_key,
+        user=USER,
+        password=PASSWORD,
+    )
+    resilient = dataclasses.replace(
+        opts(zenoh_domain, zenoh_security=security),
+        keepalive_interval=0.2,
+        keepalive_timeout=0.6,
+        reconnect=rmb.ReconnectPolicy(initial_delay=0.1, max_delay=0.3),
+    )
+    router = ZenohRouter(scheme="tls", settings=settings).start()
+    try:
+        async with (
+            rmb.connect(router.locator, options=resilient) as client,
+            client.subscribe("/secure", schema=STRING) as sub,
+        ):
+            router.stop()
+            await wait_until(lambda: client.status == "reconnecting", 10.0, what="reconnecting")
+            router.start()  # the same port, the same settings
+            await wait_until(lambda: client.status == "connected", 20.0, what="reconnected")
+            async with rmb.connect(
+                router.locator, options=opts(zenoh_domain, zenoh_security=security)
+            ) as talker:
+                await wait_until(
+                    lambda: any(t.name == "/secure" for t in talker.topics),
+                    10.0,
+                    what="resubscribed",
+                )
+                await talker.publish("/secure", STRING, {"data": "after"})
+                [got] = await take(sub, 1)
+                assert got.data.data == "after"
+    finally:
+        router.stop()
+
+
 # -- each failure names its cause -------------------------------------------------------------
 async def test_a_wrong_ca_fails_naming_the_certificate(
     tls_router: ZenohRouter, pki: Pki, zenoh_domain: int
