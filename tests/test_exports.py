@@ -358,7 +358,7 @@ def test_flow_knows_no_protocol(path: Path) -> None:
 # -- the house: layers, each importing only what stands below it ------------------------
 
 LAYERS: tuple[frozenset[str], ...] = (
-    frozenset({"_errors", "_types", "_slots", "_version", "_checks", "_loop"}),
+    frozenset({"_errors", "_types", "_slots", "_version", "_checks", "_loop", "_zenoh_options"}),
     frozenset({"wire", "codec", "interfaces", "flow", "transport", "_signals"}),
     frozenset({"_options", "lag"}),
     frozenset({"adapters"}),

@@ -111,6 +111,9 @@ def test_every_field_is_covered_here() -> None:
         # tests/test_interfaces.py
         "interface_paths",
         "ament_prefix_path",
+        # tests/test_zenoh_secure.py
+        "zenoh_security",
+        "zenoh_config",
         # below, and tests/test_error_contract.py
         "unknown_topic_warning",
     }

@@ -112,6 +112,20 @@ def test_tcp_endpoint_is_zenoh(protocol: str) -> None:
     assert parse_target("TCP/[::1]:1", protocol=protocol).host == "::1"
 
 
+@pytest.mark.parametrize("protocol", ["auto", "zenoh"])
+def test_tls_endpoint_is_a_secure_zenoh_link(protocol: str) -> None:
+    ep = parse_target("tls/robot.example:7448", protocol=protocol)
+    assert (ep.host, ep.port, ep.zenoh, ep.secure) == ("robot.example", 7448, True, True)
+    assert ep.zenoh_locator == "tls/robot.example:7448"
+    assert parse_target("TLS/[::1]", protocol=protocol).zenoh_locator == "tls/[::1]:7447"
+    assert parse_target("tcp/robot:1", protocol=protocol, secure=True).zenoh_locator == (
+        "tls/robot:1"
+    )
+    assert parse_target("tls/robot:1", secure=False).zenoh_locator == "tcp/robot:1"
+    with pytest.raises(ValueError, match="zenoh target"):
+        parse_target("tls/robot:1", protocol="rosbridge")
+
+
 def test_endpoint_url() -> None:
     assert parse_target("robot:9000").url == "ws://robot:9000/"
     assert parse_target("[::1]:9000").url == "ws://[::1]:9000/"
@@ -168,7 +182,6 @@ def test_endpoint_url() -> None:
         "://robot",
         "tcp://robot",
         "udp/robot:7447",
-        "tls/robot:7447",
         # credentials
         "user@robot",
         "ws://user:pw@robot",

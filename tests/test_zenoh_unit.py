@@ -247,8 +247,7 @@ def test_zenoh_targets() -> None:
     assert parse_target("[::1]:7000", protocol="zenoh").zenoh_locator == "tcp/[::1]:7000"
     with pytest.raises(ValueError, match="not a URL"):
         parse_target("ws://robot:9090", protocol="zenoh")
-    with pytest.raises(ValueError, match="secure"):
-        parse_target("robot", protocol="zenoh", secure=True)
+    assert parse_target("robot", protocol="zenoh", secure=True).zenoh_locator == ("tls/robot:7447")
 
 
 def test_domain_id_option(monkeypatch: pytest.MonkeyPatch) -> None:

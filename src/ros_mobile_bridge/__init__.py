@@ -74,6 +74,7 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._types import SubscriptionStats as SubscriptionStats
     from ._types import TopicEndpoints as TopicEndpoints
     from ._types import TopicInfo as TopicInfo
+    from ._zenoh_options import ZenohSecurity as ZenohSecurity
     from .codec import FieldDef as FieldDef
     from .codec._jsonable import jsonable as jsonable
     from .flow import Batches as Batches
@@ -108,6 +109,7 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "BreakerPolicy": ("._options", "BreakerPolicy"),
     "ClientOptions": ("._options", "ClientOptions"),
     "ReconnectPolicy": ("._options", "ReconnectPolicy"),
+    "ZenohSecurity": ("._zenoh_options", "ZenohSecurity"),
     "SignalScope": ("._signals", "SignalScope"),
     "cancel_on_signals": ("._signals", "cancel_on_signals"),
     "DEFAULT_PORTS": ("._types", "DEFAULT_PORTS"),
@@ -241,6 +243,7 @@ __all__ = [
     "ThrottleMode",
     "TopicEndpoints",
     "TopicInfo",
+    "ZenohSecurity",
     "__version__",
     "cancel_on_signals",
     "connect",

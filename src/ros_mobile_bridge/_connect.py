@@ -52,9 +52,10 @@ class Endpoint:
 
     @property
     def zenoh_locator(self) -> str:
-        """The zenoh locator (``tcp/host:port``), IPv6 hosts bracketed."""
+        """The zenoh locator (``tcp/host:port``, ``tls/host:port`` when
+        secure), IPv6 hosts bracketed."""
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"tcp/{host}:{self.port}"
+        return f"{'tls' if self.secure else 'tcp'}/{host}:{self.port}"
 
 
 def _parse_port(text: str, target: str) -> int:
@@ -92,9 +93,10 @@ def parse_target(
 ) -> Endpoint:
     """Parse ``target``: ``host``, ``host:port``, ``[v6]``, ``[v6]:port``, a URL
     (``ws://``, ``wss://``, ``http://``, ``https://``, with an optional path),
-    or ``tcp/host:port`` (zenoh). An explicit ``port`` argument wins over the
-    target's; a ``wss://`` or ``https://`` scheme implies ``secure=True``
-    unless ``secure`` is given. The default port is the protocol's
+    or ``tcp/host:port`` / ``tls/host:port`` (zenoh). An explicit ``port``
+    argument wins over the target's; a ``wss://``, ``https://`` or ``tls/``
+    scheme implies ``secure=True`` unless ``secure`` is given (over zenoh,
+    ``secure=True`` makes a ``tls/`` link). The default port is the protocol's
     (``DEFAULT_PORTS``; ``auto`` uses Foxglove's 8765).
 
     Raises ``ValueError`` (or ``TypeError``) for anything malformed."""
@@ -124,8 +126,9 @@ def parse_target(
         path = "/" + tail if sep else "/"
         text = rest
     elif text.lower().startswith(("tcp/", "udp/", "tls/")):
-        if not text.lower().startswith("tcp/"):
-            raise ValueError(f"only tcp/ zenoh endpoints are supported, got {target!r}")
+        if text.lower().startswith("udp/"):
+            raise ValueError(f"only tcp/ and tls/ zenoh endpoints are supported, got {target!r}")
+        scheme_secure = text.lower().startswith("tls/")
         text = text[4:]
         zenoh = True
     if "@" in text:
@@ -154,11 +157,11 @@ def parse_target(
         raise ValueError(f"IPv6 addresses need brackets: [{text}]:port (target {target!r})")
     host = _check_host(host_text, target)
     if zenoh and protocol not in ("auto", "zenoh"):
-        raise ValueError(f"a tcp/ endpoint is a zenoh target, but protocol={protocol!r}")
-    if protocol == "zenoh" and scheme_secure is not None:
-        raise ValueError(f"a zenoh target is tcp/host:port or a host, not a URL: {target!r}")
-    if protocol == "zenoh" and secure:
-        raise ValueError("secure=True is not supported over zenoh (tls/ endpoints are not yet)")
+        raise ValueError(f"a tcp/ or tls/ endpoint is a zenoh target, but protocol={protocol!r}")
+    if protocol == "zenoh" and not zenoh and scheme_secure is not None:
+        raise ValueError(
+            f"a zenoh target is tcp/host:port, tls/host:port or a host, not a URL: {target!r}"
+        )
     zenoh = zenoh or protocol == "zenoh"
     effective = "zenoh" if zenoh else protocol
     default = DEFAULT_PORTS.get(effective, DEFAULT_PORTS["foxglove-ws"])

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any, Final
 
 from ._checks import check_interface_paths
 from ._errors import ConnectError
+from ._zenoh_options import ZenohSecurity, check_zenoh_config, describe_zenoh_config
 from .flow._breaker import CircuitBreaker
 from .flow._throttle import THROTTLE_MODES, Bucket, ThrottleMode
 from .wire._rosbridge_auth import auth_fields
@@ -224,7 +225,8 @@ class ClientOptions:
 
     Every field has a safe default; invalid values raise ``ValueError`` or
     ``TypeError`` when the options are built, never later. ``repr`` shows
-    header names but never their values, nor a rosbridge ``auth`` MAC."""
+    header names but never their values, nor a rosbridge ``auth`` MAC, a
+    Zenoh password or Zenoh JSON5 configuration text."""
 
     connect_timeout: float = 10.0
     """Seconds for TCP connect, TLS, the WebSocket upgrade and the server's
@@ -367,6 +369,20 @@ class ClientOptions:
     zenoh_shared_memory: bool = False
     """Zenoh: let the session use shared memory with peers on the same host
     (off by default, as rmw_zenoh configures its sessions)."""
+    zenoh_security: ZenohSecurity | None = None
+    """Zenoh: TLS trust, a client certificate (mutual TLS) and user/password
+    authentication of the link (:class:`ZenohSecurity`); a ``tls/host:port``
+    target needs no more when the router's certificate is signed by a
+    public CA. Its password is never shown (docs/zenoh.md, "Secure links")."""
+    zenoh_config: str | os.PathLike[str] | None = None
+    """Zenoh: a Zenoh configuration to start from, as a file path (JSON5,
+    JSON or YAML, the file rmw_zenoh reads from ``ZENOH_SESSION_CONFIG_URI``)
+    or as JSON5 text (a ``str`` starting with ``{``). Read when the session
+    opens; the library then sets ``mode`` (client), ``connect/endpoints``
+    (the target), ``connect/timeout_ms``, scouting (off), shared memory
+    (:attr:`zenoh_shared_memory`) and each field of
+    :attr:`zenoh_security` that is set; every other key keeps the
+    configuration's value. ``repr`` shows JSON5 text by its length only."""
     zenoh_backlog: int = 8192
     """Zenoh: samples that may wait between zenoh's threads and the reader
     task. Past it (or past :attr:`zenoh_backlog_bytes`) a sample is dropped
@@ -441,6 +457,9 @@ class ClientOptions:
                 raise ValueError(f"domain_id must be 0-232, got {self.domain_id!r}")
         if not isinstance(self.zenoh_shared_memory, bool):
             raise TypeError("zenoh_shared_memory must be a bool")
+        if self.zenoh_security is not None and not isinstance(self.zenoh_security, ZenohSecurity):
+            raise TypeError("zenoh_security must be a ZenohSecurity or None")
+        check_zenoh_config(self.zenoh_config)
         _count("zenoh_backlog", self.zenoh_backlog, 1)
         _count("zenoh_backlog_bytes", self.zenoh_backlog_bytes, 1024)
         _positive("type_description_timeout", self.type_description_timeout)
@@ -493,6 +512,8 @@ class ClientOptions:
                 text = repr(tuple((name, _REDACTED) for name, _ in value))
             elif f.name == "rosbridge_auth" and callable(value):
                 text = "<callable>"  # a partial(make_auth, secret=...) would show the secret
+            elif f.name == "zenoh_config":
+                text = describe_zenoh_config(value)  # JSON5 text may hold a password
             else:
                 text = repr(value)
             parts.append(f"{f.name}={text}")

@@ -6,7 +6,13 @@ memory off, no plugins), prints ``READY <port>`` and serves until its stdin
 closes or it gets SIGTERM. :class:`ZenohRouter` starts one on a free port and
 stops it; the process also dies with its parent (``PR_SET_PDEATHSIG``).
 
-    python tests/peers/zenoh_router.py 7447
+A router may listen on ``tls/`` instead (``scheme="tls"``) and take any
+other zenoh configuration keys (``settings``: key -> JSON value, inserted
+after the defaults), e.g. its certificate and key, mutual TLS, a
+user/password dictionary file, or ``connect/endpoints`` to link to another
+router (:func:`tls_settings`, :func:`usrpwd_settings`).
+
+    python tests/peers/zenoh_router.py 7447 [tcp|tls] ['{"key": value, ...}']
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ import signal
 import subprocess
 import sys
 import threading
+from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
 
@@ -30,20 +37,48 @@ READY = "READY"
 START_TIMEOUT = 20.0
 
 
-def router_config(port: int) -> object:
-    """A zenoh router config: one loopback endpoint, nothing discovered."""
+def router_config(
+    port: int, scheme: str = "tcp", settings: Mapping[str, object] | None = None
+) -> object:
+    """A zenoh router config: one loopback endpoint (``scheme``: ``tcp`` or
+    ``tls``), nothing discovered, then ``settings`` (key -> JSON value)."""
     import zenoh
 
     config = zenoh.Config()
     config.insert_json5("mode", '"router"')
-    config.insert_json5("listen/endpoints", json.dumps([f"tcp/127.0.0.1:{port}"]))
+    config.insert_json5("listen/endpoints", json.dumps([f"{scheme}/127.0.0.1:{port}"]))
     config.insert_json5("scouting/multicast/enabled", "false")
     config.insert_json5("scouting/gossip/enabled", "false")
     config.insert_json5("transport/shared_memory/enabled", "false")
+    for key, value in (settings or {}).items():
+        config.insert_json5(key, json.dumps(value))
     return config
 
 
-def serve(port: int) -> None:
+def tls_settings(
+    cert_file: str, key_file: str, *, client_ca_file: str | None = None
+) -> dict[str, object]:
+    """Router settings for a ``tls/`` endpoint with this certificate and key;
+    with ``client_ca_file``, mutual TLS: a client must show a certificate
+    that CA signed."""
+    tls = "transport/link/tls/"
+    settings: dict[str, object] = {
+        tls + "listen_certificate": cert_file,
+        tls + "listen_private_key": key_file,
+    }
+    if client_ca_file is not None:
+        settings[tls + "enable_mtls"] = True
+        settings[tls + "root_ca_certificate"] = client_ca_file
+    return settings
+
+
+def usrpwd_settings(dictionary_file: str) -> dict[str, object]:
+    """Router settings requiring user/password authentication against
+    ``dictionary_file`` (``user:password`` lines)."""
+    return {"transport/auth/usrpwd/dictionary_file": dictionary_file}
+
+
+def serve(port: int, scheme: str = "tcp", settings: Mapping[str, object] | None = None) -> None:
     """Serve until stdin closes or SIGTERM / SIGINT."""
     import zenoh
 
@@ -51,7 +86,7 @@ def serve(port: int) -> None:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     threading.Thread(target=lambda: (sys.stdin.read(), stop.set()), daemon=True).start()
-    session = zenoh.open(router_config(port))
+    session = zenoh.open(router_config(port, scheme, settings))
     try:
         print(f"{READY} {port}", flush=True)
         stop.wait()
@@ -61,16 +96,26 @@ def serve(port: int) -> None:
 
 class ZenohRouter:
     """A router process on 127.0.0.1: ``.port``, ``.locator``; a context
-    manager (``stop()`` on exit, also when the test failed)."""
+    manager (``stop()`` on exit, also when the test failed). ``scheme``
+    (``tcp`` or ``tls``) and ``settings`` as in :func:`router_config`;
+    ``start()`` again after ``stop()`` runs it on the same port."""
 
-    def __init__(self, port: int | None = None) -> None:
+    def __init__(
+        self,
+        port: int | None = None,
+        *,
+        scheme: str = "tcp",
+        settings: Mapping[str, object] | None = None,
+    ) -> None:
         self.port = port or free_port()
-        self.locator = f"tcp/127.0.0.1:{self.port}"
+        self.scheme = scheme
+        self.settings = dict(settings or {})
+        self.locator = f"{scheme}/127.0.0.1:{self.port}"
         self._proc: subprocess.Popen[str] | None = None
 
     def start(self) -> ZenohRouter:
         proc = subprocess.Popen(
-            [sys.executable, __file__, str(self.port)],
+            [sys.executable, __file__, str(self.port), self.scheme, json.dumps(self.settings)],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
@@ -116,4 +161,8 @@ class ZenohRouter:
 
 
 if __name__ == "__main__":
-    serve(int(sys.argv[1]))
+    serve(
+        int(sys.argv[1]),
+        sys.argv[2] if len(sys.argv) > 2 else "tcp",
+        json.loads(sys.argv[3]) if len(sys.argv) > 3 else None,
+    )

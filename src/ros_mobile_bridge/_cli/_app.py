@@ -219,12 +219,12 @@ _LOOSE_HOST = re.compile(r"^(localhost|[\w-]+(\.[\w-]+)+|\[[0-9a-fA-F:.]+\])$")
 
 def _reads_as_address(text: str, *, loose: bool) -> bool:
     """Whether a first positional argument is the robot's address: a URL
-    (``ws://...``, ``tcp/host:port``), ``host:port``; and, before a ROS
+    (``ws://...``, ``tcp/host:port``, ``tls/host:port``), ``host:port``; and, before a ROS
     graph name (``loose``), also ``localhost``, a dotted name or an IP
     address (ROS names contain neither ``.`` nor ``:``)."""
     if text.startswith("/"):
         return False
-    if "://" in text or text.startswith(("tcp/", "udp/")) or _HOST_PORT.match(text):
+    if "://" in text or text.startswith(("tcp/", "tls/", "udp/")) or _HOST_PORT.match(text):
         return True
     return loose and bool(_LOOSE_HOST.match(text))
 
@@ -233,7 +233,11 @@ def _trailing_address(text: str) -> bool:
     """Whether an argument after a ROS name is the robot's address (``rmb
     echo /odom 127.0.0.1:8765``): a URL or ``host:port`` with a port. Types,
     names and YAML mappings never read so."""
-    return "://" in text or text.startswith(("tcp/", "udp/")) or bool(_STRICT_HOST_PORT.match(text))
+    return (
+        "://" in text
+        or text.startswith(("tcp/", "tls/", "udp/"))
+        or bool(_STRICT_HOST_PORT.match(text))
+    )
 
 
 def _address_at(verb: Verb, pos: list[str]) -> int | None:

@@ -5,6 +5,7 @@ the notice about a topic that has not appeared."""
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Iterable
 from contextlib import AbstractAsyncContextManager
@@ -34,8 +35,18 @@ NOTICE_AFTER_S = 3.0
 that the topic has not appeared."""
 
 
+ZENOH_CONFIG_ENV = "ZENOH_SESSION_CONFIG_URI"
+"""The Zenoh session configuration file rmw_zenoh reads; ``rmb`` reads it
+too (``ClientOptions.zenoh_config``), for a ``tls/`` router's CA, a client
+certificate or a user and password."""
+
+
 def open_robot(ns: argparse.Namespace, **options: Any) -> AbstractAsyncContextManager[Client]:
-    """``connect()`` to the robot the command line names."""
+    """``connect()`` to the robot the command line names (over Zenoh,
+    starting from ``$ZENOH_SESSION_CONFIG_URI`` when it is set)."""
+    config = os.environ.get(ZENOH_CONFIG_ENV, "").strip()
+    if config:
+        options.setdefault("zenoh_config", config)
     return _connect.connect(
         ns.url, protocol=ns.protocol, options=ClientOptions(connect_timeout=ns.timeout, **options)
     )

@@ -104,9 +104,11 @@ async def open_zenoh(
     endpoint: str, options: ClientOptions, previous: object = None
 ) -> ZenohAdapter:
     """Open a zenoh client session to the router at ``endpoint`` and read
-    the domain's graph, within ``options.connect_timeout``. ``ConnectError``
-    when the router is refused or unreachable. ``previous``: the adapter this
-    one replaces (a reconnect), whose record of the latched samples delivered
+    the domain's graph, within ``options.connect_timeout``, secured by
+    ``options.zenoh_security`` and ``options.zenoh_config``. ``ConnectError``
+    naming the cause when the router is refused or unreachable, or the
+    link's TLS or authentication fails. ``previous``: the adapter this one
+    replaces (a reconnect), whose record of the latched samples delivered
     carries over (``_zenoh_latched``)."""
     deadline = anyio.current_time() + options.connect_timeout
     session = await ZenohSession.open(
@@ -115,6 +117,9 @@ async def open_zenoh(
         shared_memory=options.zenoh_shared_memory,
         max_items=options.zenoh_backlog,
         max_bytes=options.zenoh_backlog_bytes,
+        security=options.zenoh_security,
+        config=options.zenoh_config,
+        logger=options.logger,
     )
     try:
         memory = previous.latched.memory if isinstance(previous, ZenohAdapter) else None

@@ -46,6 +46,8 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -55,7 +57,8 @@ import anyio
 import anyio.to_thread
 import sniffio
 
-from .._errors import ConnectError, NotSupportedError
+from .._errors import ConnectError
+from .._zenoh_options import ZenohSecurity
 from ..wire.rmw_zenoh import (
     InboxItem,
     LivelinessChange,
@@ -65,6 +68,13 @@ from ..wire.rmw_zenoh import (
     SampleData,
     Samples,
     SessionLost,
+)
+from ._zenoh_link import (
+    LinkSettings,
+    explain_open_failure,
+    load_zenoh,
+    probe_link,
+    session_config,
 )
 
 if TYPE_CHECKING:
@@ -77,7 +87,6 @@ __all__ = [
     "load_zenoh",
 ]
 
-_EXTRA_HINT: Final = "pip install 'ros-mobile-bridge[zenoh]'"
 DEFAULT_MAX_OPEN_QUERIES: Final = 256
 """Queries to this session's queryables that may wait unanswered at once."""
 PUMP_CHANNEL_CAPACITY: Final = 256
@@ -90,17 +99,6 @@ _PUMP_JOIN_TIMEOUT: Final = 5.0
 HEARTBEAT_PERIOD: Final = 0.5
 """Seconds between a reliable cached publisher's sporadic heartbeats (sent
 only when it published since the last): rmw_zenoh's 500 ms."""
-
-
-def load_zenoh() -> Any:
-    """The ``zenoh`` module, or ``NotSupportedError`` naming the extra."""
-    try:
-        import zenoh
-    except ImportError as exc:
-        raise NotSupportedError(
-            f"the zenoh transport needs eclipse-zenoh, which is not installed: {_EXTRA_HINT}"
-        ) from exc
-    return zenoh
 
 
 def _threadsafe_caller() -> Callable[[Callable[[], None]], None]:
@@ -249,19 +247,9 @@ class Inbox:
 
 
 def client_config(endpoint: str, *, connect_timeout: float, shared_memory: bool) -> Any:
-    """A ``zenoh.Config`` for a *client* session to one router: client mode
-    fails at once when the router is unreachable (peer mode would open
-    against a dead endpoint and lose early puts), no multicast scouting,
-    shared memory off unless asked (as rmw_zenoh configures its sessions)."""
-    z = load_zenoh()
-    config = z.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    config.insert_json5("connect/timeout_ms", json.dumps(max(int(connect_timeout * 1000), 1)))
-    config.insert_json5("scouting/multicast/enabled", "false")
-    config.insert_json5("scouting/gossip/enabled", "false")
-    config.insert_json5("transport/shared_memory/enabled", json.dumps(shared_memory))
-    return config
+    """A ``zenoh.Config`` for a *client* session to one router, with the
+    library's keys only (see :func:`~._zenoh_link.session_config`)."""
+    return session_config(endpoint, connect_timeout=connect_timeout, shared_memory=shared_memory)
 
 
 class ZenohSession:
@@ -306,29 +294,83 @@ class ZenohSession:
         max_items: int,
         max_bytes: int,
         max_open_queries: int = DEFAULT_MAX_OPEN_QUERIES,
+        security: ZenohSecurity | None = None,
+        config: str | os.PathLike[str] | None = None,
+        logger: logging.Logger | None = None,
     ) -> ZenohSession:
         """Open a client session to the router at ``endpoint``
-        (``tcp/host:port``). ``ConnectError`` when it is refused or
-        unreachable (client mode fails fast)."""
+        (``tcp/host:port`` or ``tls/host:port``), starting from the
+        configuration ``config`` (a file or JSON5 text) with ``security``
+        on top (:func:`~._zenoh_link.session_config`). A ``tls/`` link, or
+        one with user/password, is probed first (:func:`~._zenoh_link.probe_link`).
+        ``ConnectError`` naming the cause (refused, unreachable, an invalid
+        configuration, an untrusted certificate, a client certificate
+        missing or refused, a refused password), all within
+        ``connect_timeout``: client mode fails fast, and zenoh's retries of
+        a refused handshake end at ``connect/timeout_ms``. Each step is
+        logged at DEBUG on ``logger`` (never a password nor a key)."""
         if isinstance(max_open_queries, bool) or not (
             isinstance(max_open_queries, int) and max_open_queries >= 1
         ):
             raise ValueError(f"max_open_queries must be an int >= 1, got {max_open_queries!r}")
         z = load_zenoh()
-        config = client_config(
-            endpoint, connect_timeout=connect_timeout, shared_memory=shared_memory
+        deadline = anyio.current_time() + connect_timeout
+        built = session_config(
+            endpoint,
+            connect_timeout=connect_timeout,
+            shared_memory=shared_memory,
+            security=security,
+            source=config,
         )
+        link = LinkSettings.read(endpoint, built)
+        log = logger or logging.getLogger("ros_mobile_bridge")
+        log.debug(
+            "zenoh: opening a client session to %s (%s)",
+            endpoint,
+            link.describe() if link is not None else "an endpoint of zenoh's own form",
+        )
+        try:
+            return await cls._open_checked(
+                z, endpoint, built, link, deadline, connect_timeout, max_items, max_bytes,
+                max_open_queries,
+            )  # fmt: skip
+        except ConnectError as exc:
+            log.debug("zenoh: no session with %s: %s", endpoint, exc)
+            raise
+
+    @classmethod
+    async def _open_checked(
+        cls,
+        z: Any,
+        endpoint: str,
+        built: Any,
+        link: LinkSettings | None,
+        deadline: float,
+        connect_timeout: float,
+        max_items: int,
+        max_bytes: int,
+        max_open_queries: int,
+    ) -> ZenohSession:
+        """:meth:`open` after the configuration is built: the probe, then
+        zenoh's ``open`` with the time left."""
+        if link is not None and link.probed:
+            # bounded by its socket timeouts (the remaining time), not abandoned
+            await anyio.to_thread.run_sync(probe_link, link, endpoint, connect_timeout)
+            left = deadline - anyio.current_time()
+            if left <= 0:
+                raise ConnectError(f"zenoh: no session with {endpoint} within the timeout")
+            built.insert_json5("connect/timeout_ms", json.dumps(max(int(left * 1000), 1)))
         inbox = Inbox(max_items, max_bytes)
         try:
             # zenoh.open blocks (it connects); it is bounded by connect/timeout_ms.
             # Not abandoned on cancellation: a session opened by an abandoned
             # thread would never be closed.
             with anyio.fail_after(connect_timeout + 5.0):
-                session = await anyio.to_thread.run_sync(z.open, config)
+                session = await anyio.to_thread.run_sync(z.open, built)
         except TimeoutError as exc:
             raise ConnectError(f"zenoh: no session with {endpoint} within the timeout") from exc
         except z.ZError as exc:
-            raise ConnectError(f"zenoh: cannot reach a router at {endpoint}: {exc}") from exc
+            raise ConnectError(explain_open_failure(link, endpoint, str(exc))) from exc
         return cls(session, inbox, max_open_queries=max_open_queries)
 
     @property
