@@ -253,7 +253,7 @@ async def test_samples_held_during_a_fetch_are_bounded_and_counted(
         got = await first_messages(client, 8)
         overflow = client.rejections.get("description_hold_overflow", 0)
         assert overflow >= 10  # 50 Hz for 1 s, 5 held
-        assert set(client.rejections) == {"description_hold_overflow"}
+        assert set(client.rejections) == {"description_hold_overflow", "type_description_timeout"}
     assert all(isinstance(m.data, memoryview) for m in got)
     stamps = [m.log_time_ns for m in got]  # the publisher's stamps
     assert None not in stamps
@@ -297,3 +297,111 @@ async def test_our_node_describes_the_types_it_publishes_to_an_sdk_client(
     assert "not RIHS01_000" in answers[1]["failure_reason"]
     assert answers[2]["successful"] is False
     assert "does not publish" in answers[2]["failure_reason"]
+
+
+# -- more than one node: each is asked in turn ---------------------------------------------
+BAD_MODES = {
+    "--describe-silent": "type_description_timeout",
+    "--describe-refuse": "type_description_refused",
+    "--describe-wrong": "type_hash_mismatch",
+}
+
+
+def named_talker(sdk: Callable[..., SdkNode], node: str, flag: str) -> SdkNode:
+    return talker(sdk, NESTED, NESTED_VALUES, flag, "--node", node)
+
+
+async def wait_for_describers(client: rmb.Client, *nodes: str) -> None:
+    """Until every node's get_type_description and the talkers' topic are in the graph."""
+    wanted = {f"/{node}/get_type_description" for node in nodes}
+    await wait_until(
+        lambda: (
+            wanted <= {s.name for s in client.services}
+            and any(t.name == "/described" for t in client.topics)
+        ),
+        timeout=15.0,
+        what="the describing nodes",
+    )
+
+
+@pytest.mark.parametrize("flag", sorted(BAD_MODES))
+async def test_when_the_first_node_fails_the_next_one_is_asked(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int, flag: str
+) -> None:
+    """Two nodes publish the type; the one asked first (publishers are asked
+    in the order of their node names, so ``sdk_a_bad`` before ``sdk_b_good``)
+    times out, refuses or answers another hash; the other is then asked and
+    the messages decode. The failure is counted by kind and named per node."""
+    bad = named_talker(sdk, "sdk_a_bad", flag)
+    good = named_talker(sdk, "sdk_b_good", "--describe")
+    opts = options(zenoh_domain, type_description_timeout=1.0)
+    async with rmb.connect(zenoh_router.locator, options=opts) as client:
+        await wait_for_describers(client, "sdk_a_bad", "sdk_b_good")
+        got = await first_messages(client, 5)
+        rejections = client.rejections
+    assert [m.decode_error for m in got] == [None] * 5
+    assert got[0].data.basic_types_value.int32_value == -42
+    assert rejections == {BAD_MODES[flag]: 1}  # the bad node was asked, first, once
+    assert good.described() == [NESTED]
+    if flag != "--describe-silent":  # a silent node never says it was asked
+        assert bad.described() == [NESTED]
+
+
+async def test_when_every_node_fails_the_error_names_each_and_why(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int
+) -> None:
+    for node, flag in (
+        ("sdk_a_silent", "--describe-silent"),
+        ("sdk_b_refuse", "--describe-refuse"),
+        ("sdk_c_wrong", "--describe-wrong"),
+    ):
+        named_talker(sdk, node, flag)
+    opts = options(zenoh_domain, type_description_timeout=1.0)
+    async with rmb.connect(zenoh_router.locator, options=opts) as client:
+        await wait_for_describers(client, "sdk_a_silent", "sdk_b_refuse", "sdk_c_wrong")
+        with anyio.fail_after(10), pytest.raises(rmb.SchemaError) as caught:
+            await client.fetch_definition(NESTED)
+        assert client.rejections == {
+            "type_description_timeout": 1,
+            "type_description_refused": 1,
+            "type_hash_mismatch": 1,
+        }
+    error = caught.value
+    assert list(error.failures) == ["/sdk_a_silent", "/sdk_b_refuse", "/sdk_c_wrong"]
+    assert "within 1 s (type_description_timeout)" in error.failures["/sdk_a_silent"]
+    assert "sdk_b_refuse refuses to describe" in error.failures["/sdk_b_refuse"]
+    assert "described another" in error.failures["/sdk_c_wrong"]
+    text = str(error)
+    for node, why in error.failures.items():
+        assert f"node {node} {why}" in text
+    assert "Client.register_type" in text
+
+
+async def test_a_type_no_node_described_is_fetched_again_when_a_new_node_uses_it(
+    sdk: Callable[..., SdkNode], zenoh_router: Any, zenoh_domain: int
+) -> None:
+    """The only node answers another hash: messages arrive raw. A second,
+    honest node starts publishing the type: it is asked (the first is not
+    asked again) and the messages decode from then on."""
+    bad = named_talker(sdk, "sdk_a_wrong", "--describe-wrong")
+    async with rmb.connect(zenoh_router.locator, options=options(zenoh_domain)) as client:
+        await wait_for_describers(client, "sdk_a_wrong")
+        async with client.subscribe("/described") as sub:
+            with anyio.fail_after(20):
+                first = await anext(aiter(sub))
+                assert isinstance(first.data, memoryview)
+                assert client.rejections == {"type_hash_mismatch": 1}
+                with pytest.raises(rmb.SchemaError) as caught:
+                    await client.fetch_definition(NESTED)
+                assert list(caught.value.failures) == ["/sdk_a_wrong"]
+                good = await anyio.to_thread.run_sync(
+                    lambda: named_talker(sdk, "sdk_b_good", "--describe")
+                )
+                async for message in sub:
+                    if message.decode_error is None:
+                        break
+        assert message.data.basic_types_value.int32_value == -42
+        assert await client.fetch_definition(NESTED) is True
+        assert client.rejections == {"type_hash_mismatch": 1}
+    assert bad.described() == [NESTED]
+    assert good.described() == [NESTED]

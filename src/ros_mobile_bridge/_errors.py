@@ -11,6 +11,7 @@ from typing import Any
 
 __all__ = [
     "ActionGoalError",
+    "ActionGoalLost",
     "AssetError",
     "ConnectError",
     "DecodeError",
@@ -23,6 +24,7 @@ __all__ = [
     "SchemaError",
     "ServiceError",
     "ServiceTimeout",
+    "connection_lost",
 ]
 
 
@@ -54,7 +56,19 @@ class ProtocolMismatchError(ConnectError):
 
 
 class NotConnected(RosBridgeError):
-    """The operation needs a live connection and there is none (closed, or lost)."""
+    """The operation needs a live connection and there is none (closed, or lost).
+
+    A service call, action goal or parameter operation in flight when the
+    connection is lost raises it at the loss, saying ``"the connection was
+    lost: <why>"``, whether or not the client then reconnects (the request
+    was lost with the connection; send it again once ``status`` is
+    ``"connected"``)."""
+
+
+def connection_lost(why: object) -> NotConnected:
+    """The :class:`NotConnected` every request cut off by a lost connection
+    raises: ``"the connection was lost: <why>"``."""
+    return NotConnected(f"the connection was lost: {why}")
 
 
 class NotSupportedError(RosBridgeError):
@@ -101,12 +115,33 @@ class ActionGoalError(RosBridgeError):
         super().__init__(f"action {action!r} goal failed: {reason}")
 
 
+class ActionGoalLost(ActionGoalError, NotConnected):
+    """An action goal cut off by a lost connection: both an
+    :class:`ActionGoalError` (``reason`` ``"disconnected"``) and a
+    :class:`NotConnected`; its message says the connection was lost and
+    why. The goal may still run on the robot: this client can no longer
+    follow or cancel it."""
+
+    def __init__(self, action: str, error: RosBridgeError) -> None:
+        super().__init__(action, "disconnected")
+        self.args = (f"action {action!r} goal failed: {error}",)
+
+
 class DecodeError(RosBridgeError):
     """A payload could not be decoded or encoded with its schema."""
 
 
 class SchemaError(DecodeError):
-    """A schema definition could not be parsed, or a type name is unknown."""
+    """A schema definition could not be parsed, or a type name is unknown.
+
+    ``failures`` maps each node that was asked for the type's description
+    (over Zenoh, REP-2011 ``get_type_description``) and did not give it to
+    why (no answer in time, a refusal with its reason, a description whose
+    hash differs); empty when no node was asked."""
+
+    def __init__(self, *args: object, failures: Mapping[str, str] | None = None) -> None:
+        super().__init__(*args)
+        self.failures: dict[str, str] = dict(failures or {})
 
 
 class MessageError(DecodeError, ValueError):

@@ -12,7 +12,8 @@ talker's, a transient-local one asks the publishers' caches at start),
 ``service``
 (``std_srvs/srv/SetBool``: success = data, message "set to <data>"; any
 other ``--type`` answers each request with the response fields of the same
-name copied from it), ``add_two_ints`` (``example_interfaces/srv/AddTwoInts``:
+name copied from it; with ``--hang`` it takes each request, prints
+``{"request": "held"}`` and never answers), ``add_two_ints`` (``example_interfaces/srv/AddTwoInts``:
 sum = a + b) and ``params`` (node ``/sdk_params``: its ``get_parameters``,
 ``set_parameters`` and ``list_parameters`` services over three parameters,
 and a ``rcl_interfaces/msg/ParameterEvent`` on ``/parameter_events`` for every
@@ -36,7 +37,8 @@ official ``share/<pkg>/<kind>/<Name>.json`` (its ``type_description_msg``)
 with the ``.msg``/``.srv`` texts as ``type_sources``, and print ``DESCRIBED
 <type>`` per answer. ``--describe-wrong`` answers with the main type's first
 field renamed (so the hash disagrees); ``--describe-silent`` declares the
-service and never answers.
+service and never answers; ``--describe-refuse`` answers ``successful:
+false`` with a ``failure_reason`` (and prints ``DESCRIBED`` too).
 
 The sdk looks up ``.msg`` / ``.srv`` files in a directory laid out as
 ``<pkg>/<msg|srv>/<Name>.<ext>`` and, when one is missing, clones the
@@ -118,10 +120,12 @@ def main(argv: list[str]) -> int:
         help="talker, listener: its QoS, in rmw_zenoh's token form (default: the sdk's)",
     )
     parser.add_argument("--node", default="", help="node name (default per role)")
+    parser.add_argument("--hang", action="store_true", help="service: never answer")
     describe = parser.add_mutually_exclusive_group()
     describe.add_argument("--describe", action="store_true")
     describe.add_argument("--describe-wrong", action="store_true")
     describe.add_argument("--describe-silent", action="store_true")
+    describe.add_argument("--describe-refuse", action="store_true")
     parser.add_argument("--step", type=float, default=0.1, help="action: seconds per feedback")
     parser.add_argument(
         "--drop-results", action="store_true", help="action: end get_result queries unanswered"
@@ -129,7 +133,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--requests", default="[]", help="client: a JSON list of requests")
     parser.add_argument("--timeout", type=float, default=10.0, help="client: per call")
     args = parser.parse_args(argv)
-    describing = args.describe or args.describe_wrong or args.describe_silent
+    describing = (
+        args.describe or args.describe_wrong or args.describe_silent or args.describe_refuse
+    )
 
     host, port = args.router.removeprefix("tcp/").rsplit(":", 1)
     from zenoh_ros2_sdk import message_registry
@@ -217,10 +223,13 @@ def main(argv: list[str]) -> int:
             handler,
             node_name=node,
             type_hash=official_hash(args, srv_type),
+            mode="queue" if args.hang else "callback",  # queued requests are never taken
             **where,
         )
         holder.append(server)
         closers.append(server)
+        if args.hang:
+            threading.Thread(target=_take_and_hold, args=(server, stop), daemon=True).start()
         store = sdk.ZenohSession.get_instance(where["router_ip"], where["router_port"]).store
         alias_nested_types(store, srv_type.split("/")[0])
         if describing:
@@ -257,6 +266,16 @@ def main(argv: list[str]) -> int:
     for closer in closers:
         closer.close()
     return 0
+
+
+def _take_and_hold(server: Any, stop: threading.Event) -> None:
+    """``--hang``: take each request, print ``{"request": "held"}``, never answer."""
+    while not stop.is_set():
+        try:
+            server.take_request(timeout=0.2)
+        except TimeoutError:
+            continue
+        emit(json.dumps({"request": "held"}))
 
 
 IMU: Final = "sensor_msgs/msg/Imu"
@@ -597,6 +616,9 @@ def _describer(sdk: Any, where: dict[str, Any], node: str, args: Any) -> Any:
         path = share / f"{request.type_name}.json"
         if not path.is_file():
             return _failure(response, store, f"unknown type {request.type_name}")
+        if args.describe_refuse:
+            emit("DESCRIBED", request.type_name)
+            return _failure(response, store, f"{node} refuses to describe {request.type_name}")
         document = json.loads(path.read_text())
         description = document["type_description_msg"]
         if args.describe_wrong:

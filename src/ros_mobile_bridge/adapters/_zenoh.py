@@ -244,6 +244,8 @@ class ZenohAdapter:
                 self._declare_subscription_token(sub, topics[topic])
         if self._subs:
             self.latched.on_graph()  # history of the transient-local publishers that came
+        for retried in self.descriptions.retry_failed():  # a new node to ask
+            self._samples.reconsider(*retried)
 
     @property
     def topics(self) -> list[TopicInfo]:
@@ -563,7 +565,7 @@ class ZenohAdapter:
     def fail_pending(self, error: Exception) -> None:
         assert isinstance(error, RosBridgeError)
         self._queries.fail_all(error)
-        self.actions.fail_all()
+        self.actions.fail_all(error)
 
     async def keepalive(self) -> None:
         """Watch the router: zenoh's client session reconnects by itself, but

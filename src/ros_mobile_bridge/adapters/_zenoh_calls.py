@@ -22,7 +22,15 @@ from typing import Any
 
 import anyio
 
-from .._errors import ActionGoalError, DecodeError, RosBridgeError, SchemaError, ServiceError
+from .._errors import (
+    ActionGoalError,
+    DecodeError,
+    RosBridgeError,
+    SchemaError,
+    ServiceError,
+    ServiceTimeout,
+    connection_lost,
+)
 from ..codec import CodecRegistry
 from ..flow import PendingRequests
 from ..wire import rmw_zenoh as rz
@@ -34,6 +42,17 @@ __all__ = ["Replies", "ZenohQueries"]
 
 Replies = list[tuple[bool, bytes, bytes | None]]
 """A query's replies: (ok, payload, attachment) each."""
+
+
+_ZENOH_TIMEOUT = "Timeout"
+"""The error reply zenoh gives a query when its deadline passes."""
+_DEADLINE_SHARE = 0.9
+"""A query that ended with no reply after this share of its timeout timed
+out (zenoh's timer and ours do not tick together)."""
+
+_ROUTER_GRACE = 0.5
+"""Seconds :meth:`ZenohQueries._router_gone` gives the session to see its
+router's link close."""
 
 
 async def _noop() -> None:
@@ -95,7 +114,12 @@ class ZenohQueries:
 
     async def request(self, service: str, srv_type: str, request: Any, timeout: float) -> Any:
         """Call ``service`` (of type ``srv_type``) and return the decoded
-        response; ``ServiceError`` with the reason otherwise."""
+        response; ``ServiceError`` with the reason otherwise:
+        ``ServiceTimeout`` when no reply came within ``timeout``,
+        ``NotConnected`` (the connection was lost) when the query ended
+        early because the router went away, a ``ServiceError`` saying no
+        server answered when it ended early for another reason (the server
+        left)."""
         codecs = self._node.codecs
         req_name, res_name = CodecRegistry.service_type_names(srv_type)
         try:
@@ -105,16 +129,42 @@ class ZenohQueries:
             raise ServiceError(service, f"no definition of {srv_type}: {exc}") from exc
         self.check_pending(service)
         query_id = self.start_query(service, srv_type, payload, timeout)
+        started = anyio.current_time()
         replies = await self._calls.request(query_id, _noop)
         for ok, body, _attachment in replies:
             if not ok:
                 text = body.decode("utf-8", "replace")
+                if text == _ZENOH_TIMEOUT:
+                    break  # zenoh's own word for the query's deadline
                 raise ServiceError(service, f"the server replied with an error: {text}")
             try:
                 return decode(memoryview(body))
             except DecodeError as exc:
                 raise ServiceError(service, f"the response does not decode: {exc}") from exc
-        raise ServiceError(service, f"no reply within {timeout:g} s")
+        elapsed = anyio.current_time() - started
+        if elapsed >= timeout * _DEADLINE_SHARE:
+            raise ServiceTimeout(service, timeout)
+        # the query ended early with no reply: its route is gone
+        if await self._router_gone():
+            raise connection_lost(f"zenoh: the router went away during the call to {service}")
+        raise ServiceError(
+            service, f"no server answered (the query ended after {elapsed:.2g} s with no reply)"
+        )
+
+    async def _router_gone(self) -> bool:
+        """Whether the session lost its router: asked when a query ended
+        early with no reply. The session may learn that its link closed a
+        moment after the query ended: asked again for up to
+        :data:`_ROUTER_GRACE` seconds."""
+        deadline = anyio.current_time() + _ROUTER_GRACE
+        while True:
+            if self._node.lost is not None or self._session.closed:
+                return True
+            if not await anyio.to_thread.run_sync(self._session.routers):
+                return True
+            if anyio.current_time() >= deadline:
+                return False
+            await anyio.sleep(_ROUTER_GRACE / 10)
 
     async def round_trip(self, timeout: float) -> bool:
         """A liveliness query for our own node token, answered by the router:

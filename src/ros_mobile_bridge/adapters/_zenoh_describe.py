@@ -15,9 +15,17 @@ sources), hashes the answer and compares with the key's hash:
   connection asks again;
 * a mismatch is refused, never decoded: a ``"type_hash_mismatch"``
   rejection, logged;
-* no answer within ``options.type_description_timeout``, no node to ask, or
-  a failed answer: a :class:`SchemaError` naming the type, the node and how
-  to register the definition by hand.
+* a node that does not answer within ``options.type_description_timeout``,
+  refuses (``successful: false``, or an error reply), or answers a
+  description whose hash differs (or that does not parse) is one failure,
+  counted in the rejections by its kind (``type_description_timeout``,
+  ``type_description_refused``, ``type_hash_mismatch``,
+  ``type_description_invalid``) and logged with the node's name; the next
+  node using the type is asked, publishers and servers first, until one
+  answers with the right hash;
+* when every node failed (or none serves ``get_type_description``): a
+  :class:`SchemaError` naming the type, every node asked and why (its
+  ``failures``), and how to register the definition by hand.
 
 The other way round, once this client publishes, its node answers
 ``/<our node>/get_type_description`` for the types it publishes, as a
@@ -26,9 +34,12 @@ definitions it encodes with).
 
 Never more than one fetch per (type, hash) is in flight; everyone who needs
 it waits on that one. A fetch runs in a task of the reader's task group, so
-it ends with the connection. Its outcome (success or error) is kept for the
-connection's life: a type that could not be learnt is not asked for again
-on this connection.
+it ends with the connection. A success is kept for the connection's life. A
+failure is kept until the graph shows a node using the type that was not
+asked yet (a new node, or one that left and came back, or the first that
+serves ``get_type_description``): :meth:`ZenohDescriptions.retry_failed`
+then starts a fetch that asks the new nodes only, and its error names every
+node asked for the type on this connection that is still in the graph.
 """
 
 from __future__ import annotations
@@ -41,7 +52,7 @@ from typing import Any, Final
 import anyio
 from anyio.abc import TaskGroup
 
-from .._errors import SchemaError, ServiceError
+from .._errors import SchemaError, ServiceError, ServiceTimeout
 from ..codec import (
     DESCRIPTION_CACHE,
     CodecRegistry,
@@ -71,12 +82,14 @@ _BY_HAND: Final = (
 @dataclass(slots=True)
 class _Fetch:
     """One (type, hash) being learnt: ``done`` is set once ``error`` (None
-    on success) is final."""
+    on success) is final. ``failures``: node -> why it did not describe
+    the type (the nodes asked, in the order asked)."""
 
     type_name: str
     type_hash: str
     done: anyio.Event = field(default_factory=anyio.Event)
     error: SchemaError | None = None
+    failures: dict[str, str] = field(default_factory=dict)
 
 
 class ZenohDescriptions:
@@ -217,9 +230,32 @@ class ZenohDescriptions:
         await self.ensure_described(*announced)
         return True
 
+    def retry_failed(self) -> list[tuple[str, str]]:
+        """After a change of the graph: start a new fetch of each failed
+        (type, hash) that a node not asked yet now uses (the nodes that
+        failed and are still in the graph are not asked again); returns
+        the (type, hash) pairs fetched again. Needs the reader's task
+        group (none while it does not run)."""
+        group = self.group
+        if group is None:
+            return []
+        retried: list[tuple[str, str]] = []
+        for key, fetch in list(self._fetches.items()):
+            if not fetch.done.is_set() or fetch.error is None:
+                continue
+            nodes = [_node_of(s) for s in self.describers(*key)]
+            if all(node in fetch.failures for node in nodes):
+                continue
+            again = self._fetches[key] = _Fetch(*key)
+            # a node that left the graph may come back as another process
+            again.failures = {n: why for n, why in fetch.failures.items() if n in nodes}
+            group.start_soon(self._run_fetch, again)
+            retried.append(key)
+        return retried
+
     async def _run_fetch(self, fetch: _Fetch) -> None:
         try:
-            await self._fetch(fetch.type_name, fetch.type_hash)
+            await self._fetch(fetch)
         except SchemaError as exc:
             fetch.error = exc
             self._log.warning("%s", truncate_for_log(str(exc)))
@@ -232,17 +268,41 @@ class ZenohDescriptions:
             fetch.done.set()
             self._on_described(fetch.type_name, fetch.type_hash)
 
-    async def _fetch(self, type_name: str, type_hash: str) -> None:
+    async def _fetch(self, fetch: _Fetch) -> None:
+        """Ask each node using (type, hash) not asked yet, in turn, until
+        one describes it with that hash (see the module docstring)."""
+        type_name, type_hash = fetch.type_name, fetch.type_hash
         if self.knows(type_name, type_hash):
             return
-        services = self.describers(type_name, type_hash)
-        if not services:
+        services = [
+            s
+            for s in self.describers(type_name, type_hash)
+            if _node_of(s) not in fetch.failures
+        ]
+        if not services and not fetch.failures:
             raise SchemaError(
                 f"no definition of {type_name} ({type_hash}) and no node using it serves "
                 f"get_type_description to ask; {_BY_HAND}"
             )
-        service = services[0]
-        node = service.removesuffix(_SERVICE_SUFFIX)
+        for service in services:
+            node = _node_of(service)
+            failure = await self._ask(service, node, type_name, type_hash)
+            if failure is None:
+                return
+            kind, why = failure
+            fetch.failures[node] = why
+            self._events.reject(kind, f"{type_name}: node {node} {why}")
+        asked = "; ".join(f"node {node} {why}" for node, why in fetch.failures.items())
+        raise SchemaError(
+            f"no definition of {type_name} ({type_hash}): {asked}; {_BY_HAND}",
+            failures=fetch.failures,
+        )
+
+    async def _ask(
+        self, service: str, node: str, type_name: str, type_hash: str
+    ) -> tuple[str, str] | None:
+        """Ask one node; None once its description is registered, else the
+        failure's kind (a rejection reason) and why."""
         timeout = self._options.type_description_timeout
         self.description_requests += 1
         try:
@@ -252,17 +312,16 @@ class ZenohDescriptions:
                 {"type_name": type_name, "type_hash": type_hash, "include_type_sources": True},
                 timeout,
             )
+        except ServiceTimeout as exc:
+            return "type_description_timeout", (
+                f"did not describe it within {timeout:g} s (type_description_timeout): "
+                f"{exc.reason}"
+            )
         except ServiceError as exc:
-            raise SchemaError(
-                f"no definition of {type_name} ({type_hash}): node {node} did not describe it "
-                f"within {timeout:g} s (type_description_timeout): {exc.reason}; {_BY_HAND}"
-            ) from exc
+            return "type_description_refused", f"could not describe it: {exc.reason}"
         if not _field(answer, "successful"):
             reason = _field(answer, "failure_reason") or "no reason given"
-            raise SchemaError(
-                f"no definition of {type_name} ({type_hash}): node {node} could not describe "
-                f"it: {reason}; {_BY_HAND}"
-            )
+            return "type_description_refused", f"could not describe it: {reason}"
         try:
             described = describe(
                 _field(answer, "type_description"),
@@ -271,14 +330,16 @@ class ZenohDescriptions:
                 max_fields=self._options.max_schema_fields,
             )
         except HashMismatch as exc:
-            self._events.reject("type_hash_mismatch", f"node {node}: {exc}")
-            raise SchemaError(f"node {node} described another {type_name}: {exc}") from exc
+            return "type_hash_mismatch", f"described another {type_name}: {exc}"
+        except SchemaError as exc:
+            return "type_description_invalid", f"sent a description that does not parse: {exc}"
         if described.type_name != type_name:
-            raise SchemaError(
-                f"node {node} described {described.type_name} when asked for {type_name}"
+            return "type_description_invalid", (
+                f"described {described.type_name} when asked for {type_name}"
             )
         await anyio.to_thread.run_sync(self._register_described, described)
         DESCRIPTION_CACHE.remember(described)
+        return None
 
     def _register_described(self, described: DescribedTypes) -> None:
         """Register in this connection's registry and build the codecs the
@@ -356,6 +417,11 @@ class _DescriptionServer:
 
     def on_service_failed(self, error: Exception) -> None:
         self.log.warning("%s: %s", self.name, error)
+
+
+def _node_of(service: str) -> str:
+    """The node of its ``get_type_description`` service's name."""
+    return service.removesuffix(_SERVICE_SUFFIX)
 
 
 def _refusal(reason: str) -> dict[str, Any]:

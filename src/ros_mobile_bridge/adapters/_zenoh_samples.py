@@ -200,6 +200,21 @@ class ZenohSamples:
             return
         held.samples.append((key, payload, attachment))
 
+    def reconsider(self, type_name: str, type_hash: str) -> None:
+        """(type, hash) is being fetched again: the keys of that type whose
+        samples went raw choose their decoder again at their next sample
+        (held, then decoded once the fetch succeeds)."""
+        for sub in self._subs.values():
+            for key, (_schema, decode) in list(sub.keys.items()):
+                if decode is not None:
+                    continue
+                try:
+                    parsed = rz.parse_key(key)
+                except rz.MalformedKey:
+                    continue
+                if (parsed.type_name, parsed.type_hash) == (type_name, type_hash):
+                    del sub.keys[key]
+
     def release(self, type_name: str, type_hash: str) -> None:
         """A fetch of (type, hash) ended: the samples held for it are decoded
         (or delivered raw, when it failed), in order, and handed up."""
