@@ -148,6 +148,13 @@ class ZenohRouter:
 
         return end_process(proc)
 
+    def kill(self) -> int | None:
+        """SIGKILL the router: it dies at once, closing no session first."""
+        proc = self._proc
+        if proc is not None and proc.poll() is None:
+            proc.kill()
+        return self.stop()
+
     def __enter__(self) -> ZenohRouter:
         return self.start()
 

@@ -11,7 +11,7 @@ from typing import Any, Final, Generic, Literal
 
 import anyio
 
-from .._errors import ActionGoalError
+from .._errors import ActionGoalError, ActionGoalLost, RosBridgeError
 from .._types import ActionOutcome, FeedbackT, GoalState, ResultT
 from ..flow import Watchable, Watcher
 
@@ -121,6 +121,14 @@ class ActionGoal(Generic[ResultT, FeedbackT]):
             return
         self._fail("failed", reason)
         self._accepted.set()  # waiters wake and see the error
+
+    def on_lost(self, error: RosBridgeError) -> None:
+        if self.done:
+            return
+        self._state = "failed"
+        self._error = ActionGoalLost(self.action, error)
+        self._finish()
+        self._accepted.set()
 
     def _accept(self) -> None:
         if self._state == "pending":

@@ -17,7 +17,14 @@ import anyio
 import anyio.abc
 
 from .._checks import check_timeout, nearest_hint
-from .._errors import ConnectError, DecodeError, NotConnected, NotSupportedError, ServiceTimeout
+from .._errors import (
+    ConnectError,
+    DecodeError,
+    NotConnected,
+    NotSupportedError,
+    ServiceTimeout,
+    connection_lost,
+)
 from .._loop._wakeup import serve_timers
 from .._options import ClientOptions
 from .._types import ServiceInfo, Status, TopicInfo
@@ -274,11 +281,14 @@ class Connection:
                 return
 
     def _disconnected(self, error: ConnectError) -> None:
-        """The connection is gone: fail what waits on it, keep what can be
-        restored (subscriptions, advertisements, parameter watches)."""
+        """The connection is gone: fail what waits on it (every call, goal
+        and parameter operation in flight, at once, with ``NotConnected``
+        "the connection was lost: ...", whatever the reconnect policy: the
+        request was lost with the connection), keep what can be restored
+        (subscriptions, advertisements, parameter watches)."""
         self._log.warning("connection lost: %s", error)
         self.last_error = error
-        self.adapter.fail_pending(NotConnected(f"disconnected: {error}"))
+        self.adapter.fail_pending(connection_lost(error))
         self.outbound.adapter = None
         dropped = self.outbound.outbox.clear()
         self.outbound.settle_all(error)
@@ -294,7 +304,7 @@ class Connection:
     def _give_up(self, error: ConnectError) -> None:
         self.last_error = error
         self.status.set("error")
-        lost = NotConnected(f"disconnected: {error}")
+        lost = connection_lost(error)
         self.router.fail_all(lost)
         self.served.fail_all(lost)
 

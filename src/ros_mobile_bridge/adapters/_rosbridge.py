@@ -804,7 +804,7 @@ class RosbridgeAdapter:
     def fail_pending(self, error: Exception) -> None:
         assert isinstance(error, RosBridgeError)
         self._calls.pending.fail_all(error)
-        self._actions.fail_all()
+        self._actions.fail_all(error)
 
     def publishing(self) -> Mapping[str, str]:
         return self._pubs.schemas()

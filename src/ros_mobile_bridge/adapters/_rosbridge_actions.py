@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from .._errors import ActionGoalError, DecodeError, ServiceError
+from .._errors import ActionGoalError, DecodeError, RosBridgeError, ServiceError
 from ..codec import CodecRegistry
 from ..transport import WebSocket
 from ..wire import rosbridge as rb
@@ -110,9 +110,10 @@ class RosbridgeActions:
         entry[2].on_failed(message)
         return True
 
-    def fail_all(self) -> None:
-        """The connection is lost: every goal fails as ``"disconnected"``."""
+    def fail_all(self, error: RosBridgeError) -> None:
+        """The connection is lost (``error`` says how): every goal fails
+        (``ActionGoalLost``, reason ``"disconnected"``)."""
         goals = list(self._goals.values())
         self._goals.clear()  # (in place: the calls count this dict)
         for _action, _base, events in goals:
-            events.on_failed("disconnected")
+            events.on_lost(error)

@@ -79,7 +79,10 @@ class GoalEvents(Protocol):
         """The goal ended: ``status`` is the ``GoalStatus`` code if known."""
 
     def on_failed(self, reason: str) -> None:
-        """The goal is lost (refused by the server, or the connection went)."""
+        """The goal failed (refused by the server, or lost: ``reason``)."""
+
+    def on_lost(self, error: RosBridgeError) -> None:
+        """The connection went (``error`` says how): the goal is lost."""
 
 
 class ServiceHandler(Protocol):

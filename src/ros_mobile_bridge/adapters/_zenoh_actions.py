@@ -27,7 +27,7 @@ from __future__ import annotations
 import uuid
 from typing import Any, Final
 
-from .._errors import ActionGoalError, DecodeError, SchemaError, ServiceError
+from .._errors import ActionGoalError, DecodeError, RosBridgeError, SchemaError, ServiceError
 from ..codec import CodecRegistry
 from ..flow import Decoder
 from ..wire import rmw_zenoh as rz
@@ -220,9 +220,10 @@ class ZenohActions:
             self._options.service_timeout,
         )
 
-    def fail_all(self) -> None:
-        """The connection is lost: every open goal fails (``"disconnected"``)."""
+    def fail_all(self, error: RosBridgeError) -> None:
+        """The connection is lost (``error`` says how): every open goal
+        fails (``ActionGoalLost``, reason ``"disconnected"``)."""
         goals = list(self._goals.values())
         self._goals.clear()
         for goal in goals:
-            goal.events.on_failed("disconnected")
+            goal.events.on_lost(error)
