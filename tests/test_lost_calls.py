@@ -9,6 +9,10 @@ that must not be what ends it."""
 
 from __future__ import annotations
 
+import os
+import signal
+import threading
+import uuid
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -16,7 +20,7 @@ import anyio
 import pytest
 
 import ros_mobile_bridge as rmb
-from _util import FAST, wait_until
+from _util import FAST, fast_options, wait_until
 from _util import zenoh_options as zoptions
 
 pytest_plugins = ["peers.ros_fixtures"]
@@ -87,4 +91,192 @@ async def test_zenoh_a_call_cut_off_by_the_router_death_raises_not_connected(
                 lambda: bool(server.records()),
                 router.kill,
             )
+    assert_lost(error)
+
+
+def zenoh_opts(domain: int, policy: str) -> rmb.ClientOptions:
+    """The keep-alive declares a router missing for 1 s lost."""
+    return zoptions(
+        domain,
+        connect_timeout=2.0,
+        keepalive_interval=0.2,
+        keepalive_timeout=1.0,
+        service_timeout=CALL_TIMEOUT,
+        reconnect=POLICIES[policy],
+    )
+
+
+@pytest.mark.parametrize("policy", sorted(POLICIES))
+async def test_zenoh_a_parameter_get_cut_off_by_the_router_death_raises_not_connected(
+    sdk: Callable[..., Any], zenoh_domain: int, policy: str
+) -> None:
+    """``/held_node``'s get_parameters service holds every request."""
+    from peers.zenoh_router import ZenohRouter
+
+    with ZenohRouter() as router:
+        server = sdk(
+            "service",
+            "--type",
+            "rcl_interfaces/srv/GetParameters",
+            "--name",
+            "/held_node/get_parameters",
+            "--node",
+            "held_node",
+            "--hang",
+            router=router,
+        )
+        async with rmb.connect(router.locator, options=zenoh_opts(zenoh_domain, policy)) as client:
+            await wait_until(
+                lambda: any(s.name == "/held_node/get_parameters" for s in client.services),
+                timeout=15.0,
+                what="the parameter service",
+            )
+            error = await cut_off(
+                lambda: client.get_parameters(["/held_node:speed"], timeout=CALL_TIMEOUT),
+                lambda: bool(server.records()),
+                router.kill,
+            )
+    assert_lost(error)
+
+
+@pytest.mark.parametrize("policy", sorted(POLICIES))
+async def test_zenoh_a_goal_cut_off_by_the_router_death_raises_not_connected(
+    sdk: Callable[..., Any], zenoh_domain: int, ros_share: Any, policy: str
+) -> None:
+    """A goal of 500 steps of 0.1 s is running when the router dies: its
+    ``result()`` raises ``ActionGoalLost``, a ``NotConnected`` (and an
+    ``ActionGoalError`` whose reason is ``"disconnected"``)."""
+    from peers.zenoh_router import ZenohRouter
+
+    fib = "test_msgs/action/Fibonacci"
+    with ZenohRouter() as router:
+        sdk("action", "--name", "/fibonacci", "--step", "0.1", router=router)
+        async with rmb.connect(router.locator, options=zenoh_opts(zenoh_domain, policy)) as client:
+            client.register_type(
+                fib, (ros_share / f"{fib}.action").read_text(), encoding="ros2action"
+            )
+            await wait_until(
+                lambda: any(s.name == "/fibonacci/_action/cancel_goal" for s in client.services),
+                timeout=15.0,
+                what="the action server",
+            )
+            async with client.send_action_goal("/fibonacci", fib, {"order": 500}) as goal:
+                await goal.accepted()
+                error = await cut_off(goal.result, lambda: True, router.kill)
+                assert goal.state == "failed"
+    assert_lost(error)
+    assert isinstance(error, rmb.ActionGoalLost)
+    assert isinstance(error, rmb.ActionGoalError)
+    assert error.reason == "disconnected"
+    assert "/fibonacci" in str(error)
+
+
+# -- rosbridge --------------------------------------------------------------------------------
+@pytest.mark.parametrize("policy", sorted(POLICIES))
+async def test_rosbridge_a_call_cut_off_by_the_bridge_death_raises_not_connected(
+    ros_graph: Any, rosbridge_factory: Callable[..., Any], policy: str
+) -> None:
+    """A ROS service of the graph holds the call; the bridge is killed
+    (SIGKILL) while it waits for the answer."""
+    service = f"/held_{uuid.uuid4().hex[:8]}"
+    await anyio.to_thread.run_sync(ros_graph.command, {"cmd": "hold", "service": service})
+    bridge = await anyio.to_thread.run_sync(rosbridge_factory)
+    try:
+        opts = rmb.ClientOptions(
+            connect_timeout=5.0,
+            discovery_interval=0.5,
+            keepalive_interval=0.5,
+            keepalive_timeout=1.0,
+            reconnect=POLICIES[policy],
+        )
+        async with rmb.connect(bridge.url, protocol="rosbridge", options=opts) as client:
+            await wait_until(
+                lambda: any(s.name == service for s in client.services),
+                timeout=15.0,
+                what="the held service at the bridge",
+            )
+
+            def held() -> bool:
+                return bool(ros_graph.command({"cmd": "held", "service": service}))
+
+            error = await cut_off(
+                lambda: client.call_service(service, {}, timeout=CALL_TIMEOUT),
+                held,
+                lambda: os.kill(bridge.pid, signal.SIGKILL),
+            )
+    finally:
+        await anyio.to_thread.run_sync(ros_graph.command, {"cmd": "release", "service": service})
+        await anyio.to_thread.run_sync(bridge.stop)
+    assert_lost(error)
+
+
+# -- foxglove ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("policy", sorted(POLICIES))
+async def test_foxglove_a_call_cut_off_by_the_server_stop_raises_not_connected(
+    policy: str,
+) -> None:
+    """The Foxglove SDK server's service handler holds the call; the server
+    is stopped while the client waits for the answer."""
+    from peers.foxglove_sdk import SdkServer, ros2_service
+
+    called = threading.Event()
+    release = threading.Event()
+
+    def handler(_request: Any) -> bytes:
+        called.set()
+        release.wait(120.0)
+        return b""
+
+    service = ros2_service(
+        "/held", "std_srvs/srv/Trigger", "", "bool success\nstring message", handler
+    )
+    server = SdkServer(services=[service])
+    try:
+        opts = fast_options(
+            keepalive_interval=0.5, keepalive_timeout=1.0, reconnect=POLICIES[policy]
+        )
+        async with rmb.connect(server.url, options=opts) as client:
+            error = await cut_off(
+                lambda: client.call_service("/held", {}, timeout=CALL_TIMEOUT),
+                called.is_set,
+                server.server.stop,
+            )
+    finally:
+        release.set()
+        server.stop()
+    assert_lost(error)
+
+
+@pytest.mark.parametrize("policy", sorted(POLICIES))
+async def test_foxglove_a_parameter_get_cut_off_by_the_server_stop_raises_not_connected(
+    policy: str,
+) -> None:
+    """The server's get-parameters callback holds the request."""
+    from peers.foxglove_sdk import SdkServer, _Listener
+
+    called = threading.Event()
+    release = threading.Event()
+
+    class Holding(_Listener):
+        def on_get_parameters(
+            self, client: Any, param_names: list[str], request_id: str | None = None
+        ) -> list[Any]:
+            called.set()
+            release.wait(20.0)
+            return []
+
+    server = SdkServer(listener=Holding, parameters={"speed": 0.5})
+    try:
+        opts = fast_options(
+            keepalive_interval=0.5, keepalive_timeout=1.0, reconnect=POLICIES[policy]
+        )
+        async with rmb.connect(server.url, options=opts) as client:
+            error = await cut_off(
+                lambda: client.get_parameters(["speed"], timeout=CALL_TIMEOUT),
+                called.is_set,
+                server.server.stop,
+            )
+    finally:
+        release.set()
+        server.stop()
     assert_lost(error)

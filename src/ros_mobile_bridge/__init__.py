@@ -28,6 +28,7 @@ if _typing.TYPE_CHECKING:  # what type checkers and documentation tools read
     from ._core._serve import ServiceRequest as ServiceRequest
     from ._core._serve import ServiceRequests as ServiceRequests
     from ._errors import ActionGoalError as ActionGoalError
+    from ._errors import ActionGoalLost as ActionGoalLost
     from ._errors import AssetError as AssetError
     from ._errors import ConnectError as ConnectError
     from ._errors import DecodeError as DecodeError
@@ -94,6 +95,7 @@ _LAZY: "dict[str, tuple[str, str]]" = {
     "connect": ("._connect", "connect"),
     "parse_target": ("._connect", "parse_target"),
     "ActionGoalError": ("._errors", "ActionGoalError"),
+    "ActionGoalLost": ("._errors", "ActionGoalLost"),
     "AssetError": ("._errors", "AssetError"),
     "ConnectError": ("._errors", "ConnectError"),
     "DecodeError": ("._errors", "DecodeError"),
@@ -186,6 +188,7 @@ __all__ = [
     "DEFAULT_PRESETS",
     "ActionGoal",
     "ActionGoalError",
+    "ActionGoalLost",
     "ActionOutcome",
     "AssetError",
     "Batches",

@@ -45,6 +45,9 @@ JSON line on stdout, ``{"ok": true, "result": ...}`` or ``{"ok": false,
 - ``call`` {service, type, args={}, timeout=5}: call a service from this ROS
   node (a real ROS client); answers ``{"response": {...}}``, or
   ``{"timeout": true}`` when no response came within ``timeout`` seconds;
+- ``hold`` {service}: a ``std_srvs/srv/Trigger`` service that holds each
+  call (one executor thread each) until ``release`` {service} (or 120 s),
+  then answers it; ``held`` {service}: how many calls it received;
 - ``ping``: answers "pong";
 - ``quit``: answers, then exits. End of input also exits.
 """
@@ -150,6 +153,7 @@ class Graph:
         self.published: dict[str, int] = {}
         self.extra_nodes: dict[str, Node] = {}
         self.executor: MultiThreadedExecutor | None = None
+        self.holds: dict[str, tuple[threading.Event, list[int]]] = {}
 
         self._periodic("/chatter", "std_msgs/msg/String", 10.0, self._chatter)
         self._periodic("/odom", "nav_msgs/msg/Odometry", 20.0, self._odom)
@@ -306,6 +310,23 @@ class Graph:
             goal_handle.succeed()
         return Fibonacci.Result(sequence=sequence)
 
+    def hold(self, service: str) -> None:
+        from std_srvs.srv import Trigger
+
+        release = threading.Event()
+        calls: list[int] = []
+        self.holds[service] = (release, calls)
+
+        def held(_request: Any, response: Any) -> Any:
+            with self.lock:
+                calls.append(1)
+            release.wait(120.0)
+            response.success = False
+            response.message = "released"
+            return response
+
+        self.node.create_service(Trigger, service, held, callback_group=self.reentrant)
+
     def call(self, service: str, typename: str, args: dict[str, Any], timeout: float) -> Any:
         pkg, _, name = typename.split("/")
         cls = getattr(importlib.import_module(f"{pkg}.srv"), name)
@@ -385,6 +406,15 @@ class Graph:
                 request.get("args", {}),
                 float(request.get("timeout", 5.0)),
             )
+        if cmd == "hold":
+            self.hold(str(request["service"]))
+            return None
+        if cmd == "held":
+            with self.lock:
+                return len(self.holds[str(request["service"])][1])
+        if cmd == "release":
+            self.holds[str(request["service"])][0].set()
+            return None
         if cmd == "param":
             return self.params.get_parameter(str(request["name"])).value
         raise ValueError(f"unknown command {cmd!r}")
@@ -419,6 +449,8 @@ def main() -> int:
                 traceback.print_exc(file=sys.stderr)
                 _answer({"ok": False, "error": f"{type(exc).__name__}: {exc}"})
     finally:
+        for release, _calls in graph.holds.values():
+            release.set()
         executor.shutdown(timeout_sec=2.0)
         graph.node.destroy_node()
         graph.params.destroy_node()
