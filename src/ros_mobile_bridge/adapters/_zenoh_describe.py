@@ -52,7 +52,7 @@ from typing import Any, Final
 import anyio
 from anyio.abc import TaskGroup
 
-from .._errors import SchemaError, ServiceError, ServiceTimeout
+from .._errors import NotConnected, SchemaError, ServiceError, ServiceTimeout
 from ..codec import (
     DESCRIPTION_CACHE,
     CodecRegistry,
@@ -259,6 +259,9 @@ class ZenohDescriptions:
         except SchemaError as exc:
             fetch.error = exc
             self._log.warning("%s", truncate_for_log(str(exc)))
+        except NotConnected as exc:  # no node's fault: asked again when the graph changes
+            fetch.error = SchemaError(f"cannot learn {fetch.type_name} ({fetch.type_hash}): {exc}")
+            self._log.warning("%s", truncate_for_log(str(fetch.error)))
         except Exception as exc:  # a bug must not kill the reader's task group
             fetch.error = SchemaError(
                 f"cannot learn {fetch.type_name} ({fetch.type_hash}): {type(exc).__name__}: {exc}"
@@ -275,9 +278,7 @@ class ZenohDescriptions:
         if self.knows(type_name, type_hash):
             return
         services = [
-            s
-            for s in self.describers(type_name, type_hash)
-            if _node_of(s) not in fetch.failures
+            s for s in self.describers(type_name, type_hash) if _node_of(s) not in fetch.failures
         ]
         if not services and not fetch.failures:
             raise SchemaError(
@@ -314,8 +315,7 @@ class ZenohDescriptions:
             )
         except ServiceTimeout as exc:
             return "type_description_timeout", (
-                f"did not describe it within {timeout:g} s (type_description_timeout): "
-                f"{exc.reason}"
+                f"did not describe it within {timeout:g} s (type_description_timeout): {exc.reason}"
             )
         except ServiceError as exc:
             return "type_description_refused", f"could not describe it: {exc.reason}"
