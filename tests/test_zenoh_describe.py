@@ -8,7 +8,11 @@ An un-bundled nested type reaches ``async for`` decoded; a service of such a
 type is called; an answer whose hash disagrees with the key is refused and
 counted, nothing decoded; a silent node gives a SchemaError within the
 timeout; what was learnt is cached for the process; fetch_definition,
-schema_definition and the recorder's schema text work for it."""
+schema_definition and the recorder's schema text work for it. With several
+nodes using the type, each is asked in turn until one answers with the
+right hash (a silent, refusing or lying first node does not stop it); when
+all fail the error names each; a type no node described is asked of a new
+node that starts using it."""
 
 from __future__ import annotations
 
