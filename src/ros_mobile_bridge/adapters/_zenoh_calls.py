@@ -38,10 +38,16 @@ from ._shared import check_pending
 from ._zenoh_node import ZenohNode
 from ._zenoh_values import Query
 
-__all__ = ["Replies", "ZenohQueries"]
+__all__ = ["NoServerAnswered", "Replies", "ZenohQueries"]
 
 Replies = list[tuple[bool, bytes, bytes | None]]
 """A query's replies: (ok, payload, attachment) each."""
+
+
+class NoServerAnswered(ServiceError):
+    """A query that ended early with no reply while the router is there: no
+    queryable of the service was reached (the server left, or its
+    declaration has not reached the router yet although its token has)."""
 
 
 _ZENOH_TIMEOUT = "Timeout"
@@ -147,7 +153,7 @@ class ZenohQueries:
         # the query ended early with no reply: its route is gone
         if await self._router_gone():
             raise connection_lost(f"zenoh: the router went away during the call to {service}")
-        raise ServiceError(
+        raise NoServerAnswered(
             service, f"no server answered (the query ended after {elapsed:.2g} s with no reply)"
         )
 

@@ -22,7 +22,9 @@ sources), hashes the answer and compares with the key's hash:
   ``type_description_refused``, ``type_hash_mismatch``,
   ``type_description_invalid``) and logged with the node's name; the next
   node using the type is asked, publishers and servers first, until one
-  answers with the right hash;
+  answers with the right hash. A node whose query reaches no queryable (its
+  token seen before its service's route) is asked again, within its
+  timeout;
 * when every node failed (or none serves ``get_type_description``): a
   :class:`SchemaError` naming the type, every node asked and why (its
   ``failures``), and how to register the definition by hand.
@@ -65,7 +67,7 @@ from ..codec import (
 from ..wire import rmw_zenoh as rz
 from ..wire._limits import truncate_for_log
 from ._seam import ServiceHost
-from ._zenoh_calls import ZenohQueries
+from ._zenoh_calls import NoServerAnswered, ZenohQueries
 from ._zenoh_node import ZenohNode
 from ._zenoh_serving import ZenohServing
 
@@ -73,6 +75,9 @@ __all__ = ["DESCRIBE_SERVICE_TYPE", "ZenohDescriptions"]
 
 DESCRIBE_SERVICE_TYPE: Final = "type_description_interfaces/srv/GetTypeDescription"
 _SERVICE_SUFFIX: Final = "/get_type_description"
+_NOT_ROUTED_PAUSE: Final = 0.05
+"""Seconds before a node whose query reached no queryable is asked again
+(doubling, up to 0.4 s, within ``type_description_timeout``)."""
 _BY_HAND: Final = (
     "register it by hand with Client.register_type(name, msg_text) or point "
     "ClientOptions.interface_paths at a directory holding its .msg/.srv/.action files"
@@ -305,17 +310,28 @@ class ZenohDescriptions:
         """Ask one node; None once its description is registered, else the
         failure's kind (a rejection reason) and why."""
         timeout = self._options.type_description_timeout
-        self.description_requests += 1
+        request = {"type_name": type_name, "type_hash": type_hash, "include_type_sources": True}
+        deadline = anyio.current_time() + timeout
+        pause = _NOT_ROUTED_PAUSE
         try:
-            answer = await self._queries.request(
-                service,
-                DESCRIBE_SERVICE_TYPE,
-                {"type_name": type_name, "type_hash": type_hash, "include_type_sources": True},
-                timeout,
-            )
-        except ServiceTimeout as exc:
+            while True:
+                self.description_requests += 1
+                try:
+                    left = max(deadline - anyio.current_time(), _NOT_ROUTED_PAUSE)
+                    answer = await self._queries.request(
+                        service, DESCRIBE_SERVICE_TYPE, request, left
+                    )
+                    break
+                except NoServerAnswered:
+                    # its token came before its queryable's route: asked
+                    # again until the timeout
+                    if anyio.current_time() + pause >= deadline:
+                        raise
+                    await anyio.sleep(pause)
+                    pause = min(pause * 2, _NOT_ROUTED_PAUSE * 8)
+        except ServiceTimeout:
             return "type_description_timeout", (
-                f"did not describe it within {timeout:g} s (type_description_timeout): {exc.reason}"
+                f"did not describe it within {timeout:g} s (type_description_timeout)"
             )
         except ServiceError as exc:
             return "type_description_refused", f"could not describe it: {exc.reason}"
