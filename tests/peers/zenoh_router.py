@@ -139,6 +139,13 @@ class ZenohRouter:
     def running(self) -> bool:
         return self._proc is not None and self._proc.poll() is None
 
+    @property
+    def pid(self) -> int:
+        """The router process's id (to pause it with SIGSTOP, as a router
+        that went silent)."""
+        assert self._proc is not None, "the router is not running"
+        return self._proc.pid
+
     def stop(self) -> int | None:
         """Stop the router (stdin closed, then SIGTERM, then SIGKILL); its exit code."""
         proc, self._proc = self._proc, None

@@ -7,11 +7,14 @@ Each raises ``TypeError`` / ``ValueError`` naming the mistake, at once."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal
 
-from .._checks import check_name, check_schema
+from .._checks import check_name, check_save_bandwidth, check_schema
 from ..codec import same_type_name
+from ..codec._classes import remember
 from ..interfaces._base import RosGoal, RosMessage
+
+_BUNDLED = "ros_mobile_bridge.interfaces."
 
 __all__ = ["advertise_arguments", "goal_arguments", "publish_arguments", "subscribe_arguments"]
 
@@ -90,11 +93,38 @@ def publish_arguments(
 
 
 def subscribe_arguments(
+    given: type[RosMessage] | str | None,
+    schema: str | None,
+    compression: object,
+    adaptive: object,
+    decode: object,
+    save_bandwidth: object,
+    max_hz: float | None,
+) -> tuple[type[RosMessage] | None, str | None, bool | Literal["adaptive"]]:
+    """``subscribe``'s arguments checked: (the class wanted, the type name,
+    the save-bandwidth mode). ``TypeError`` for a ``type`` that is neither
+    a message class nor a name, ``ValueError`` when ``type`` and ``schema``
+    name different types; the other arguments' mistakes as their checks
+    raise them. A generated class of the user's is remembered, so its
+    messages are received as instances of it."""
+    want, name = _subscribe_type(given, schema)
+    if want is not None and not want.__module__.startswith(_BUNDLED):
+        remember(want)
+    if name is not None:
+        check_schema(name)
+    if compression is not None and compression not in ("cbor", "cbor-raw"):
+        raise ValueError(f"compression must be 'cbor', 'cbor-raw' or None, got {compression!r}")
+    if not isinstance(adaptive, bool):
+        raise TypeError("adaptive must be a bool")
+    if not isinstance(decode, bool):
+        raise TypeError("decode must be a bool")
+    return want, name, check_save_bandwidth(save_bandwidth, max_hz, adaptive)
+
+
+def _subscribe_type(
     given: type[RosMessage] | str | None, schema: str | None
 ) -> tuple[type[RosMessage] | None, str | None]:
-    """``subscribe``'s ``type`` and ``schema`` as (the class wanted, the
-    type name): ``TypeError`` for a ``type`` that is neither a message
-    class nor a name, ``ValueError`` when the two name different types."""
+    """(the class wanted, the type name) of ``subscribe``'s ``type`` and ``schema``."""
     if given is None:
         return None, schema
     if isinstance(given, str):

@@ -9,7 +9,7 @@ holds no wire format and starts no task of its own."""
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
+from collections.abc import AsyncIterator, Mapping, Sequence
 from contextlib import AbstractAsyncContextManager, asynccontextmanager
 from typing import TYPE_CHECKING, Any, TypeVar, overload
 
@@ -17,7 +17,6 @@ import anyio
 
 from .._checks import (
     check_name,
-    check_save_bandwidth,
     check_schema,
     check_timeout,
     check_uri,
@@ -49,7 +48,6 @@ from .._types import (
 )
 from ..adapters import ParameterAccess, require
 from ..codec import FieldDef, same_type_name
-from ..codec._classes import remember
 from ..flow import FeedWatcher, Present, Watcher
 from ..interfaces._base import RosGoal, RosMessage, RosRequest, RosService
 from ._action import ActionGoal
@@ -66,7 +64,6 @@ if TYPE_CHECKING:
 
 __all__ = ["Client"]
 
-_BUNDLED = "ros_mobile_bridge.interfaces."
 T = TypeVar("T")
 M = TypeVar("M", bound=RosMessage)
 R = TypeVar("R", bound=RosMessage)
@@ -195,7 +192,7 @@ class Client:
         URIs); ``AssetError`` with the server's reason, ``NotSupportedError``
         without assets, ``ServiceTimeout`` past ``timeout``."""
         check_uri(uri)
-        return await self._request(
+        return await self._conn.request(
             f"fetchAsset {uri}", lambda _: self._conn.offered("assets").fetch_asset(uri), timeout
         )
 
@@ -233,7 +230,7 @@ class Client:
         ``playbackControl``; ``ServiceTimeout`` when no answer came within ``timeout``."""
         if not isinstance(request, PlaybackRequest):
             raise TypeError(f"request must be a PlaybackRequest, not {type(request).__name__}")
-        return await self._request(
+        return await self._conn.request(
             "playbackControlRequest",
             lambda _: self._conn.offered("playback").control_playback(request),
             timeout,
@@ -354,18 +351,9 @@ class Client:
         subscriptions to one topic pause only when every one asks for it.
         Arguments are checked here, at once."""
         check_name("topic", topic)
-        want, schema = subscribe_arguments(type, schema)
-        if want is not None and not want.__module__.startswith(_BUNDLED):
-            remember(want)  # a generated class of the user's: received as itself
-        if schema is not None:
-            check_schema(schema)
-        if compression is not None and compression not in ("cbor", "cbor-raw"):
-            raise ValueError(f"compression must be 'cbor', 'cbor-raw' or None, got {compression!r}")
-        if not isinstance(adaptive, bool):
-            raise TypeError("adaptive must be a bool")
-        if not isinstance(decode, bool):
-            raise TypeError("decode must be a bool")
-        mode = check_save_bandwidth(save_bandwidth, max_hz, adaptive)
+        want, schema, mode = subscribe_arguments(
+            type, schema, compression, adaptive, decode, save_bandwidth, max_hz
+        )
         route = self._router.route(
             topic,
             max_hz=max_hz,
@@ -539,6 +527,20 @@ class Client:
             raise ValueError(f"schema must be Twist or TwistStamped, got {schema!r}")
         await self.publish(topic, schema, zero_twist(schema), priority="control")
 
+    async def confirm_delivery(self, *, timeout: float | None = None) -> None:
+        """Return once everything published so far (data frames queued
+        included) has reached the bridge, as a round trip behind it shows
+        (Foxglove: a WebSocket ping; rosbridge: rosapi's ``get_time``). Over
+        Zenoh it raises ``NotSupportedError``: a put has no acknowledgement
+        and no query only the router answers proves it has one. Raises
+        ``NotConnected`` when the connection is lost first (what was sent
+        may or may not have arrived: a write into a socket whose peer just
+        died returns normally, TCP cannot tell), ``ServiceTimeout`` after
+        ``timeout`` (default ``options.service_timeout``). The server having
+        a message is not the robot acting on it; a robot that must stop
+        when commands stop needs its own ``cmd_vel`` watchdog."""
+        await self._conn.confirm_delivery(check_timeout(timeout))
+
     # -- recording ----------------------------------------------------------
     def record(
         self,
@@ -623,7 +625,7 @@ class Client:
             )
         adapter = self._conn.adapter
         try:
-            return await self._request(
+            return await self._conn.request(
                 name,
                 lambda limit: adapter.call_service(name, request, limit),
                 timeout,
@@ -706,12 +708,6 @@ class Client:
         ) as served:
             yield served
 
-    async def _request(
-        self, what: str, call: Callable[[float], Awaitable[T]], timeout: float | None, **kw: float
-    ) -> T:
-        """One correlated request under its deadline: :meth:`Connection.request`."""
-        return await self._conn.request(what, call, timeout, **kw)
-
     # -- parameters ---------------------------------------------------------
     def _parameters(self) -> ParameterAccess:
         """The connection's parameter part (``NotSupportedError`` when it has none)."""
@@ -732,7 +728,7 @@ class Client:
         if isinstance(names, str) or not all(isinstance(n, str) for n in names):
             raise TypeError("names must be a sequence of str")
         names = list(names)
-        values = await self._request(
+        values = await self._conn.request(
             "getParameters", lambda _limit: self._parameters().get_parameters(names), timeout
         )
         missing = [n for n in names if n not in values]
@@ -751,7 +747,7 @@ class Client:
 
     async def list_parameters(self, *, timeout: float | None = None) -> dict[str, Any]:
         """Every parameter the server exposes, with its value."""
-        return await self._request(
+        return await self._conn.request(
             "getParameters", lambda _limit: self._parameters().get_parameters([]), timeout
         )
 
@@ -776,7 +772,7 @@ class Client:
         values = dict(values)
         reasons: dict[str, str] = {}
         try:
-            after = await self._request(
+            after = await self._conn.request(
                 "setParameters", lambda _limit: self._parameters().set_parameters(values), timeout
             )
         except ParameterError as exc:

@@ -22,6 +22,7 @@ from .._errors import (
     DecodeError,
     NotConnected,
     NotSupportedError,
+    ServiceError,
     ServiceTimeout,
     connection_lost,
 )
@@ -142,6 +143,25 @@ class Connection:
             raise ServiceTimeout(what, limit)
         self._options.report_latency((time.perf_counter() - start) * 1000.0)
         return result
+
+    async def confirm_delivery(self, timeout: float | None) -> None:
+        """:meth:`Client.confirm_delivery`: the outbox written, then the
+        adapter's round trip, within one deadline; ``NotConnected`` when the
+        connection it started on is gone or replaced by then."""
+        adapter = self.adapter
+        if not adapter.confirms_delivery:
+            raise NotSupportedError(
+                f"{adapter.protocol} cannot confirm delivery: a zenoh put has no acknowledgement,"
+                " and no query proves the router has it"
+            )
+
+        async def confirm(limit: float) -> None:
+            await self.outbound.drain(limit)
+            await adapter.confirm_delivery()
+            if self.adapter is not adapter or not self.connected:
+                raise connection_lost("the connection went down before delivery was confirmed")
+
+        await self.request("confirming delivery", confirm, timeout)
 
     @overload
     def offered(self, name: Literal["node_list"]) -> NodeLister: ...
@@ -449,7 +469,7 @@ class Connection:
                             "teardown: could not send a zero Twist to %s: %s", topic, exc
                         )
             await adapter.confirm_delivery()
-        except ConnectError as exc:
+        except (ConnectError, NotConnected, ServiceError) as exc:
             self._log.error(
                 "teardown: connection failed before the zero Twist was confirmed: %s", exc
             )

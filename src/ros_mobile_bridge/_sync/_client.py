@@ -506,6 +506,11 @@ class SyncClient:
         )
 
     @_mirrors
+    def confirm_delivery(self, *, timeout: float | None = None) -> None:
+        """:meth:`Client.confirm_delivery`, blocking; ``timeout`` is its own."""
+        self._call(_confirm_delivery, self._client, timeout, timeout=None, what="confirmation")
+
+    @_mirrors
     def fetch_asset(self, uri: str, *, timeout: float | None = None) -> bytes:
         """:meth:`Client.fetch_asset`, blocking; ``timeout`` is the request's own."""
         return self._call(_fetch_asset, self._client, uri, timeout, timeout=None, what=uri)
@@ -735,6 +740,10 @@ async def _control_playback(
     client: Client, request: PlaybackRequest, timeout: float | None
 ) -> PlaybackState:
     return await client.control_playback(request, timeout=timeout)
+
+
+async def _confirm_delivery(client: Client, timeout: float | None) -> None:
+    await client.confirm_delivery(timeout=timeout)
 
 
 async def _fetch_asset(client: Client, uri: str, timeout: float | None) -> bytes:

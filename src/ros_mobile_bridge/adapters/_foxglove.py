@@ -23,6 +23,7 @@ from .._errors import (
     RosBridgeError,
     SchemaError,
     ServiceError,
+    connection_lost,
 )
 from .._options import ClientOptions
 from .._types import ServerInfo, ServerStatus, ServiceInfo, StatusLevel, StatusRemoved, TopicInfo
@@ -149,6 +150,7 @@ class FoxgloveAdapter:
     no type descriptions, and a client cannot serve a service over it."""
 
     protocol = "foxglove-ws"
+    confirms_delivery = True  # a WebSocket ping / a rosapi call the server answers
     wire_timeout_slack = 0.0  # the protocol carries no timeout
     actions: None = None
     serving: None = None
@@ -779,7 +781,9 @@ class FoxgloveAdapter:
 
     async def confirm_delivery(self) -> None:
         pong = await self._ws.ping()
-        await pong.wait()
+        await pong.wait()  # (also set when the connection closes)
+        if self._ws.closed:
+            raise connection_lost("the server did not answer the ping before the socket closed")
 
     def fail_pending(self, error: Exception) -> None:
         assert isinstance(error, RosBridgeError)

@@ -204,6 +204,7 @@ class RosbridgeAdapter:
     definitions (the type descriptions), serving, parameters and actions."""
 
     protocol = "rosbridge"
+    confirms_delivery = True  # a WebSocket ping / a rosapi call the server answers
     wire_timeout_slack = _WIRE_SLACK
     assets: None = None  # Foxglove's alone
     playback: None = None

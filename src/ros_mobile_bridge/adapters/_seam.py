@@ -334,6 +334,10 @@ class Adapter(Protocol):
 
     protocol: str
     server_info: ServerInfo
+    confirms_delivery: bool
+    """Whether :meth:`confirm_delivery` proves that the server has what was
+    sent (a round trip the server itself must answer), so the client may
+    offer it to the caller; else it is the teardown's best effort."""
     codecs: CodecRegistry
 
     @property
@@ -440,7 +444,11 @@ class Adapter(Protocol):
 
     async def confirm_delivery(self) -> None:
         """Return once everything sent so far has reached the server (a
-        round trip), so closing now loses nothing."""
+        round trip behind it), so closing now loses nothing (see
+        :attr:`confirms_delivery` for how sure that is). Raises
+        ``NotConnected`` when the connection is lost first (the server's
+        answer never came), and may wait as long as the server is silent:
+        the caller owns the deadline."""
 
     def fail_pending(self, error: Exception) -> None:
         """Fail every pending request with ``error``."""

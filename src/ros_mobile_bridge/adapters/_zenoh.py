@@ -144,6 +144,9 @@ class ZenohAdapter:
     samples part (:class:`~._zenoh_samples.ZenohSamples`), the hot path."""
 
     protocol = "zenoh"
+    # a put has no acknowledgement, and the liveliness round trip may be
+    # answered by this session itself while the router is silent
+    confirms_delivery = False
     wire_timeout_slack = 0.0  # the client's deadline is the query's timeout
     assets: None = None  # Foxglove's alone
     playback: None = None
