@@ -42,6 +42,8 @@ import json
 import math
 import os
 import platform
+import shutil
+import signal
 import statistics
 import subprocess
 import sys
@@ -102,7 +104,7 @@ def fds() -> int:
     return len(os.listdir("/proc/self/fd"))
 
 
-async def client_run(cfg: dict[str, Any]) -> dict[str, Any]:
+async def client_run(cfg: dict[str, Any], records: IO[str]) -> dict[str, Any]:
     import tracemalloc
 
     import anyio
@@ -118,7 +120,7 @@ async def client_run(cfg: dict[str, Any]) -> dict[str, Any]:
     )
     from _common import subscription_counts
 
-    received: dict[str, list[tuple[int, int, float]]] = {"cam": [], "odom": []}
+    received = {"cam": [0], "odom": [0]}  # messages so far
     counts: dict[str, dict[str, int]] = {}
     wake = [anyio.Event()]  # set on every message and status change
 
@@ -128,7 +130,6 @@ async def client_run(cfg: dict[str, Any]) -> dict[str, Any]:
                 wake[0] = anyio.Event()
                 await wake[0].wait()
 
-    publishes: list[tuple[int, float, float, str]] = []
     samples: list[tuple[float, int, int, int]] = []
     statuses: list[tuple[float, str]] = []
     tracing = bool(cfg["trace_memory"])
@@ -143,10 +144,12 @@ async def client_run(cfg: dict[str, Any]) -> dict[str, Any]:
             # images (JSON base64 at 30 Hz saturates the bridge); ignored elsewhere
             async with robot.subscribe(topic, cls, compression="cbor-raw") as sub:
                 out = received[name]
+                write = records.write
                 try:
                     async for msg in sub:
                         st = msg.data.header.stamp
-                        out.append((int(st.sec), int(st.nanosec), monotonic()))
+                        write(f"r {name} {st.sec} {st.nanosec} {monotonic():.6f}\n")
+                        out[0] += 1
                         wake[0].set()
                 finally:
                     counts[name] = subscription_counts(sub)
@@ -171,7 +174,7 @@ async def client_run(cfg: dict[str, Any]) -> dict[str, Any]:
                     outcome = "ok"
                 except rmb.RosBridgeError as exc:
                     outcome = type(exc).__name__
-                publishes.append((seq, t0, monotonic() - t0, outcome))
+                records.write(f"p {seq} {t0:.6f} {monotonic() - t0:.6f} {outcome}\n")
 
         async def watch() -> None:
             async for status in robot.watch_status():
@@ -190,7 +193,7 @@ async def client_run(cfg: dict[str, Any]) -> dict[str, Any]:
             tg.start_soon(watch)
             tg.start_soon(consume, "cam", CAMERA_TOPIC, Image)
             tg.start_soon(consume, "odom", ODOM_TOPIC, Odometry)
-            await until(lambda: bool(received["cam"] and received["odom"]))
+            await until(lambda: received["cam"][0] > 0 and received["odom"][0] > 0)
             tg.start_soon(control)
             await anyio.sleep(1.0)
             first = sample()
@@ -204,12 +207,12 @@ async def client_run(cfg: dict[str, Any]) -> dict[str, Any]:
             else:
                 await anyio.sleep(duration)
             # the end's figures are taken while connected and receiving again
-            mark = (len(received["cam"]), len(received["odom"]))
+            mark = (received["cam"][0], received["odom"][0])
             await until(
                 lambda: (
                     robot.status == "connected"
-                    and len(received["cam"]) > mark[0]
-                    and len(received["odom"]) > mark[1]
+                    and received["cam"][0] > mark[0]
+                    and received["odom"][0] > mark[1]
                 )
             )
             if tracing:
@@ -227,8 +230,6 @@ async def client_run(cfg: dict[str, Any]) -> dict[str, Any]:
         "last": last,
         "closed": closed,
         "samples": samples,
-        "received": received,
-        "publishes": publishes,
         "statuses": statuses,
         "growth": growth,
         "subscriptions": counts,
@@ -255,9 +256,28 @@ def trace_growth(before: Any, after: Any, top: int = 25) -> list[dict[str, Any]]
 
 def client_main(config: str) -> None:
     cfg = json.loads(config)
-    result = run_on(cfg["loop"], client_run, cfg)
+    # every record goes to a file as it is made (none is kept in memory: the
+    # client's memory is the library's); the file is open from start to end
+    with open(cfg["records"], "w", buffering=1 << 16) as records:
+        result = run_on(cfg["loop"], client_run, cfg, records)
     Path(cfg["out"]).write_text(json.dumps(result))
     print("done", flush=True)
+
+
+def read_records(path: Path) -> dict[str, Any]:
+    """The client's records file: ``received`` (per stream, (run, seq,
+    time) of every message) and ``publishes`` ((seq, start, seconds,
+    outcome) of every control publish)."""
+    received: dict[str, list[tuple[int, int, float]]] = {"cam": [], "odom": []}
+    publishes: list[tuple[int, float, float, str]] = []
+    with path.open() as f:
+        for line in f:
+            words = line.split()
+            if words[0] == "r":
+                received[words[1]].append((int(words[2]), int(words[3]), float(words[4])))
+            elif words[0] == "p":
+                publishes.append((int(words[1]), float(words[2]), float(words[3]), words[4]))
+    return {"received": received, "publishes": publishes}
 
 
 # -- the robot side and the peer's lives ------------------------------------------------------
@@ -495,13 +515,14 @@ def fifth_medians(samples: list[list[float]]) -> tuple[float, float]:
 def analyse(world: World, client: dict[str, Any], args: argparse.Namespace) -> dict[str, Any]:
     """Everything the report shows, from the robot's and the client's records."""
     lives = world.lives
+    stop = client["start"] + client["last"][0]  # the client's end figures
     # delivery per life: the robot's messages published while the peer lived
     per_life: list[dict[str, Any]] = []
     got = {k: {(r, s) for r, s, _ in client["received"][k]} for k in ("cam", "odom")}
     first_rx = {k: sorted(client["received"][k], key=lambda x: x[2]) for k in ("cam", "odom")}
     for i, life in enumerate(lives):
-        end = life.killed if life.killed is not None else float("inf")
-        row: dict[str, Any] = {"life": i + 1, "seconds": (min(end, monotonic()) - life.ready)}
+        end = life.killed if life.killed is not None else stop
+        row: dict[str, Any] = {"life": i + 1, "seconds": end - life.ready}
         for kind in ("cam", "odom"):
             mine = [(r, s, t) for r, s, t in world.published[kind] if life.ready <= t < end]
             received = [m for m in mine if (m[0], m[1]) in got[kind]]
@@ -528,7 +549,7 @@ def analyse(world: World, client: dict[str, Any], args: argparse.Namespace) -> d
     ]
     arrivals = sorted(world.commands.values())
     for row, life in zip(per_life, lives, strict=True):
-        end = life.killed if life.killed is not None else float("inf")
+        end = life.killed if life.killed is not None else stop
         mine = [t for t in arrivals if life.ready <= t < end]
         row["cmd"] = {
             "arrived": len(mine),
@@ -653,7 +674,7 @@ def print_report(r: dict[str, Any]) -> None:
         f" p99 {c['p99_ms']:.2f} ms, max {c['max_ms']:.1f} ms"
     )
     print(
-        f"  arrival     written -> robot's receipt: p50 {c['arrival_p50_ms']:.2f} ms,"
+        f"  arrival     publish returned -> robot's receipt: p50 {c['arrival_p50_ms']:.2f} ms,"
         f" p99 {c['arrival_p99_ms']:.2f} ms"
     )
     for name, counts in r["subscriptions"].items():
@@ -703,9 +724,12 @@ def main() -> int:
     if args.client is not None:
         client_main(args.client)
         return 0
+    # SIGTERM (and SIGINT, ignored in a background job) stop the run cleanly
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     seconds = args.minutes * 60.0
     world = World(args.transport, 0)
-    out = Path(tempfile.mkstemp(prefix="rmb-soak-", suffix=".json")[1])
+    scratch = Path(tempfile.mkdtemp(prefix="rmb-soak-"))
+    out, records = scratch / "client.json", scratch / "records.txt"
     client: subprocess.Popen[str] | None = None
     try:
         world.start()
@@ -719,15 +743,19 @@ def main() -> int:
             "trace_memory": args.trace_memory,
             "trace_frames": args.trace_frames,
             "out": str(out),
+            "records": str(records),
             "domain": world.graph_domain if args.transport == "zenoh" else None,
         }
         paths = [str(ROOT / "src"), os.environ.get("PYTHONPATH", "")]
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in paths if p)}
+        from peers.rosbridge import _die_with_parent
+
         client = subprocess.Popen(
             [sys.executable, __file__, "--client", json.dumps(cfg)],
             stdout=subprocess.PIPE,
             text=True,
             env=env,
+            preexec_fn=_die_with_parent,
         )
         assert client.stdout is not None
         line = client.stdout.readline()
@@ -758,12 +786,13 @@ def main() -> int:
             raise RuntimeError(f"the client failed (exit {code})")
         time.sleep(1.0)  # the last control messages reach the robot's records
         result = json.loads(out.read_text())
+        result.update(read_records(records))
     finally:
         if client is not None and client.poll() is None:
             client.kill()
             client.wait()
         world.stop()
-        out.unlink(missing_ok=True)
+        shutil.rmtree(scratch, ignore_errors=True)
     report = analyse(world, result, args)
     report["machine"] = f"{platform.machine()}, {os.cpu_count()} CPUs, load {os.getloadavg()}"
     report["date"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
