@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import bisect
+import gc
 import itertools
 import json
 import math
@@ -185,7 +186,11 @@ async def client_run(cfg: dict[str, Any], records: IO[str]) -> dict[str, Any]:
             return (monotonic() - start, rss_bytes(), fds(), os_threads())
 
         async def sampler() -> None:
+            collect, last_collect = float(cfg.get("gc_every") or 0), monotonic()
             while True:
+                if collect and monotonic() - last_collect >= collect:
+                    gc.collect()
+                    last_collect = monotonic()
                 samples.append(sample())
                 await anyio.sleep(SAMPLE_S)
 
@@ -719,6 +724,12 @@ def main() -> int:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--trace-memory", action="store_true")
     parser.add_argument("--trace-frames", type=int, default=6)
+    parser.add_argument(
+        "--gc-every",
+        type=float,
+        default=0.0,
+        help="a diagnostic: a full gc.collect() in the client every S seconds (0: never)",
+    )
     parser.add_argument("--client", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.client is not None:
@@ -742,6 +753,7 @@ def main() -> int:
             "seconds": seconds,
             "trace_memory": args.trace_memory,
             "trace_frames": args.trace_frames,
+            "gc_every": args.gc_every,
             "out": str(out),
             "records": str(records),
             "domain": world.graph_domain if args.transport == "zenoh" else None,
