@@ -75,8 +75,9 @@ IN_FLIGHT: Final = "written before the peer died, not yet handled by it"
 DOWN: Final = "written after the peer died, before it returned"
 ROUTE: Final = "written before the route to the robot was up again"
 CLOSED: Final = "written before a connection the peer closed (not a kill)"
+END: Final = "written before the client closed, not yet handled by the peer"
 UNEXPLAINED: Final = "unexplained: later publishes arrived on the same connection"
-EXPLAINED: Final = (IN_FLIGHT, DOWN, ROUTE, CLOSED)
+EXPLAINED: Final = (IN_FLIGHT, DOWN, ROUTE, CLOSED, END)
 """The classes of a lost control publish that a connection's end explains:
 TCP (or a zenoh put) returned, and the peer died or closed with it unhandled."""
 
@@ -224,6 +225,7 @@ async def client_run(cfg: dict[str, Any], records: IO[str]) -> dict[str, Any]:
                 snapshots.append(tracemalloc.take_snapshot())
             last = sample()
             tg.cancel_scope.cancel()
+        statuses.append((monotonic(), "closed"))  # the client leaves: its close begins
     closed = sample()
     growth: list[dict[str, Any]] = []
     if tracing:
@@ -622,6 +624,9 @@ def classify_lost(
       last ``connected``, or the peer's return) and it (:data:`ROUTE`: the
       first publishes after a (re)connection, before the bridge's or the
       router's route to the robot's subscriber exists);
+    * no later publish arrived, and the client closed after it (:data:`END`:
+      still queued in the peer when the client left, which ends the
+      connection and what the peer had not handled);
     * else :data:`UNEXPLAINED`: a loss in the middle of a working connection.
     """
     written = {seq: t0 + dur for seq, t0, dur, outcome in publishes if outcome == "ok"}
@@ -630,6 +635,7 @@ def classify_lost(
         (lf.killed, nxt.ready) for lf, nxt in itertools.pairwise(lives) if lf.killed is not None
     ]
     losses = [t for t, status in statuses if status == "reconnecting"]
+    closes = [t for t, status in statuses if status == "closed"]
     epochs = sorted(
         [t for t, status in statuses if status == "connected"] + [lf.ready for lf in lives]
     )
@@ -648,6 +654,8 @@ def classify_lost(
             entry["class"] = IN_FLIGHT if w < kill else DOWN if w < back else ROUTE
         elif any(w <= t < nxt for t in losses):
             entry["class"] = CLOSED
+        elif nxt == math.inf and closes and closes[-1] >= w:
+            entry["class"] = END
         else:
             j = bisect.bisect_right(epochs, w)
             entry["class"] = ROUTE if j and prev < epochs[j - 1] else UNEXPLAINED

@@ -14,7 +14,8 @@ dead, before the route to the robot was up again, or before a close by the
 peer: TCP, or a zenoh put, cannot tell); file descriptors and threads are
 back at the end; every life of the peer delivered camera and odometry; the
 client's memory grew less than 50 MB in the 2 minutes (a leak per kill or
-per message would pass it; this is no figure). Marked ``slow``.
+per message would pass it; this is no figure). Marked ``slow``. A quick
+test checks the classification of lost publishes itself.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,13 +33,21 @@ ROOT = Path(__file__).resolve().parent.parent
 BENCH = ROOT / "bench"
 sys.path.insert(0, str(BENCH))
 
-from soak import EXPLAINED  # noqa: E402
+from soak import DOWN, END, EXPLAINED, IN_FLIGHT, ROUTE, UNEXPLAINED, Life, classify_lost  # noqa: E402
 
 MINUTES = 2
 KILL_EVERY = 30
 GROWTH_BOUND_MB = 50.0
 
-pytestmark = [pytest.mark.slow, pytest.mark.peer, pytest.mark.timeout(MINUTES * 60 + 240)]
+TIMEOUT = MINUTES * 60 + 240
+
+
+def soak_test(fn: Callable[[Path], None]) -> Callable[[Path], None]:
+    """A soak test: ``slow``, ``peer``, and a timeout for its minutes."""
+    marked: Callable[[Path], None] = pytest.mark.slow(
+        pytest.mark.peer(pytest.mark.timeout(TIMEOUT)(fn))
+    )
+    return marked
 
 
 def soak(transport: str, loop: str, tmp_path: Path) -> dict[str, Any]:
@@ -82,15 +92,44 @@ def check(report: dict[str, Any]) -> None:
     assert report["memory"]["growth_mb"] < GROWTH_BOUND_MB, report["memory"]
 
 
+def test_lost_control_publishes_are_classified_by_what_explains_them() -> None:
+    """The classes the soak tests allow, on made-up records: a publish is
+    explained only by a kill or a connection's end around it; one lost while
+    later ones arrived on the same connection is not."""
+    publishes: list[list[Any]] = [[i, i * 0.05, 0.001, "ok"] for i in range(1, 100)]
+    lost = {*range(39, 46), 70, *range(95, 100)}
+    arrived = {i: i * 0.05 + 0.01 for i in range(1, 100) if i not in lost}
+    lives = [Life(ready=-1.0, killed=2.0), Life(ready=2.2)]
+    statuses: list[list[Any]] = [
+        [-0.5, "connected"],
+        [2.05, "reconnecting"],
+        [2.3, "connected"],
+        [5.0, "closed"],
+    ]
+    classes = {e["seq"]: e["class"] for e in classify_lost(publishes, arrived, lives, statuses)}
+    assert classes == {
+        39: IN_FLIGHT,  # written 49 ms before the kill
+        **dict.fromkeys(range(40, 44), DOWN),  # after the kill, before the return at 2.2 s
+        44: ROUTE,  # after the return, before the first arrival
+        45: ROUTE,
+        70: UNEXPLAINED,  # 69 and 71 arrived on the same connection
+        **dict.fromkeys(range(95, 100), END),  # nothing later arrived; the client closed
+    }
+    assert UNEXPLAINED not in EXPLAINED
+
+
+@soak_test
 def test_soak_foxglove_on_trio(tmp_path: Path) -> None:
     check(soak("foxglove", "trio", tmp_path))
 
 
+@soak_test
 @pytest.mark.ros
 def test_soak_rosbridge_on_asyncio(tmp_path: Path) -> None:
     check(soak("rosbridge", "asyncio", tmp_path))
 
 
+@soak_test
 @pytest.mark.ros
 def test_soak_zenoh_on_uvloop(tmp_path: Path) -> None:
     pytest.importorskip("uvloop")
