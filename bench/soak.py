@@ -46,6 +46,7 @@ import platform
 import shutil
 import signal
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
@@ -124,6 +125,7 @@ async def client_run(cfg: dict[str, Any], records: IO[str]) -> dict[str, Any]:
 
     received = {"cam": [0], "odom": [0]}  # messages so far
     counts: dict[str, dict[str, int]] = {}
+    raw = {"cam": 0, "odom": 0}  # delivered undecoded (a memoryview)
     wake = [anyio.Event()]  # set on every message and status change
 
     async def until(predicate: Callable[[], bool]) -> None:
@@ -149,8 +151,16 @@ async def client_run(cfg: dict[str, Any], records: IO[str]) -> dict[str, Any]:
                 write = records.write
                 try:
                     async for msg in sub:
-                        st = msg.data.header.stamp
-                        write(f"r {name} {st.sec} {st.nanosec} {monotonic():.6f}\n")
+                        data = msg.data
+                        if isinstance(data, memoryview):  # delivered raw: not decoded
+                            raw[name] += 1
+                            stamp = raw_stamp(data)
+                            if stamp is None:
+                                continue
+                            sec, nanosec = stamp
+                        else:
+                            sec, nanosec = data.header.stamp.sec, data.header.stamp.nanosec
+                        write(f"r {name} {sec} {nanosec} {monotonic():.6f}\n")
                         out[0] += 1
                         wake[0].set()
                 finally:
@@ -240,7 +250,17 @@ async def client_run(cfg: dict[str, Any], records: IO[str]) -> dict[str, Any]:
         "statuses": statuses,
         "growth": growth,
         "subscriptions": counts,
+        "raw": raw,
     }
+
+
+def raw_stamp(data: memoryview) -> tuple[int, int] | None:
+    """``header.stamp`` of a message delivered raw, when it is little-endian
+    CDR (the stamp is its first field); None otherwise."""
+    if data.nbytes >= 12 and bytes(data[:2]) == b"\x00\x01":
+        sec, nanosec = struct.unpack_from("<iI", data, 4)
+        return int(sec), int(nanosec)
+    return None
 
 
 def trace_growth(before: Any, after: Any, top: int = 25) -> list[dict[str, Any]]:
@@ -596,6 +616,7 @@ def analyse(world: World, client: dict[str, Any], args: argparse.Namespace) -> d
             "arrival_p99_ms": percentile(latency, 0.99),
         },
         "subscriptions": client.get("subscriptions", {}),
+        "delivered_raw": client.get("raw", {}),
         "statuses": client["statuses"],
         "rss_samples": [[round(s[0], 1), s[1]] for s in client["samples"]],
         "memory_growth_sites": client["growth"],
@@ -692,6 +713,8 @@ def print_report(r: dict[str, Any]) -> None:
     )
     for name, counts in r["subscriptions"].items():
         print(f"  {name:<11} {counts}")
+    if any(r["delivered_raw"].values()):
+        print(f"  delivered raw (not decoded): {r['delivered_raw']}")
     print(f"  returned, never arrived: {c['returned_not_arrived']} {c['lost_by_class']}")
     for entry in c["lost"][:20]:
         extra = ""
