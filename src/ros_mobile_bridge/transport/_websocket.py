@@ -639,6 +639,8 @@ class WebSocket:
                 await self._discard_until_closed(lambda: self._parser.closed_reason is not None)
         self._parser.lost(ConnectionLost("connection closed by client", code))
         await self._close_stream()
+        self._leftover = b""
+        self._parser.release()
 
 
 def _on_trio() -> bool:

@@ -26,6 +26,7 @@ inline handler before anything is parsed (:meth:`~FrameParser.take_inline`)."""
 
 from __future__ import annotations
 
+import contextlib
 from collections import deque
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -489,6 +490,34 @@ class FrameParser:
             event = self.pongs.pop(bytes(data), None)
             if event is not None:
                 event.set()
+
+    def release(self) -> None:
+        """The connection is over and its owner done with it: drop every
+        buffer (the kept large-frame buffer, unparsed bytes, a frame being
+        gathered, messages nobody will read), and the tracebacks of
+        :attr:`closed_reason` and of the exceptions it chains (the read's
+        ``EndOfStream`` or ``OSError``). Their frames hold this connection,
+        and the reason holds them: a reference cycle that would keep the
+        connection and its buffers (a large frame's, about the size of the
+        largest message) alive until the cyclic garbage collector's next
+        full pass, and for as long as a caller keeps the exception
+        (``client.last_error``). The reason itself, its message and its
+        ``__cause__`` stay."""
+        self.messages.clear()
+        self._buf = bytearray()
+        self._parts = None
+        self._fragment = None
+        direct, self.direct = self.direct, None
+        if direct is not None:
+            with contextlib.suppress(BufferError):  # (still exported: let it go)
+                direct.release()
+        self._direct_buf = bytearray()
+        seen: set[int] = set()
+        error: BaseException | None = self.closed_reason
+        while error is not None and id(error) not in seen:
+            seen.add(id(error))
+            error.__traceback__ = None
+            error = error.__cause__ or error.__context__
 
     def lost(self, reason: ConnectionLost) -> ConnectionLost:
         """The connection is over: ``reason`` is why, unless one was given
