@@ -22,6 +22,12 @@ from ros_mobile_bridge.interfaces.std_msgs.msg import String
 FIB = "example_interfaces/action/Fibonacci"
 
 
+def sub_type(given: Any, schema: str | None) -> tuple[Any, str | None]:
+    """``subscribe_arguments``'s class and type name, other arguments as defaults."""
+    want, name, _mode = subscribe_arguments(given, schema, None, True, True, False, None)
+    return want, name
+
+
 def test_an_instance_names_its_type() -> None:
     twist = Twist(linear=Vector3(x=0.2))
     assert publish_arguments(twist, None) == ("geometry_msgs/msg/Twist", twist)
@@ -34,10 +40,10 @@ def test_an_instance_names_its_type() -> None:
     assert goal_arguments(goal, None) == (FIB, goal)
     assert goal_arguments(FIB, goal) == (FIB, goal)
     assert goal_arguments(FIB, {"order": 5}) == (FIB, {"order": 5})
-    assert subscribe_arguments(Odometry, None) == (Odometry, "nav_msgs/msg/Odometry")
-    assert subscribe_arguments("nav_msgs/msg/Odometry", None) == (None, "nav_msgs/msg/Odometry")
-    assert subscribe_arguments(None, "nav_msgs/Odometry") == (None, "nav_msgs/Odometry")
-    assert subscribe_arguments(Odometry, "nav_msgs/Odometry") == (Odometry, "nav_msgs/msg/Odometry")
+    assert sub_type(Odometry, None) == (Odometry, "nav_msgs/msg/Odometry")
+    assert sub_type("nav_msgs/msg/Odometry", None) == (None, "nav_msgs/msg/Odometry")
+    assert sub_type(None, "nav_msgs/Odometry") == (None, "nav_msgs/Odometry")
+    assert sub_type(Odometry, "nav_msgs/Odometry") == (Odometry, "nav_msgs/msg/Odometry")
 
 
 @pytest.mark.parametrize(
@@ -52,9 +58,9 @@ def test_an_instance_names_its_type() -> None:
         (lambda: goal_arguments(FIB, Fibonacci.Result()), TypeError, "not an action's goal"),
         (lambda: goal_arguments("other/action/Count", Fibonacci.Goal()), ValueError, "Count"),
         (lambda: goal_arguments(FIB, 5), TypeError, "not int"),
-        (lambda: subscribe_arguments(RosMessage, None), TypeError, "message class"),
-        (lambda: subscribe_arguments(dict, None), TypeError, "message class"),  # type: ignore[arg-type]
-        (lambda: subscribe_arguments(Odometry, "std_msgs/msg/String"), ValueError, "different"),
+        (lambda: sub_type(RosMessage, None), TypeError, "message class"),
+        (lambda: sub_type(dict, None), TypeError, "message class"),  # type: ignore[arg-type]
+        (lambda: sub_type(Odometry, "std_msgs/msg/String"), ValueError, "different"),
     ],
 )
 def test_each_mistake_is_named(call: Any, error: type[Exception], words: str) -> None:

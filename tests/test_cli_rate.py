@@ -180,6 +180,6 @@ def test_info_json(robot: DemoRobot) -> None:
         "topic": "/odom",
         "type": "nav_msgs/msg/Odometry",
         "encoding": "cdr",
-        "publishers": None,
-        "subscriptions": None,
+        "publishers": 1,  # from the demo robot's connection graph
+        "subscriptions": 0,
     }
