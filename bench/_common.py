@@ -11,6 +11,7 @@ from typing import Any, TypeVar
 import anyio
 
 import ros_mobile_bridge as rmb
+from ros_mobile_bridge._loop._backends import BACKENDS, run_args
 
 __all__ = [
     "DROP_REASONS",
@@ -35,15 +36,15 @@ DROP_REASONS = (
 
 T = TypeVar("T")
 
-LOOPS = ("asyncio", "trio", "uvloop")
+LOOPS = BACKENDS
 """The event loops a benchmark runs on: ``uvloop`` is asyncio on uvloop."""
 
 
 def run_on(loop: str, fn: Callable[..., Awaitable[T]], *args: Any) -> T:
-    """``anyio.run(fn, *args)`` on ``loop`` (one of :data:`LOOPS`)."""
-    if loop == "uvloop":
-        return anyio.run(fn, *args, backend="asyncio", backend_options={"use_uvloop": True})
-    return anyio.run(fn, *args, backend=loop)
+    """``anyio.run(fn, *args)`` on ``loop`` (one of :data:`LOOPS`), mapped
+    as the library maps the loops it starts (``_loop._backends.run_args``)."""
+    backend, options = run_args(loop, None, f"--backend {loop}")
+    return anyio.run(fn, *args, backend=backend, backend_options=options)
 
 
 def versions(names: Sequence[str]) -> str:

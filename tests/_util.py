@@ -98,10 +98,10 @@ async def take(sub: rmb.Subscription, n: int, timeout: float = 15.0) -> list[rmb
     return got
 
 
-ASYNCIO_LOOPS = [
-    pytest.param("asyncio", id="asyncio"),
-    pytest.param(("asyncio", {"use_uvloop": True}), id="uvloop"),
-]
+UVLOOP = pytest.param(("asyncio", {"use_uvloop": True}), id="uvloop")
+"""The ``anyio_backend`` value of asyncio on uvloop."""
+
+ASYNCIO_LOOPS = [pytest.param("asyncio", id="asyncio"), UVLOOP]
 """``anyio_backend`` values for tests of asyncio-only code: the standard
 loop and uvloop (which uvicorn runs whenever it is installed), whose
 transports are not ``asyncio.Transport`` subclasses."""

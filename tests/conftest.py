@@ -26,6 +26,7 @@ from hypothesis import strategies as st
 from hypothesis.errors import HypothesisSideeffectWarning
 
 from _util import SHORT_SEARCHES, examples
+from _util import UVLOOP as _UVLOOP
 from peers.zenoh_router import ZenohRouter
 
 if TYPE_CHECKING:
@@ -98,8 +99,6 @@ timers and thread-safe calls are its own code, not asyncio's. Modules with
 a loop parameter of their own add uvloop there (test_asyncio_stream, the
 sync worker's in test_sync, the ``rmb`` processes' in test_signals,
 test_uvloop); the others run on asyncio and trio."""
-
-_UVLOOP = pytest.param(("asyncio", {"use_uvloop": True}), id="uvloop")
 
 
 def _loops_of_its_own(item: pytest.Item) -> bool:
